@@ -1,0 +1,631 @@
+"""Evaluation metrics for 3D shape retrieval.
+
+Pure numpy, no I/O. Every metric works on an all-to-all dissimilarity matrix
+``dissimilarity : (n, n) float`` (smaller = more similar; the diagonal is never read)
+and a vector of class labels ``labels : (n,)`` (strings or ints).
+
+Three families, as used by Smeets et al. (2010) and the SHREC / Princeton Shape
+Benchmark (PSB) literature:
+
+* Verification over the unordered pairs ``i < j``: :func:`roc_curve`,
+  :func:`equal_error_rate`. Only the upper triangle ``dissimilarity[i, j], i < j``
+  is read, so an asymmetric matrix should be symmetrised by the caller.
+* Identification with a gallery of one model per class: :func:`first_instance_split`,
+  :func:`cmc_curve`, :func:`rank1_rate`. Rows are probes, columns gallery items.
+* Leave-one-out retrieval: :func:`nearest_neighbor_rate`, :func:`first_tier`,
+  :func:`second_tier`, :func:`e_measure`, :func:`discounted_cumulative_gain`,
+  :func:`mean_average_precision`, and :func:`retrieval_scores` for all of them at
+  once. Row ``i`` is the query, so each query ranks ``dissimilarity[i, j], j != i``.
+
+Tie conventions (deliberately different per family, each the standard one):
+
+* ROC: every pair with the same dissimilarity is accepted at the same threshold.
+* CMC: pessimistic; a wrong gallery item tied with the correct one ranks before it.
+* Retrieval: ties are broken by object index (stable sort), i.e. the lower index is
+  retrieved first.
+
+Input validation (square matrix, finite off-diagonal values, label count, at least
+two classes) happens once, at each public function, and raises ``ValueError``.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "cmc_curve",
+    "discounted_cumulative_gain",
+    "e_measure",
+    "equal_error_rate",
+    "first_instance_split",
+    "first_tier",
+    "mean_average_precision",
+    "natural_sort_key",
+    "nearest_neighbor_rate",
+    "rank1_rate",
+    "retrieval_scores",
+    "roc_curve",
+    "second_tier",
+]
+
+#: Number of retrieved objects used by the PSB E-measure.
+E_MEASURE_CUTOFF = 32
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _validate(dissimilarity: ArrayLike, labels: ArrayLike) -> tuple[NDArray[np.float64], NDArray]:
+    """Check the common inputs and convert labels to integer class codes.
+
+    Parameters
+    ----------
+    dissimilarity : (n, n) array_like of float
+        All-to-all dissimilarities. The diagonal is ignored (may hold anything).
+    labels : (n,) array_like
+        Class label of each object (strings or ints).
+
+    Returns
+    -------
+    d : (n, n) ndarray of float64
+        The dissimilarity matrix as a float array.
+    codes : (n,) ndarray of int
+        Class index of each object, ``0 .. n_classes - 1``.
+
+    Raises
+    ------
+    ValueError
+        If the matrix is not square, has non-finite off-diagonal entries, the label
+        count does not match, or fewer than two classes are present.
+    """
+    d = np.asarray(dissimilarity, dtype=np.float64)
+    if d.ndim != 2 or d.shape[0] != d.shape[1]:
+        raise ValueError(f"dissimilarity must be a square (n, n) matrix, got shape {d.shape}")
+    n = d.shape[0]
+    lab = np.asarray(labels)
+    if lab.ndim != 1:
+        raise ValueError(f"labels must be a 1-D array, got shape {lab.shape}")
+    if lab.shape[0] != n:
+        raise ValueError(
+            f"labels has {lab.shape[0]} entries but dissimilarity is {n} x {n}; they must match"
+        )
+    off_diagonal = ~np.eye(n, dtype=bool)
+    if not np.all(np.isfinite(d[off_diagonal])):
+        raise ValueError("dissimilarity has NaN or infinite off-diagonal entries")
+    classes, codes = np.unique(lab, return_inverse=True)
+    if classes.size < 2:
+        raise ValueError(f"at least two classes are required, got {classes.size}")
+    return d, codes.reshape(-1)
+
+
+# --------------------------------------------------------------------------- verification
+
+
+def roc_curve(
+    dissimilarity: ArrayLike, labels: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Verification ROC over all unordered pairs ``i < j``.
+
+    A pair is *genuine* when both objects share a label and an *impostor* pair
+    otherwise. At threshold ``t`` a pair is accepted when its dissimilarity is
+    ``<= t``; all pairs with equal dissimilarity are therefore accepted together.
+
+    Parameters
+    ----------
+    dissimilarity : (n, n) array_like of float
+        All-to-all dissimilarities; only the upper triangle (``i < j``) is read.
+    labels : (n,) array_like
+        Class label of each object.
+
+    Returns
+    -------
+    far : (m + 1,) ndarray of float
+        False acceptance rate, accepted impostors / impostors. Non-decreasing.
+    frr : (m + 1,) ndarray of float
+        False rejection rate, rejected genuines / genuines. Non-increasing.
+    thresholds : (m + 1,) ndarray of float
+        ``-inf`` (accept nothing: FAR = 0, FRR = 1) followed by the ``m`` distinct
+        pair dissimilarities in increasing order. The last threshold accepts every
+        pair, so the curve always ends at FAR = 1, FRR = 0.
+
+    Raises
+    ------
+    ValueError
+        On invalid inputs, or when no class has two objects (no genuine pairs).
+    """
+    d, codes = _validate(dissimilarity, labels)
+    iu, ju = np.triu_indices(d.shape[0], k=1)
+    values = d[iu, ju]
+    genuine_mask = codes[iu] == codes[ju]
+    genuine = np.sort(values[genuine_mask])
+    impostor = np.sort(values[~genuine_mask])
+    if genuine.size == 0:
+        raise ValueError("no genuine pairs: every class has a single object")
+
+    thresholds = np.unique(values)
+    # side="right" counts values <= t, so tied pairs are accepted together.
+    accepted_impostors = np.searchsorted(impostor, thresholds, side="right")
+    accepted_genuines = np.searchsorted(genuine, thresholds, side="right")
+    far = np.concatenate(([0.0], accepted_impostors / impostor.size))
+    frr = np.concatenate(([1.0], 1.0 - accepted_genuines / genuine.size))
+    return far, frr, np.concatenate(([-np.inf], thresholds))
+
+
+def equal_error_rate(dissimilarity: ArrayLike, labels: ArrayLike) -> float:
+    """Equal error rate: the error where FAR = FRR on the ROC of :func:`roc_curve`.
+
+    The ROC points are joined by straight line segments in the (FAR, FRR) plane and
+    the EER is where that polyline crosses the diagonal FAR = FRR. If a ROC point
+    lies exactly on the diagonal, its FAR is returned; otherwise the crossing is
+    linearly interpolated between the last point with FRR > FAR and the first point
+    with FRR < FAR. (Since FAR rises from 0 to 1 and FRR falls from 1 to 0, the
+    crossing always exists and is unique.)
+
+    Parameters
+    ----------
+    dissimilarity : (n, n) array_like of float
+        All-to-all dissimilarities; only the upper triangle is read.
+    labels : (n,) array_like
+        Class label of each object.
+
+    Returns
+    -------
+    float
+        EER in ``[0, 1]``; 0 for perfect separation.
+    """
+    far, frr, _ = roc_curve(dissimilarity, labels)
+    gap = frr - far  # goes from +1 (first point) to -1 (last point), non-increasing
+    k = int(np.argmax(gap <= 0.0))  # first point at or past the crossing
+    if gap[k] == 0.0:
+        return float(far[k])
+    # Segment (k-1) -> k: solve gap[k-1] + alpha * (gap[k] - gap[k-1]) = 0.
+    alpha = gap[k - 1] / (gap[k - 1] - gap[k])
+    return float(far[k - 1] + alpha * (far[k] - far[k - 1]))
+
+
+# --------------------------------------------------------------------------- identification
+
+
+def natural_sort_key(name: str) -> tuple[tuple[str | int, ...], str]:
+    """Sort key ordering file names naturally (``"cat2" < "cat10"``).
+
+    Runs of ASCII digits compare as integers, other text case-insensitively; the
+    original string breaks remaining ties (e.g. ``"cat02"`` vs ``"cat2"``).
+
+    Parameters
+    ----------
+    name : str
+        File name or path.
+
+    Returns
+    -------
+    tuple
+        Key for :func:`sorted`.
+    """
+    parts = re.split(r"([0-9]+)", name)
+    # re.split with a capture group alternates text (even) and digits (odd), so keys
+    # of two names always compare str with str and int with int.
+    return tuple(int(p) if i % 2 else p.casefold() for i, p in enumerate(parts)), name
+
+
+def first_instance_split(
+    names: Sequence[str], labels: ArrayLike
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Split objects into a one-per-class gallery and probes.
+
+    The gallery holds, for each class, the object whose name comes first in natural
+    order (see :func:`natural_sort_key`); every other object is a probe.
+
+    Parameters
+    ----------
+    names : (n,) sequence of str
+        File name of each object.
+    labels : (n,) array_like
+        Class label of each object.
+
+    Returns
+    -------
+    gallery_idx : (n_classes,) ndarray of int
+        Indices of the gallery objects, in increasing index order.
+    probe_idx : (n - n_classes,) ndarray of int
+        Indices of all other objects, in increasing index order (may be empty).
+
+    Raises
+    ------
+    ValueError
+        If ``names`` and ``labels`` differ in length or are empty.
+    """
+    names = [str(name) for name in names]
+    lab = np.asarray(labels)
+    if lab.ndim != 1 or lab.shape[0] != len(names):
+        raise ValueError(
+            f"names has {len(names)} entries but labels has shape {lab.shape}; they must match"
+        )
+    if not names:
+        raise ValueError("names and labels are empty")
+    order = sorted(range(len(names)), key=lambda i: natural_sort_key(names[i]))
+    _, codes = np.unique(lab, return_inverse=True)
+    codes = codes.reshape(-1)
+    is_gallery = np.zeros(len(names), dtype=bool)
+    seen: set[int] = set()
+    for i in order:
+        code = int(codes[i])
+        if code not in seen:  # first object of this class in natural name order
+            seen.add(code)
+            is_gallery[i] = True
+    return np.flatnonzero(is_gallery), np.flatnonzero(~is_gallery)
+
+
+def _validate_split(
+    n: int, gallery_idx: ArrayLike, probe_idx: ArrayLike
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Check gallery / probe index arrays: 1-D ints in range, unique, disjoint, non-empty."""
+    result = []
+    for name, idx in (("gallery_idx", gallery_idx), ("probe_idx", probe_idx)):
+        arr = np.asarray(idx)
+        if arr.ndim != 1 or arr.size == 0:
+            raise ValueError(f"{name} must be a non-empty 1-D index array, got shape {arr.shape}")
+        if not np.issubdtype(arr.dtype, np.integer):
+            raise ValueError(f"{name} must hold integers, got dtype {arr.dtype}")
+        if arr.min() < 0 or arr.max() >= n:
+            raise ValueError(f"{name} has indices outside [0, {n})")
+        if np.unique(arr).size != arr.size:
+            raise ValueError(f"{name} has repeated indices")
+        result.append(arr.astype(np.intp))
+    gallery, probes = result
+    if np.intersect1d(gallery, probes).size:
+        raise ValueError("gallery_idx and probe_idx overlap")
+    return gallery, probes
+
+
+def cmc_curve(
+    dissimilarity: ArrayLike,
+    labels: ArrayLike,
+    gallery_idx: ArrayLike,
+    probe_idx: ArrayLike,
+) -> NDArray[np.float64]:
+    """Cumulative match characteristic of closed-set identification.
+
+    Each probe ranks the gallery by ``dissimilarity[probe, gallery]``. Its rank is
+    the position of the best-matching gallery item of its own class. Ties are
+    counted pessimistically: ``rank = 1 + #{wrong-class gallery items with
+    dissimilarity <= that of the best correct item}``, so a wrong item tied with the
+    correct one is ranked before it.
+
+    Parameters
+    ----------
+    dissimilarity : (n, n) array_like of float
+        All-to-all dissimilarities; rows are read as probes, columns as gallery.
+    labels : (n,) array_like
+        Class label of each object.
+    gallery_idx : (g,) array_like of int
+        Indices of the gallery objects.
+    probe_idx : (p,) array_like of int
+        Indices of the probe objects, disjoint from ``gallery_idx``.
+
+    Returns
+    -------
+    cmc : (g,) ndarray of float
+        ``cmc[r - 1]`` = fraction of probes whose rank is ``<= r``. Non-decreasing,
+        and ``cmc[-1] == 1``.
+
+    Raises
+    ------
+    ValueError
+        On invalid inputs, or if a probe's class has no gallery item.
+    """
+    d, codes = _validate(dissimilarity, labels)
+    gallery, probes = _validate_split(d.shape[0], gallery_idx, probe_idx)
+    scores = d[np.ix_(probes, gallery)]  # (p, g)
+    correct = codes[probes][:, None] == codes[gallery][None, :]  # (p, g)
+    missing = ~correct.any(axis=1)
+    if missing.any():
+        raise ValueError(f"probes {probes[missing].tolist()} have a class with no gallery item")
+    best_correct = np.where(correct, scores, np.inf).min(axis=1)  # (p,)
+    ranks = 1 + np.sum(~correct & (scores <= best_correct[:, None]), axis=1)  # (p,)
+    return np.array([np.mean(ranks <= r) for r in range(1, gallery.size + 1)])
+
+
+def rank1_rate(
+    dissimilarity: ArrayLike,
+    labels: ArrayLike,
+    gallery_idx: ArrayLike,
+    probe_idx: ArrayLike,
+) -> float:
+    """Rank-1 identification rate, ``cmc_curve(...)[0]``.
+
+    Parameters
+    ----------
+    dissimilarity : (n, n) array_like of float
+        All-to-all dissimilarities.
+    labels : (n,) array_like
+        Class label of each object.
+    gallery_idx : (g,) array_like of int
+        Indices of the gallery objects.
+    probe_idx : (p,) array_like of int
+        Indices of the probe objects.
+
+    Returns
+    -------
+    float
+        Fraction of probes whose best gallery match (pessimistic ties) is correct.
+    """
+    return float(cmc_curve(dissimilarity, labels, gallery_idx, probe_idx)[0])
+
+
+# --------------------------------------------------------------------------- retrieval
+
+
+def _ranked_relevance(dissimilarity: ArrayLike, labels: ArrayLike) -> NDArray[np.bool_]:
+    """Leave-one-out ranking of every query, as a relevance matrix.
+
+    Parameters
+    ----------
+    dissimilarity : (n, n) array_like of float
+        All-to-all dissimilarities; row ``i`` is query ``i``.
+    labels : (n,) array_like
+        Class label of each object.
+
+    Returns
+    -------
+    relevant : (n, n - 1) ndarray of bool
+        ``relevant[i, k]`` is True when the ``(k + 1)``-th object retrieved for query
+        ``i`` (query excluded, ties broken by lower index first) shares its label.
+
+    Raises
+    ------
+    ValueError
+        On invalid inputs, or if some class has a single object (no relevant items).
+    """
+    d, codes = _validate(dissimilarity, labels)
+    n = d.shape[0]
+    class_sizes = np.bincount(codes)
+    if np.any(class_sizes < 2):
+        singletons = np.unique(np.asarray(labels)[class_sizes[codes] < 2])
+        raise ValueError(
+            "retrieval metrics need every class to have at least two objects; "
+            f"singleton classes: {singletons.tolist()}"
+        )
+    rows = np.arange(n)[:, None]
+    cols = np.arange(n - 1)[None, :]
+    others = cols + (cols >= rows)  # (n, n-1): row i lists j != i in increasing order
+    order = np.argsort(d[rows, others], axis=1, kind="stable")  # stable: index breaks ties
+    retrieved = np.take_along_axis(others, order, axis=1)
+    return codes[retrieved] == codes[:, None]
+
+
+def _nearest_neighbor(relevant: NDArray[np.bool_]) -> float:
+    return float(np.mean(relevant[:, 0]))
+
+
+def _tier(relevant: NDArray[np.bool_], multiple: int) -> float:
+    n_relevant = relevant.sum(axis=1)  # (n,) = C - 1
+    cutoff = np.minimum(multiple * n_relevant, relevant.shape[1])
+    hits = np.cumsum(relevant, axis=1)[np.arange(relevant.shape[0]), cutoff - 1]
+    return float(np.mean(hits / n_relevant))
+
+
+def _e_measure(relevant: NDArray[np.bool_], cutoff: int) -> float:
+    k = min(cutoff, relevant.shape[1])
+    hits = relevant[:, :k].sum(axis=1)
+    precision = hits / k
+    recall = hits / relevant.sum(axis=1)
+    # 2 / (1/P + 1/R) == 2PR / (P + R); defined as 0 when there is no hit.
+    with np.errstate(invalid="ignore", divide="ignore"):
+        e = np.where(hits > 0, 2.0 * precision * recall / (precision + recall), 0.0)
+    return float(np.mean(e))
+
+
+def _dcg(relevant: NDArray[np.bool_]) -> float:
+    positions = np.arange(1, relevant.shape[1] + 1)
+    discount = np.ones(positions.size)
+    discount[1:] = 1.0 / np.log2(positions[1:])  # DCG_1 = G_1, then G_i / log2(i)
+    dcg = relevant @ discount
+    ideal = np.cumsum(discount)[relevant.sum(axis=1) - 1]  # all C-1 relevant first
+    return float(np.mean(dcg / ideal))
+
+
+def _mean_average_precision(relevant: NDArray[np.bool_]) -> float:
+    positions = np.arange(1, relevant.shape[1] + 1)
+    precision_at = np.cumsum(relevant, axis=1) / positions
+    ap = np.sum(precision_at * relevant, axis=1) / relevant.sum(axis=1)
+    return float(np.mean(ap))
+
+
+def nearest_neighbor_rate(dissimilarity: ArrayLike, labels: ArrayLike) -> float:
+    """Nearest-neighbour rate: fraction of queries whose closest other object is relevant.
+
+    Ties are broken by lower index, as for every retrieval metric.
+
+    Parameters
+    ----------
+    dissimilarity : (n, n) array_like of float
+        All-to-all dissimilarities; row ``i`` ranks the other objects for query ``i``.
+    labels : (n,) array_like
+        Class label of each object; every class needs at least two objects.
+
+    Returns
+    -------
+    float
+        Score in ``[0, 1]``, averaged over all ``n`` queries (higher is better).
+
+    Raises
+    ------
+    ValueError
+        On invalid inputs or a singleton class.
+    """
+    return _nearest_neighbor(_ranked_relevance(dissimilarity, labels))
+
+
+def first_tier(dissimilarity: ArrayLike, labels: ArrayLike) -> float:
+    """First tier: recall within the top ``C - 1`` retrieved objects.
+
+    ``C`` is the size of the query's class, so ``C - 1`` other objects are relevant.
+
+    Parameters
+    ----------
+    dissimilarity : (n, n) array_like of float
+        All-to-all dissimilarities; row ``i`` ranks the other objects for query ``i``.
+    labels : (n,) array_like
+        Class label of each object; every class needs at least two objects.
+
+    Returns
+    -------
+    float
+        Score in ``[0, 1]``, averaged over all ``n`` queries (higher is better).
+
+    Raises
+    ------
+    ValueError
+        On invalid inputs or a singleton class.
+    """
+    return _tier(_ranked_relevance(dissimilarity, labels), 1)
+
+
+def second_tier(dissimilarity: ArrayLike, labels: ArrayLike) -> float:
+    """Second tier: recall within the top ``2 (C - 1)`` retrieved objects.
+
+    The cut-off is capped at ``n - 1``; recall is still relative to ``C - 1``.
+
+    Parameters
+    ----------
+    dissimilarity : (n, n) array_like of float
+        All-to-all dissimilarities; row ``i`` ranks the other objects for query ``i``.
+    labels : (n,) array_like
+        Class label of each object; every class needs at least two objects.
+
+    Returns
+    -------
+    float
+        Score in ``[0, 1]``, averaged over all ``n`` queries (higher is better).
+
+    Raises
+    ------
+    ValueError
+        On invalid inputs or a singleton class.
+    """
+    return _tier(_ranked_relevance(dissimilarity, labels), 2)
+
+
+def e_measure(
+    dissimilarity: ArrayLike, labels: ArrayLike, *, cutoff: int = E_MEASURE_CUTOFF
+) -> float:
+    """E-measure of the Princeton Shape Benchmark.
+
+    With the top ``k = min(cutoff, n - 1)`` retrieved objects, precision
+    ``P = hits / k`` and recall ``R = hits / (C - 1)`` give ``E = 2 / (1/P + 1/R)``;
+    ``E = 0`` when there is no hit. Note that ``E < 1`` even for a perfect ranking
+    unless ``k == C - 1``.
+
+    Parameters
+    ----------
+    dissimilarity : (n, n) array_like of float
+        All-to-all dissimilarities; row ``i`` ranks the other objects for query ``i``.
+    labels : (n,) array_like
+        Class label of each object; every class needs at least two objects.
+    cutoff : int, default 32
+        Number of top-ranked objects considered (32 in the PSB); must be >= 1.
+
+    Returns
+    -------
+    float
+        Score in ``[0, 1]``, averaged over all ``n`` queries (higher is better).
+
+    Raises
+    ------
+    ValueError
+        On invalid inputs or a singleton class.
+    """
+    if cutoff < 1:
+        raise ValueError(f"cutoff must be a positive integer, got {cutoff}")
+    return _e_measure(_ranked_relevance(dissimilarity, labels), cutoff)
+
+
+def discounted_cumulative_gain(dissimilarity: ArrayLike, labels: ArrayLike) -> float:
+    """Normalised discounted cumulative gain over the full ranked list (PSB form).
+
+    ``G_i = 1`` if the ``i``-th retrieved object is relevant else 0, ``DCG_1 = G_1``,
+    ``DCG_i = DCG_{i-1} + G_i / log2(i)``, divided by the ideal DCG with all
+    ``C - 1`` relevant objects first. (Ranks 1 and 2 carry the same weight.)
+
+    Parameters
+    ----------
+    dissimilarity : (n, n) array_like of float
+        All-to-all dissimilarities; row ``i`` ranks the other objects for query ``i``.
+    labels : (n,) array_like
+        Class label of each object; every class needs at least two objects.
+
+    Returns
+    -------
+    float
+        Score in ``[0, 1]``, averaged over all ``n`` queries (higher is better).
+
+    Raises
+    ------
+    ValueError
+        On invalid inputs or a singleton class.
+    """
+    return _dcg(_ranked_relevance(dissimilarity, labels))
+
+
+def mean_average_precision(dissimilarity: ArrayLike, labels: ArrayLike) -> float:
+    """Mean average precision over leave-one-out queries.
+
+    Per query, the mean of ``precision@r`` over the ranks ``r`` of its ``C - 1``
+    relevant objects (the full list is ranked, so all are retrieved).
+
+    Parameters
+    ----------
+    dissimilarity : (n, n) array_like of float
+        All-to-all dissimilarities; row ``i`` ranks the other objects for query ``i``.
+    labels : (n,) array_like
+        Class label of each object; every class needs at least two objects.
+
+    Returns
+    -------
+    float
+        Score in ``[0, 1]``, averaged over all ``n`` queries (higher is better).
+
+    Raises
+    ------
+    ValueError
+        On invalid inputs or a singleton class.
+    """
+    return _mean_average_precision(_ranked_relevance(dissimilarity, labels))
+
+
+def retrieval_scores(dissimilarity: ArrayLike, labels: ArrayLike) -> dict[str, float]:
+    """All leave-one-out retrieval scores from a single ranking.
+
+    Parameters
+    ----------
+    dissimilarity : (n, n) array_like of float
+        All-to-all dissimilarities; row ``i`` ranks the other objects for query ``i``.
+    labels : (n,) array_like
+        Class label of each object; every class needs at least two objects.
+
+    Returns
+    -------
+    dict of str to float
+        Keys ``nn`` (:func:`nearest_neighbor_rate`), ``first_tier``, ``second_tier``,
+        ``e_measure`` (cutoff 32), ``dcg`` (:func:`discounted_cumulative_gain`) and
+        ``map`` (:func:`mean_average_precision`).
+
+    Raises
+    ------
+    ValueError
+        On invalid inputs or a singleton class.
+    """
+    relevant = _ranked_relevance(dissimilarity, labels)
+    return {
+        "nn": _nearest_neighbor(relevant),
+        "first_tier": _tier(relevant, 1),
+        "second_tier": _tier(relevant, 2),
+        "e_measure": _e_measure(relevant, E_MEASURE_CUTOFF),
+        "dcg": _dcg(relevant),
+        "map": _mean_average_precision(relevant),
+    }
