@@ -1,0 +1,236 @@
+"""Reading and cleaning triangle meshes from user files.
+
+``load_mesh`` accepts OBJ, PLY, OFF, STL, GLB and GLTF, optionally gzip-compressed,
+from a path or from bytes plus the original file name, and returns one clean,
+connected triangle surface or raises a :class:`~worker.errors.MeshError` whose
+message can be shown to the person who uploaded the file.
+"""
+
+from __future__ import annotations
+
+import io
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from .errors import (
+    EmptyMeshError,
+    MeshError,
+    NonFiniteCoordinatesError,
+    PointCloudError,
+    TooFewVerticesError,
+    TooManyFacesError,
+    UnreadableMeshError,
+    UnsupportedFormatError,
+)
+from .tol import TOL
+from .topology import unique_rows
+
+MESH_FORMATS = ("obj", "ply", "off", "stl", "glb", "gltf")
+DEFAULT_MAX_FACES = 2_000_000
+DEFAULT_MAX_DECOMPRESSED_BYTES = 512 * 1024 * 1024
+MIN_VERTICES = 10
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """A triangle surface.
+
+    Attributes
+    ----------
+    vertices : (n, 3) float64
+    faces : (m, 3) int64, indices into ``vertices``
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+
+    @property
+    def n_vertices(self) -> int:
+        return len(self.vertices)
+
+    @property
+    def n_faces(self) -> int:
+        return len(self.faces)
+
+
+def mesh_format(filename: str) -> tuple[str, bool]:
+    """Return ``(format, gzipped)`` for a file name, or raise ``UnsupportedFormatError``."""
+    name = Path(filename).name.lower()
+    gzipped = name.endswith(".gz")
+    if gzipped:
+        name = name[: -len(".gz")]
+    ext = name.rsplit(".", 1)[-1] if "." in name else ""
+    if ext not in MESH_FORMATS:
+        shown = f".{ext}" if ext else "no extension"
+        raise UnsupportedFormatError(
+            f"Files with {shown} are not supported; upload one of "
+            + ", ".join(f".{f}" for f in MESH_FORMATS)
+            + " (optionally .gz-compressed)."
+        )
+    return ext, gzipped
+
+
+def _gunzip(data: bytes, limit: int) -> bytes:
+    """Decompress at most ``limit`` bytes, refusing gzip bombs without expanding them."""
+    decompressor = zlib.decompressobj(wbits=16 + zlib.MAX_WBITS)
+    try:
+        out = decompressor.decompress(data, limit + 1)
+    except zlib.error as exc:
+        raise UnreadableMeshError(
+            "The file ends in .gz but is not valid gzip data."
+        ) from exc
+    if len(out) > limit:
+        raise TooManyFacesError(
+            f"The file expands to more than {limit // (1024 * 1024)} MB when decompressed, "
+            "which is over this service's limit."
+        )
+    if not decompressor.eof:
+        raise UnreadableMeshError("The gzip data is truncated.")
+    return out
+
+
+def _parse(data: bytes, fmt: str) -> tuple[np.ndarray, np.ndarray]:
+    import trimesh  # heavy import, only needed when a file is actually parsed
+
+    try:
+        loaded = trimesh.load(
+            io.BytesIO(data), file_type=fmt, process=False, force="mesh"
+        )
+    except Exception as exc:  # trimesh raises many unrelated types on bad bytes
+        raise UnreadableMeshError(
+            f"The file could not be read as {fmt.upper()}: it is damaged or not a mesh."
+        ) from exc
+    vertices = np.asarray(getattr(loaded, "vertices", np.empty((0, 3))), dtype=np.float64)
+    faces = np.asarray(getattr(loaded, "faces", np.empty((0, 3))), dtype=np.int64)
+    return vertices.reshape(-1, 3), faces.reshape(-1, 3)
+
+
+def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
+    """Merge duplicate vertices, drop degenerate faces, keep the largest component.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    faces : (m, 3) int
+
+    Returns
+    -------
+    Mesh with only referenced vertices (renumbered).
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+
+    # Merge vertices that coincide up to a tiny fraction of the model size.
+    extent = float(np.linalg.norm(np.ptp(vertices, axis=0))) or 1.0
+    quantum = extent * TOL.merge_fraction
+    first, inverse = unique_rows(np.round(vertices / quantum).astype(np.int64))
+    faces = inverse[faces]
+
+    # Faces with a repeated corner or (almost) zero area carry no surface.
+    repeated = (
+        (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
+    )
+    faces = faces[~repeated]
+    merged = vertices[first]
+    if len(faces):
+        cross = np.cross(
+            merged[faces[:, 1]] - merged[faces[:, 0]], merged[faces[:, 2]] - merged[faces[:, 0]]
+        )
+        area = 0.5 * np.linalg.norm(cross, axis=1)
+        faces = faces[area > TOL.degenerate_area_fraction * max(area.mean(), np.finfo(float).tiny)]
+    if len(faces):
+        # The same triangle listed twice (in any corner order) is one face.
+        first_face, _ = unique_rows(np.sort(faces, axis=1))
+        faces = faces[np.sort(first_face)]
+    if not len(faces):
+        raise TooFewVerticesError(
+            "After removing duplicate vertices and degenerate triangles no surface is left."
+        )
+
+    # Keep the connected component with the most faces (specks and debris are dropped).
+    n = len(merged)
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]]])
+    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    _, component = connected_components(graph, directed=False)
+    face_component = component[faces[:, 0]]
+    largest = np.bincount(face_component).argmax()
+    faces = faces[face_component == largest]
+
+    used = np.unique(faces)
+    renumber = np.full(n, -1, dtype=np.int64)
+    renumber[used] = np.arange(len(used))
+    return Mesh(vertices=merged[used], faces=renumber[faces])
+
+
+def load_mesh(
+    source: str | Path | bytes,
+    filename: str | None = None,
+    *,
+    max_faces: int = DEFAULT_MAX_FACES,
+    max_decompressed_bytes: int = DEFAULT_MAX_DECOMPRESSED_BYTES,
+    min_vertices: int = MIN_VERTICES,
+) -> Mesh:
+    """Read a mesh file and return its cleaned largest connected surface.
+
+    Parameters
+    ----------
+    source : path of the file, or its bytes.
+    filename : the original file name; required with bytes, it selects the format.
+    max_faces : refuse meshes with more triangles than this.
+    max_decompressed_bytes : refuse ``.gz`` files that expand beyond this.
+    min_vertices : refuse surfaces with fewer vertices than this after cleaning.
+
+    Raises
+    ------
+    MeshError
+        A subclass naming what is wrong, with a sentence for the user.
+    """
+    if isinstance(source, bytes | bytearray | memoryview):
+        if filename is None:
+            raise ValueError("filename is required when the mesh is given as bytes")
+        data = bytes(source)
+    else:
+        path = Path(source)
+        filename = filename or path.name
+        data = path.read_bytes()
+    fmt, gzipped = mesh_format(filename)
+    if gzipped:
+        data = _gunzip(data, max_decompressed_bytes)
+    if not data.strip():
+        raise EmptyMeshError("The file is empty.")
+
+    vertices, faces = _parse(data, fmt)
+    if not len(vertices):
+        raise EmptyMeshError("The file contains no vertices.")
+    if not len(faces):
+        raise PointCloudError(
+            "The file contains points but no triangles; upload a triangle mesh, not a point cloud."
+        )
+    if len(faces) > max_faces:
+        raise TooManyFacesError(
+            f"The mesh has {len(faces):,} triangles; the limit is {max_faces:,}. "
+            "Simplify it before uploading."
+        )
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise UnreadableMeshError("Some triangles refer to vertices that do not exist.")
+    used = vertices[np.unique(faces)]
+    if not np.all(np.isfinite(used)) or np.abs(used).max() > TOL.max_abs_coordinate:
+        raise NonFiniteCoordinatesError(
+            "Some vertex coordinates are not finite numbers (NaN, infinity or too large)."
+        )
+
+    mesh = clean_mesh(vertices, faces)
+    if mesh.n_vertices < min_vertices:
+        raise TooFewVerticesError(
+            f"After cleaning, the largest connected surface has only {mesh.n_vertices} "
+            f"vertices; at least {min_vertices} are needed."
+        )
+    return mesh
+
+
+__all__ = ["MESH_FORMATS", "Mesh", "MeshError", "clean_mesh", "load_mesh", "mesh_format"]

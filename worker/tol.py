@@ -1,0 +1,26 @@
+"""Numerical tolerances of the descriptor engine, kept in one place."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    # Vertices closer than this fraction of the bounding-box diagonal are merged.
+    merge_fraction: float = 1e-9
+    # Faces with area below this fraction of the mean face area are dropped.
+    degenerate_area_fraction: float = 1e-12
+    # Coordinates above this magnitude overflow squared lengths and areas.
+    max_abs_coordinate: float = 1e100
+    # An interior edge is flipped when cot(alpha) + cot(beta) < -delaunay_slack.
+    delaunay_slack: float = 1e-9
+    # Shift of the shift-invert eigensolver, relative to the mean of diag(L)/diag(A).
+    eigen_shift: float = 1e-6
+    # Relative eigenvalue of a Gram matrix below which a direction is numerically absent.
+    basis_rank: float = 1e-12
+    # Regularization of the singular Poisson system of the heat method, relative.
+    poisson_regularization: float = 1e-9
+
+
+TOL = Tolerances()
