@@ -42,7 +42,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="shapes", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     describe = sub.add_parser("describe", help="compute GDM/DDT modal descriptors of meshes")
-    describe.add_argument("meshes", nargs="+", help="mesh files (.obj .ply .off .stl .glb .gltf, .gz)")
+    describe.add_argument(
+        "meshes", nargs="+", help="mesh files (.obj .ply .off .stl .glb .gltf, optionally .gz)"
+    )
     describe.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
     describe.add_argument("--out", help="directory to save descriptors in (default: print JSON)")
     describe.add_argument("--format", choices=("json", "npz"), default="json")

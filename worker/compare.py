@@ -54,9 +54,7 @@ def gallery_sigma(gallery: np.ndarray) -> np.ndarray:
     return np.where(sigma > 0, sigma, 1.0)
 
 
-def normalized_euclidean(
-    queries: np.ndarray, gallery: np.ndarray, sigma: np.ndarray
-) -> np.ndarray:
+def normalized_euclidean(queries: np.ndarray, gallery: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     """D2, eq. (9): ``sqrt(sum_i (s_k,i - s_l,i)^2 / sigma_i^2)``.
 
     Parameters

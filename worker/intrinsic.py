@@ -106,10 +106,10 @@ def intrinsic_delaunay(mesh: IntrinsicMesh) -> IntrinsicMesh:
         h1, h2, violation = h1[bad], h2[bad], violation[bad]
         f1, c1 = np.divmod(h1, 3)
         f2, c2 = np.divmod(h2, 3)
-        k, l = faces[f1, c1], faces[f2, c2]
+        k, opp = faces[f1, c1], faces[f2, c2]
         # Skip flips that would duplicate an existing edge or join a vertex to itself.
-        new_keys = np.minimum(k, l) * n + np.maximum(k, l)
-        exists = np.isin(new_keys, sorted_keys) | (k == l)
+        new_keys = np.minimum(k, opp) * n + np.maximum(k, opp)
+        exists = np.isin(new_keys, sorted_keys) | (k == opp)
         # One flip per triangle per round: an edge wins if it is the most violating
         # edge of both of its triangles.
         best = np.full(m, -np.inf)
@@ -138,7 +138,7 @@ def _flip(faces, lengths, f1, c1, f2, c2):
     k = faces[f1, c1]
     i = faces[f1, (c1 + 1) % 3]
     j = faces[f1, (c1 + 2) % 3]
-    l = faces[f2, c2]
+    l_ = faces[f2, c2]
     ij = lengths[f1, c1]
     jk = lengths[f1, (c1 + 1) % 3]
     ki = lengths[f1, (c1 + 2) % 3]
@@ -150,9 +150,9 @@ def _flip(faces, lengths, f1, c1, f2, c2):
     lx = (il**2 - lj**2 + ij**2) / (2 * ij)
     ly = -np.sqrt(np.maximum(il**2 - lx**2, 0.0))
     kl = np.hypot(kx - lx, ky - ly)
-    faces[f1] = np.stack([k, i, l], axis=1)
+    faces[f1] = np.stack([k, i, l_], axis=1)
     lengths[f1] = np.stack([il, kl, ki], axis=1)
-    faces[f2] = np.stack([l, j, k], axis=1)
+    faces[f2] = np.stack([l_, j, k], axis=1)
     lengths[f2] = np.stack([jk, kl, lj], axis=1)
     return faces, lengths
 
@@ -202,11 +202,10 @@ def fem_operators(mesh: IntrinsicMesh) -> FEMOperators:
     safe = np.maximum(area, np.finfo(float).tiny)
     grad = np.stack([-e[..., 1], e[..., 0]], axis=2) / (2 * safe[:, None, None])  # (m, 3, 2)
     m = len(faces)
-    rows = np.broadcast_to(np.arange(m)[:, None, None] + m * np.arange(2)[None, None, :], grad.shape)
+    rows = np.arange(m)[:, None, None] + m * np.arange(2)[None, None, :]
+    rows = np.broadcast_to(rows, grad.shape)
     cols = np.broadcast_to(faces[:, :, None], grad.shape)
-    gradient = sp.csr_matrix(
-        (grad.ravel(), (rows.ravel(), cols.ravel())), shape=(2 * m, n)
-    )
+    gradient = sp.csr_matrix((grad.ravel(), (rows.ravel(), cols.ravel())), shape=(2 * m, n))
     stiffness = (gradient.T @ sp.diags(np.tile(area, 2)) @ gradient).tocsr()
     vertex_areas = np.bincount(faces.ravel(), weights=np.repeat(area / 3.0, 3), minlength=n)
     return FEMOperators(gradient, area, stiffness, vertex_areas)

@@ -81,9 +81,7 @@ def _gunzip(data: bytes, limit: int) -> bytes:
     try:
         out = decompressor.decompress(data, limit + 1)
     except zlib.error as exc:
-        raise UnreadableMeshError(
-            "The file ends in .gz but is not valid gzip data."
-        ) from exc
+        raise UnreadableMeshError("The file ends in .gz but is not valid gzip data.") from exc
     if len(out) > limit:
         raise TooManyFacesError(
             f"The file expands to more than {limit // (1024 * 1024)} MB when decompressed, "
@@ -98,9 +96,7 @@ def _parse(data: bytes, fmt: str) -> tuple[np.ndarray, np.ndarray]:
     import trimesh  # heavy import, only needed when a file is actually parsed
 
     try:
-        loaded = trimesh.load(
-            io.BytesIO(data), file_type=fmt, process=False, force="mesh"
-        )
+        loaded = trimesh.load(io.BytesIO(data), file_type=fmt, process=False, force="mesh")
     except Exception as exc:  # trimesh raises many unrelated types on bad bytes
         raise UnreadableMeshError(
             f"The file could not be read as {fmt.upper()}: it is damaged or not a mesh."

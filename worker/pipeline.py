@@ -70,15 +70,20 @@ class ShapeDescriptor:
             name: np.asarray(data[name]["values"], dtype=np.float64).reshape(data[name]["shape"])
             for name in MODALITIES
         }
-        meta = {k: data[k] for k in ("preset", "preset_version", "input_vertices",
-                                     "input_faces", "vertices")}
+        meta = {
+            k: data[k]
+            for k in ("preset", "preset_version", "input_vertices", "input_faces", "vertices")
+        }
         return cls(**meta, **arrays, timings=dict(data.get("timings", {})))
 
     def to_npz_bytes(self) -> bytes:
         buffer = io.BytesIO()
         meta = {k: v for k, v in self.to_json().items() if k not in MODALITIES}
-        np.savez(buffer, meta=np.array(json.dumps(meta)),
-                 **{name: getattr(self, name) for name in MODALITIES})
+        np.savez(
+            buffer,
+            meta=np.array(json.dumps(meta)),
+            **{name: getattr(self, name) for name in MODALITIES},
+        )
         return buffer.getvalue()
 
     @classmethod
