@@ -54,6 +54,12 @@ class TooFewVerticesError(MeshError):
     code = "too_few_vertices"
 
 
+class FileTooLargeError(MeshError):
+    """The file (or what it decompresses to) is over the size limit."""
+
+    code = "file_too_large"
+
+
 class TooManyFacesError(MeshError):
     """The mesh has more faces than the configured limit."""
 

@@ -19,6 +19,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .errors import (
     EmptyMeshError,
+    FileTooLargeError,
     MeshError,
     NonFiniteCoordinatesError,
     PointCloudError,
@@ -83,7 +84,7 @@ def _gunzip(data: bytes, limit: int) -> bytes:
     except zlib.error as exc:
         raise UnreadableMeshError("The file ends in .gz but is not valid gzip data.") from exc
     if len(out) > limit:
-        raise TooManyFacesError(
+        raise FileTooLargeError(
             f"The file expands to more than {limit // (1024 * 1024)} MB when decompressed, "
             "which is over this service's limit."
         )
@@ -96,14 +97,28 @@ def _parse(data: bytes, fmt: str) -> tuple[np.ndarray, np.ndarray]:
     import trimesh  # heavy import, only needed when a file is actually parsed
 
     try:
-        loaded = trimesh.load(io.BytesIO(data), file_type=fmt, process=False, force="mesh")
+        loaded = trimesh.load(io.BytesIO(data), file_type=fmt, process=False)
+        # Scenes (GLB/GLTF, multi-object OBJ): every mesh placed by its transform.
+        parts = loaded.dump() if isinstance(loaded, trimesh.Scene) else [loaded]
     except Exception as exc:  # trimesh raises many unrelated types on bad bytes
         raise UnreadableMeshError(
             f"The file could not be read as {fmt.upper()}: it is damaged or not a mesh."
         ) from exc
-    vertices = np.asarray(getattr(loaded, "vertices", np.empty((0, 3))), dtype=np.float64)
-    faces = np.asarray(getattr(loaded, "faces", np.empty((0, 3))), dtype=np.int64)
-    return vertices.reshape(-1, 3), faces.reshape(-1, 3)
+    meshes = [p for p in parts if isinstance(p, trimesh.Trimesh) and len(p.faces)]
+    if not meshes:
+        n_points = sum(len(getattr(p, "vertices", ())) for p in parts)
+        if n_points:
+            raise PointCloudError(
+                "The file contains points but no triangles; "
+                "upload a triangle mesh, not a point cloud."
+            )
+        return np.empty((0, 3)), np.empty((0, 3), dtype=np.int64)
+    vertices, faces, offset = [], [], 0
+    for mesh in meshes:
+        vertices.append(np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3))
+        faces.append(np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3) + offset)
+        offset += len(vertices[-1])
+    return np.concatenate(vertices), np.concatenate(faces)
 
 
 def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:

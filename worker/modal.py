@@ -8,10 +8,12 @@ the descriptors. Both tensors are first normalized per slice (sec. 4.2).
 from __future__ import annotations
 
 import numpy as np
+import scipy.linalg as la
 import scipy.sparse.linalg as sla
 import tensorly as tl
 from tensorly.decomposition import tucker
 
+from .diffusion import seeded_start
 from .tol import TOL
 
 
@@ -54,35 +56,15 @@ def modal_gdm(gdm: np.ndarray, k: int) -> np.ndarray:
     (k,) float
     """
     normalized = normalize_slices(gdm)
-    values = sla.eigsh(normalized, k=k, which="LM", return_eigenvectors=False)
+    values = sla.eigsh(
+        normalized, k=k, which="LM", return_eigenvectors=False, v0=seeded_start(len(gdm))
+    )
     return np.sort(np.abs(values))[::-1]
 
 
 def modal_gdm_reference(gdm: np.ndarray, k: int) -> np.ndarray:
     """The same descriptor by a full SVD."""
     return np.linalg.svd(normalize_slices(gdm), compute_uv=False)[:k]
-
-
-def _gram_svd(matrix, n_eigenvecs=None, **_):
-    """Truncated SVD through the Gram matrix of the short side of ``matrix``.
-
-    The unfoldings of a (p, p, s) tensor are very wide; their left singular vectors
-    are the eigenvectors of the small ``X X^T``, which is far cheaper than an SVD.
-    """
-    x = np.asarray(matrix)
-    wide = x.shape[0] <= x.shape[1]
-    gram = x @ x.T if wide else x.T @ x
-    values, vectors = np.linalg.eigh(gram)
-    order = np.argsort(values)[::-1][:n_eigenvecs]
-    s = np.sqrt(np.maximum(values[order], 0.0))
-    safe = np.where(s > 0, s, 1.0)
-    if wide:
-        u = vectors[:, order]
-        v = (u.T @ x) / safe[:, None]
-    else:
-        v = vectors[:, order].T
-        u = (x @ v.T) / safe[None, :]
-    return u, s, v
 
 
 def hosvd_core(tensor: np.ndarray, core_shape: tuple[int, int, int]) -> np.ndarray:
@@ -106,26 +88,22 @@ def hosvd_core(tensor: np.ndarray, core_shape: tuple[int, int, int]) -> np.ndarr
     -------
     core_shape float, non-negative.
     """
-    core, _ = tucker(
-        tl.tensor(tensor), rank=list(core_shape), n_iter_max=0, init="svd", svd=_gram_svd
-    )
+    # A plain SVD of each unfolding, not the Gram matrix: small core elements weigh
+    # as much as large ones in D1, and squaring the unfolding would drown them.
+    core, _ = tucker(tl.tensor(tensor), rank=list(core_shape), n_iter_max=0, init="svd")
     return np.abs(tl.to_numpy(core))
 
 
 def orthonormal_basis(columns: np.ndarray) -> np.ndarray:
     """Orthonormal basis of the span of ``columns`` (n, m), n >> m, rank-revealing.
 
-    From the eigen-decomposition of the small Gram matrix; directions whose
-    eigenvalue is below ``TOL.basis_rank`` of the largest are dropped (the constant
-    vector is also the first eigenvector, so the columns are dependent).
+    Householder QR with column pivoting; directions whose pivot is below
+    ``TOL.basis_rank`` of the largest are numerically absent and dropped (the
+    constant vector is also the first eigenvector, so the columns are dependent).
     """
-    gram = columns.T @ columns
-    values, vectors = np.linalg.eigh(gram)
-    keep = values > TOL.basis_rank * values[-1]
-    q = columns @ (vectors[:, keep] / np.sqrt(values[keep]))
-    # One re-orthogonalization pass removes the Gram matrix's squared conditioning.
-    q, _ = np.linalg.qr(q)
-    return q
+    q, r, _ = la.qr(columns, mode="economic", pivoting=True)
+    pivots = np.abs(np.diag(r))
+    return q[:, pivots > TOL.basis_rank * pivots[0]]
 
 
 def ddt_core(

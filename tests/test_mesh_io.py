@@ -1,0 +1,161 @@
+"""Mesh input: every supported format, gzip, cleaning, and a typed error per bad input."""
+
+from __future__ import annotations
+
+import gzip
+
+import numpy as np
+import pytest
+import trimesh
+
+from worker import errors
+from worker.mesh_io import clean_mesh, load_mesh, mesh_format
+
+
+@pytest.fixture(scope="module")
+def sphere() -> trimesh.Trimesh:
+    return trimesh.creation.icosphere(subdivisions=3)
+
+
+@pytest.mark.parametrize("fmt", ["obj", "ply", "off", "stl", "glb"])
+@pytest.mark.parametrize("gz", [False, True])
+def test_reads_every_format_from_bytes_and_path(tmp_path, sphere, fmt, gz):
+    data = sphere.export(file_type=fmt)
+    data = data.encode() if isinstance(data, str) else data
+    name = f"shape.{fmt}" + (".gz" if gz else "")
+    if gz:
+        data = gzip.compress(data)
+    (tmp_path / name).write_bytes(data)
+    for mesh in (load_mesh(data, name), load_mesh(tmp_path / name)):
+        # STL stores unmerged triangles: cleaning merges them back.
+        assert mesh.n_vertices == len(sphere.vertices)
+        assert mesh.n_faces == len(sphere.faces)
+        area = trimesh.Trimesh(mesh.vertices, mesh.faces).area
+        assert area == pytest.approx(sphere.area, rel=1e-5)
+
+
+def test_reads_gltf_with_embedded_buffers(sphere):
+    files = trimesh.Scene(sphere).export(file_type="gltf", embed_buffers=True)
+    data = files["model.gltf"]
+    mesh = load_mesh(data, "scene.gltf")
+    assert mesh.n_faces == len(sphere.faces)
+
+
+def test_tosca_file_reads(tosca_dir):
+    mesh = load_mesh(tosca_dir / "wolf0.off.gz")
+    assert mesh.n_vertices == 4344
+    assert mesh.faces.max() < mesh.n_vertices
+
+
+def test_cleaning_merges_drops_degenerate_and_keeps_largest_component(sphere):
+    big = sphere
+    small = trimesh.creation.icosphere(subdivisions=1, radius=0.1)
+    first = big.faces[0]
+    vertices = np.concatenate([big.vertices, small.vertices + 5.0, big.vertices[first[::-1]]])
+    faces = np.concatenate(
+        [
+            big.faces,
+            small.faces + len(big.vertices),
+            [[0, 0, 1]],  # repeated corner
+            [
+                [len(vertices) - 3, len(vertices) - 2, len(vertices) - 1]
+            ],  # face 0 again, other winding
+        ]
+    )
+    # Split every face's vertices apart, as STL does.
+    soup = vertices[faces].reshape(-1, 3)
+    mesh = clean_mesh(soup, np.arange(len(soup)).reshape(-1, 3))
+    assert mesh.n_vertices == len(big.vertices)
+    assert mesh.n_faces == len(big.faces)
+
+
+def test_collinear_face_is_dropped():
+    tri = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0]], dtype=float)
+    mesh = clean_mesh(tri, np.array([[0, 1, 2], [0, 1, 3]]))
+    assert mesh.n_faces == 1
+
+
+def _off(vertices, faces) -> bytes:
+    lines = ["OFF", f"{len(vertices)} {len(faces)} 0"]
+    lines += [" ".join(str(c) for c in v) for v in vertices]
+    lines += ["3 " + " ".join(str(i) for i in f) for f in faces]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def test_unsupported_extension():
+    with pytest.raises(errors.UnsupportedFormatError, match=r"\.docx"):
+        load_mesh(b"hello", "report.docx")
+    with pytest.raises(errors.UnsupportedFormatError, match="no extension"):
+        mesh_format("README")
+
+
+def test_empty_file():
+    with pytest.raises(errors.EmptyMeshError):
+        load_mesh(b"", "empty.obj")
+    with pytest.raises(errors.EmptyMeshError):
+        load_mesh(b"   \n", "blank.ply")
+
+
+def test_random_bytes_are_unreadable():
+    junk = np.random.default_rng(0).bytes(4096)
+    for ext in ("ply", "glb", "off"):
+        with pytest.raises(errors.MeshError) as info:
+            load_mesh(junk, f"junk.{ext}")
+        assert isinstance(info.value, errors.UnreadableMeshError | errors.EmptyMeshError)
+        assert info.value.message.endswith(".")
+
+
+def test_truncated_gzip():
+    data = gzip.compress(_off(*_tetra()))[:20]
+    with pytest.raises(errors.UnreadableMeshError, match="truncated|not valid gzip"):
+        load_mesh(data, "t.off.gz")
+
+
+def test_gzip_bomb_is_refused_without_expanding():
+    bomb = gzip.compress(b"0" * (8 * 1024 * 1024))
+    with pytest.raises(errors.FileTooLargeError):
+        load_mesh(bomb, "bomb.obj.gz", max_decompressed_bytes=1024 * 1024)
+
+
+def test_point_cloud_has_no_faces():
+    cloud = trimesh.PointCloud(np.random.default_rng(0).random((50, 3))).export(file_type="ply")
+    with pytest.raises(errors.PointCloudError):
+        load_mesh(cloud, "cloud.ply")
+
+
+def test_non_finite_coordinates():
+    vertices, faces = _tetra()
+    vertices[1][0] = float("nan")
+    with pytest.raises(errors.NonFiniteCoordinatesError):
+        load_mesh(_off(vertices, faces), "nan.off")
+    vertices, faces = _tetra()
+    vertices[2][1] = 1e300
+    with pytest.raises(errors.NonFiniteCoordinatesError):
+        load_mesh(_off(vertices, faces), "huge.off")
+
+
+def test_faces_indexing_missing_vertices():
+    vertices, faces = _tetra()
+    faces[0][2] = 99
+    with pytest.raises(errors.MeshError):
+        load_mesh(_off(vertices, faces), "bad.off")
+
+
+def test_too_few_vertices_after_cleaning():
+    with pytest.raises(errors.TooFewVerticesError):
+        load_mesh(_off(*_tetra()), "tetra.off")
+    # All vertices identical: every face is degenerate.
+    with pytest.raises(errors.TooFewVerticesError):
+        load_mesh(_off([[1, 1, 1]] * 4, [[0, 1, 2], [1, 2, 3]]), "point.off")
+
+
+def test_face_limit(sphere):
+    data = sphere.export(file_type="ply")
+    with pytest.raises(errors.TooManyFacesError, match="limit"):
+        load_mesh(data, "s.ply", max_faces=100)
+
+
+def _tetra():
+    vertices = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    faces = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]
+    return vertices, faces
