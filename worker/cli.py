@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import shlex
+import subprocess
 import sys
 from pathlib import Path
 
@@ -38,6 +41,59 @@ def _describe(args: argparse.Namespace) -> int:
     return 1 if failures else 0
 
 
+#: Default descriptor cache, outside any checkout.
+DEFAULT_CACHE = Path.home() / ".cache" / "modalshape" / "evaluate"
+
+
+def _git_revision() -> str:
+    """``git describe`` of the checkout this code runs from, for the report; '' if none."""
+    try:
+        result = subprocess.run(
+            ["git", "describe", "--always", "--dirty", "--abbrev=12"],
+            cwd=Path(__file__).resolve().parent,
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    return result.stdout.strip()
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from .evaluate import COLUMNS, EvaluationError, run_evaluation
+
+    preset = get_preset(args.preset)
+    dataset = Path(args.dataset_dir)
+    labels = Path(args.labels) if args.labels else dataset / "labels.csv"
+    out = Path(args.out) if args.out else Path("evaluation-out") / preset.name
+    try:
+        report = run_evaluation(
+            dataset,
+            labels,
+            preset,
+            out_dir=out,
+            cache_root=Path(args.cache),
+            jobs=args.jobs,
+            per_class_limit=args.limit,
+            command=shlex.join(["shapes", *args.argv]),
+            environment={"git": _git_revision()},
+        )
+    except (EvaluationError, OSError) as exc:
+        print(f"shapes evaluate: {exc}", file=sys.stderr)
+        return 2
+    width = max(len(row["title"]) for row in report["rows"].values())
+    print(f"{'':{width}}  " + " ".join(f"{h:>6}" for h in COLUMNS.values()))
+    for row in report["rows"].values():
+        cells = " ".join(f"{100 * row[k]:6.2f}" for k in COLUMNS)
+        print(f"{row['title']:{width}}  {cells}")
+    for name, why in report["failures"].items():
+        print(f"left out {name}: {why}", file=sys.stderr)
+    print(f"report written to {out}/report.md", file=sys.stderr)
+    return 1 if report["failures"] else 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="shapes", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -49,11 +105,41 @@ def build_parser() -> argparse.ArgumentParser:
     describe.add_argument("--out", help="directory to save descriptors in (default: print JSON)")
     describe.add_argument("--format", choices=("json", "npz"), default="json")
     describe.set_defaults(run=_describe)
+
+    evaluate = sub.add_parser(
+        "evaluate",
+        help="score the descriptors on a labelled collection (the paper's sec. 4 protocol)",
+        description="Describe every mesh of labels.csv, compare all to all per modality and "
+        "fused, next to lapy's ShapeDNA, and write report.json, report.md, cmc.png, roc.png.",
+    )
+    evaluate.add_argument("dataset_dir", help="directory holding the mesh files")
+    evaluate.add_argument(
+        "--labels", help="CSV with columns file,class (default: DATASET_DIR/labels.csv)"
+    )
+    evaluate.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
+    evaluate.add_argument(
+        "--jobs",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="worker processes, one BLAS thread each (default: CPUs)",
+    )
+    evaluate.add_argument(
+        "--cache", default=str(DEFAULT_CACHE), help=f"descriptor cache (default: {DEFAULT_CACHE})"
+    )
+    evaluate.add_argument("--out", help="report directory (default: evaluation-out/PRESET)")
+    evaluate.add_argument(
+        "--limit",
+        type=int,
+        help="use only the first N meshes (natural file-name order) of each class, N >= 2",
+    )
+    evaluate.set_defaults(run=_evaluate)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
+    args.argv = argv
     return args.run(args)
 
 
