@@ -1,0 +1,23 @@
+"""``python -m worker``: run one descriptor-queue consumer (settings from ``SHAPES_*``)."""
+
+from __future__ import annotations
+
+import argparse
+
+from .queue import QueueSettings, run_consumer
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m worker", description=__doc__)
+    parser.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="tasks run at once in this process (default 1; start more processes instead)",
+    )
+    args = parser.parse_args(argv)
+    run_consumer(QueueSettings(), workers=args.threads)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,160 @@
+"""The descriptor job queue (Huey): embedded on SQLite by default, Redis across machines.
+
+This module is the only place that knows about the task queue. It has no
+knowledge of the service's database: a task receives the path of an upload and
+returns a JSON-able result, which the service's collector stores. Keeping the
+database single-writer (the service) keeps SQLite safe under several workers.
+
+Result of ``describe_upload``::
+
+    {"ok": true, "descriptor": "<base64 of ShapeDescriptor.to_npz_bytes()>"}
+    {"ok": false, "code": "<MeshError.code>", "message": "<sentence for the user>"}
+
+A :class:`~worker.errors.MeshError` is deterministic (the same file fails the
+same way), so it is returned, not raised, and never retried. Any other
+exception is raised so that Huey retries the task (``TASK_RETRIES`` times); the
+final failure is stored by Huey as the task's error.
+
+While a task runs, a heartbeat ``{"pid", "host", "started", "beat"}`` is kept
+fresh in Huey's key-value store under :func:`heartbeat_key`, so the service can
+show "processing" and tell a dead worker (stale heartbeat) from a slow one.
+"""
+
+from __future__ import annotations
+
+import base64
+import os
+import socket
+import threading
+import time
+from pathlib import Path
+
+from huey import Huey, RedisHuey, SqliteHuey
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+from .errors import MeshError
+from .pipeline import ShapeDescriptor, describe_file
+from .presets import get_preset
+
+TASK_NAME = "describe_upload"
+TASK_RETRIES = 2
+TASK_RETRY_DELAY_SECONDS = 1
+QUEUE_FILE = "queue.sqlite3"
+
+
+class QueueSettings(BaseSettings):
+    """Queue settings, read from ``SHAPES_*`` environment variables.
+
+    The service's settings class extends this one, so the API process and the
+    worker processes read the same variables the same way.
+    """
+
+    model_config = SettingsConfigDict(env_prefix="SHAPES_", extra="ignore")
+
+    data_dir: Path = Path("data")
+    redis_url: str | None = None
+    queue_name: str = "shapes"
+    heartbeat_seconds: float = 2.0
+
+
+def heartbeat_key(task_id: str) -> str:
+    """Key of a running task's heartbeat in the queue's key-value store."""
+    return f"heartbeat:{task_id}"
+
+
+def encode_descriptor(descriptor: ShapeDescriptor) -> str:
+    return base64.b64encode(descriptor.to_npz_bytes()).decode("ascii")
+
+
+def decode_descriptor(text: str) -> ShapeDescriptor:
+    return ShapeDescriptor.from_npz_bytes(base64.b64decode(text))
+
+
+def make_huey(settings: QueueSettings) -> Huey:
+    """The Huey instance for ``settings``, with the ``describe_upload`` task registered.
+
+    SQLite (``<data_dir>/queue.sqlite3``, WAL) unless ``redis_url`` is set.
+    Intermediate errors are not stored, so a task's result is either its value
+    or, after the last retry, its final error.
+    """
+    if settings.redis_url:
+        huey: Huey = RedisHuey(
+            settings.queue_name, url=settings.redis_url, store_intermediate_errors=False
+        )
+    else:
+        settings.data_dir.mkdir(parents=True, exist_ok=True)
+        huey = SqliteHuey(
+            settings.queue_name,
+            filename=str(settings.data_dir / QUEUE_FILE),
+            store_intermediate_errors=False,
+            timeout=30,
+        )
+    heartbeat_seconds = settings.heartbeat_seconds
+    data_dir = settings.data_dir
+
+    @huey.task(
+        retries=TASK_RETRIES, retry_delay=TASK_RETRY_DELAY_SECONDS, context=True, name=TASK_NAME
+    )
+    def describe_upload(
+        upload_path: str, filename: str, preset_name: str, max_faces: int, task=None
+    ) -> dict:
+        """Describe one uploaded mesh file; see the module docstring for the result.
+
+        ``upload_path`` is relative to this worker's data directory (or absolute).
+        """
+        key = heartbeat_key(task.id)
+        started = time.time()
+        done = threading.Event()
+
+        def beat() -> None:
+            while True:
+                huey.put(
+                    key,
+                    {
+                        "pid": os.getpid(),
+                        "host": socket.gethostname(),
+                        "started": started,
+                        "beat": time.time(),
+                    },
+                )
+                if done.wait(heartbeat_seconds):
+                    return
+
+        beater = threading.Thread(target=beat, name=f"heartbeat-{task.id}", daemon=True)
+        beater.start()
+        try:
+            path = Path(upload_path)
+            descriptor = describe_file(
+                path if path.is_absolute() else data_dir / path,
+                get_preset(preset_name),
+                filename,
+                max_faces=max_faces,
+            )
+        except MeshError as exc:  # deterministic: report, do not retry
+            return {"ok": False, "code": exc.code, "message": exc.message}
+        finally:
+            done.set()
+            beater.join()
+        return {"ok": True, "descriptor": encode_descriptor(descriptor)}
+
+    huey.describe_upload = describe_upload  # type: ignore[attr-defined]
+    return huey
+
+
+def run_consumer(settings: QueueSettings | None = None, workers: int = 1) -> None:
+    """Run a Huey consumer (blocking) on the queue described by ``settings``.
+
+    SIGINT stops it gracefully (the running task finishes), SIGTERM at once;
+    a task interrupted either way is re-enqueued by the service's collector
+    once its heartbeat goes stale.
+    """
+    import logging
+
+    logging.basicConfig(
+        level=logging.INFO, format="%(asctime)s %(process)d %(name)s %(levelname)s %(message)s"
+    )
+    huey = make_huey(settings or QueueSettings())
+    consumer = huey.create_consumer(
+        workers=workers, worker_type="thread", initial_delay=0.1, backoff=1.15, max_delay=0.5
+    )
+    consumer.run()
