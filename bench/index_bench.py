@@ -1,0 +1,231 @@
+"""Index benchmark: recall@10 against the exhaustive fused ranking, and search latency.
+
+    python bench/index_bench.py                       # TOSCA + 1k/10k/100k synthetic
+    python bench/index_bench.py --sizes 1000 10000    # fewer sizes
+
+* TOSCA: every mesh is a query against the other 82 (leave-one-out), under the
+  default preset (D2, product rule) and under the TOSCA preset (D1, sum rule).
+* Synthetic: descriptors shaped like real ones (below), N enrolled, 200 fresh
+  queries from the same classes.
+
+The reference ranking is the exhaustive one computed with ``worker.compare``
+alone (``gallery_sigma`` over the whole gallery, eq. 8/9, ``fuse``), not with
+the index's code. Latency is the search step alone (``GalleryIndex.search``),
+one query at a time, after one warm-up query.
+
+Synthetic descriptors: every modality is modelled in log space from the real
+TOSCA descriptors. A synthetic class centre is the real mean plus a random
+combination of the real class-mean deviations plus independent per-element
+noise (30 % of the real between-class spread); a member is its centre plus a
+random combination of the real within-class residuals (a pose change). So
+per-element scales, correlations and the within/between-class ratio follow the
+real data. Classes have 10 members.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from app.index import GalleryIndex, SearchStats, descriptor_dims  # noqa: E402
+from bench._tosca import tosca_descriptors, tosca_labels  # noqa: E402
+from worker.compare import (  # noqa: E402
+    fuse,
+    gallery_sigma,
+    mean_normalized_manhattan,
+    normalized_euclidean,
+)
+from worker.presets import MODALITIES, get_preset  # noqa: E402
+
+K = 10
+
+
+def exhaustive_topk(preset, gallery: dict, sigma: dict | None, queries: list[dict], k: int):
+    """(p, k) positions of the best gallery rows per query by the exact fused score,
+    computed with ``worker.compare`` alone over the whole gallery."""
+    per = {}
+    for m in preset.fused_modalities:
+        q = np.stack([query[m] for query in queries])
+        if preset.dissimilarity == "D2":
+            per[m] = normalized_euclidean(q, gallery[m], sigma[m])
+        else:
+            per[m] = mean_normalized_manhattan(q, gallery[m])
+    fused = fuse(per, preset.fusion, {m: preset.weight(m) for m in preset.fused_modalities})
+    n = fused.shape[1]
+    return np.stack([np.lexsort((np.arange(n), row))[:k] for row in fused])
+
+
+def build(preset, gallery: dict, ids: np.ndarray) -> GalleryIndex:
+    index = GalleryIndex(preset, descriptor_dims(preset))
+    index.add_many((int(i), {m: gallery[m][j] for m in MODALITIES}) for j, i in enumerate(ids))
+    return index
+
+
+def measure(
+    preset, gallery: dict, queries: list[dict], exclude: list[tuple[int, ...]] | None = None
+):
+    """recall@K, latency percentiles (ms), mean candidates and certified fraction."""
+    n = len(next(iter(gallery.values())))
+    ids = np.arange(n, dtype=np.int64)
+    index = build(preset, gallery, ids)
+    sigma = (
+        {m: gallery_sigma(gallery[m]) for m in MODALITIES} if preset.dissimilarity == "D2" else None
+    )
+    index.search(queries[0], K)  # warm-up
+    hits = total = 0
+    results: list[set[int]] = []
+    times, candidates, scored, certified = [], [], [], 0
+    for qi, query in enumerate(queries):
+        excluded = exclude[qi] if exclude else ()
+        stats = SearchStats()
+        start = time.perf_counter()
+        found = index.search(query, K, exclude=excluded, stats=stats)
+        times.append(time.perf_counter() - start)
+        candidates.append(stats.candidates)
+        scored.append(stats.scored or stats.candidates)
+        certified += stats.certified
+        if excluded:
+            keep = np.setdiff1d(np.arange(n), np.asarray(excluded))
+            sub = {m: gallery[m][keep] for m in MODALITIES}
+            # The excluded shape stays enrolled, so it stays in the gallery's sigma.
+            ref = keep[exhaustive_topk(preset, sub, sigma, [query], K)[0]]
+            hits += len({m.id for m in found} & set(int(i) for i in ref))
+            total += len(ref)
+        else:
+            results.append({m.id for m in found})
+    if results:
+        refs = exhaustive_topk(preset, gallery, sigma, queries, K)
+        for got, ref in zip(results, refs, strict=True):
+            hits += len(got & set(int(i) for i in ref))
+            total += len(ref)
+    ms = np.array(times) * 1000
+    return {
+        "n": n,
+        "recall": hits / total,
+        "p50": float(np.percentile(ms, 50)),
+        "p95": float(np.percentile(ms, 95)),
+        "max": float(ms.max()),
+        "candidates": statistics.mean(candidates),
+        "scored": statistics.mean(scored),
+        "certified": certified / len(queries),
+    }
+
+
+def synthetic_model(preset_name: str):
+    """Log-space class structure of the real TOSCA descriptors, per modality."""
+    descriptors = tosca_descriptors(preset_name)
+    labels = tosca_labels()
+    names = sorted(descriptors)
+    classes = sorted(set(labels[n] for n in names))
+    model = {}
+    for m in MODALITIES:
+        x = np.stack([descriptors[n].vector(m) for n in names])
+        positive = x[x > 0]
+        floor = positive.min() if positive.size else 1e-12
+        logx = np.log(np.maximum(x, floor))
+        mu = logx.mean(axis=0)
+        class_means = np.stack(
+            [logx[[labels[n] == c for n in names]].mean(axis=0) for c in classes]
+        )
+        residuals = np.concatenate(
+            [logx[[labels[n] == c for n in names]] - class_means[i] for i, c in enumerate(classes)]
+        )
+        model[m] = {
+            "mu": mu,
+            "between": class_means - mu,
+            "spread": (class_means - mu).std(axis=0),
+            "within": residuals,
+        }
+    return model
+
+
+def synthetic(model: dict, n_classes: int, per_class: int, rng: np.random.Generator) -> dict:
+    """``n_classes * per_class`` descriptors (modality -> (N, M)), class by class."""
+    n = n_classes * per_class
+    nb = len(next(iter(model.values()))["between"])
+    nw = len(next(iter(model.values()))["within"])
+    # The same class and pose draws for every modality (a shape is one draw).
+    centre_weights = rng.normal(size=(n_classes, nb)) / np.sqrt(nb)
+    member_weights = rng.normal(size=(n, nw)) / np.sqrt(nw)
+    out = {}
+    for m, part in model.items():
+        noise = 0.3 * part["spread"] * rng.normal(size=(n_classes, len(part["mu"])))
+        centres = part["mu"] + centre_weights @ part["between"] + noise
+        out[m] = np.exp(np.repeat(centres, per_class, axis=0) + member_weights @ part["within"])
+    return out
+
+
+def tosca_rows(preset_name: str) -> list[dict]:
+    preset = get_preset(preset_name)
+    descriptors = tosca_descriptors(preset_name)
+    names = sorted(descriptors)
+    gallery = {m: np.stack([descriptors[n].vector(m) for n in names]) for m in MODALITIES}
+    queries = [{m: gallery[m][i] for m in MODALITIES} for i in range(len(names))]
+    # Leave-one-out: each mesh queries the rest (it stays in the gallery's sigma).
+    row = measure(preset, gallery, queries, exclude=[(i,) for i in range(len(names))])
+    row["data"] = f"TOSCA ({preset.name}: {preset.dissimilarity}, {preset.fusion})"
+    return [row]
+
+
+def synthetic_rows(preset_name: str, sizes: list[int], n_queries: int, seed: int) -> list[dict]:
+    preset = get_preset(preset_name)
+    model = synthetic_model(preset_name)
+    rows = []
+    for size in sizes:
+        rng = np.random.default_rng(seed)
+        per_class = 10
+        n_classes = max(1, size // per_class)
+        # Each class gets one extra member, held out: the queries are unseen poses
+        # of enrolled classes.
+        data = synthetic(model, n_classes, per_class + 1, rng)
+        member = np.arange(n_classes * (per_class + 1)) % (per_class + 1)
+        gallery = {m: v[member < per_class][:size] for m, v in data.items()}
+        held_out = np.flatnonzero(member == per_class)
+        pick = rng.choice(held_out, size=min(n_queries, len(held_out)), replace=False)
+        queries = [{m: data[m][i] for m in MODALITIES} for i in pick]
+        row = measure(preset, gallery, queries)
+        row["data"] = f"synthetic ({preset.name})"
+        rows.append(row)
+        print(_format(row), flush=True)
+    return rows
+
+
+HEADER = (
+    "| data | enrolled | recall@10 | search p50 ms | p95 ms | max ms | "
+    "faiss candidates | DDT scored exactly | certified exact |\n"
+    "|---|---|---|---|---|---|---|---|---|"
+)
+
+
+def _format(row: dict) -> str:
+    return (
+        f"| {row['data']} | {row['n']:,} | {row['recall']:.4f} | {row['p50']:.2f} | "
+        f"{row['p95']:.2f} | {row['max']:.2f} | {row['candidates']:.0f} | {row['scored']:.0f} | "
+        f"{row['certified']:.0%} |"
+    )
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="*", default=[1000, 10_000, 100_000])
+    parser.add_argument("--queries", type=int, default=200)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--preset", default="smeets2010-shrec")
+    parser.add_argument("--tosca-presets", nargs="*", default=["smeets2010-shrec"])
+    args = parser.parse_args(argv)
+    print(HEADER, flush=True)
+    for name in args.tosca_presets:
+        for row in tosca_rows(name):
+            print(_format(row), flush=True)
+    synthetic_rows(args.preset, args.sizes, args.queries, args.seed)
+
+
+if __name__ == "__main__":
+    main()
