@@ -1,0 +1,78 @@
+"""The service's settings: one object, read once from ``SHAPES_*`` environment variables."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+from pydantic import Field
+
+from worker.mesh_io import DEFAULT_MAX_FACES
+from worker.presets import DEFAULT_PRESET
+from worker.queue import QueueSettings
+
+
+class Settings(QueueSettings):
+    """Everything configurable about the service.
+
+    Inherits the queue's settings (``data_dir``, ``redis_url``, ``queue_name``,
+    ``heartbeat_seconds``) so the API and the workers agree on the queue.
+    """
+
+    # Storage
+    database_url: str | None = Field(
+        default=None, description="SQLAlchemy URL; default sqlite:///<data_dir>/shapes.sqlite3"
+    )
+
+    # Serving (python -m app)
+    host: str = "127.0.0.1"
+    port: int = 8000
+    workers: int = Field(default=1, ge=0, description="queue consumer processes started by serve")
+
+    # The method
+    preset: str = Field(
+        default=DEFAULT_PRESET, description="preset enrolled meshes are described with"
+    )
+
+    # Limits
+    max_upload_bytes: int = Field(default=64 * 1024 * 1024, ge=1)
+    max_faces: int = Field(default=DEFAULT_MAX_FACES, ge=1)
+    max_field_bytes: int = Field(default=64 * 1024, ge=1)
+    max_k: int = Field(default=100, ge=1)
+    max_page_size: int = Field(default=200, ge=1)
+
+    # Jobs
+    query_timeout_seconds: float = Field(default=120.0, gt=0)
+    query_priority: int = 100
+    collector_interval_seconds: float = Field(default=0.5, gt=0)
+    stalled_after_seconds: float = Field(
+        default=30.0, gt=0, description="a running job whose heartbeat is older is re-enqueued"
+    )
+    max_requeues: int = Field(default=2, ge=0)
+
+    # Index
+    index_refit_fraction: float = Field(
+        default=0.05, gt=0, description="refit sigma and projections after this fraction changed"
+    )
+    index_save_interval_seconds: float = Field(default=30.0, gt=0)
+
+    @property
+    def sqlalchemy_url(self) -> str:
+        return self.database_url or f"sqlite:///{(self.data_dir / 'shapes.sqlite3').resolve()}"
+
+    @property
+    def uploads_dir(self) -> Path:
+        return self.data_dir / "uploads"
+
+    @property
+    def tmp_dir(self) -> Path:
+        return self.data_dir / "tmp"
+
+    @property
+    def index_dir(self) -> Path:
+        return self.data_dir / "index"
+
+
+@lru_cache
+def get_settings() -> Settings:
+    return Settings()

@@ -1,0 +1,120 @@
+"""Domain errors and the one handler that turns them into ``{"error", "detail"}``.
+
+Services raise these; they know nothing about HTTP beyond the status each
+error carries. Mesh errors from the descriptor engine map by their ``code``.
+"""
+
+from __future__ import annotations
+
+from fastapi import FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from worker.errors import MeshError, TooManyFacesError, UnsupportedFormatError
+
+
+class DomainError(Exception):
+    """An error the client can act on: HTTP ``status``, machine ``code``, a sentence."""
+
+    status = 400
+    code = "bad_request"
+
+    def __init__(self, detail: str, *, code: str | None = None, status: int | None = None):
+        super().__init__(detail)
+        self.detail = detail
+        if code is not None:
+            self.code = code
+        if status is not None:
+            self.status = status
+
+
+class NotFoundError(DomainError):
+    status = 404
+    code = "not_found"
+
+
+class PayloadTooLargeError(DomainError):
+    status = 413
+    code = "too_large"
+
+
+class UnsupportedMediaTypeError(DomainError):
+    status = 415
+    code = "unsupported_format"
+
+
+class InvalidInputError(DomainError):
+    status = 422
+    code = "invalid_input"
+
+
+class ConflictError(DomainError):
+    status = 409
+    code = "conflict"
+
+
+class UnavailableError(DomainError):
+    status = 503
+    code = "unavailable"
+
+
+def mesh_error_status(error: MeshError) -> int:
+    """HTTP status of a descriptor-engine refusal."""
+    if isinstance(error, UnsupportedFormatError):
+        return 415
+    if isinstance(error, TooManyFacesError):
+        return 413
+    return 422
+
+
+def from_mesh_error(error: MeshError) -> DomainError:
+    return DomainError(error.message, code=error.code, status=mesh_error_status(error))
+
+
+def _body(code: str, detail: str) -> dict[str, str]:
+    return {"error": code, "detail": detail}
+
+
+_HTTP_CODES = {
+    400: "bad_request",
+    404: "not_found",
+    405: "method_not_allowed",
+    413: "too_large",
+    415: "unsupported_format",
+    422: "invalid_input",
+}
+
+
+def _validation_sentence(exc: RequestValidationError) -> str:
+    parts = []
+    for err in exc.errors()[:3]:
+        where = ".".join(str(p) for p in err.get("loc", ()) if p not in ("body", "query", "path"))
+        parts.append(f"{where}: {err.get('msg', 'invalid')}" if where else err.get("msg", ""))
+    return "Invalid request: " + "; ".join(parts) + "."
+
+
+def install_error_handlers(app: FastAPI) -> None:
+    @app.exception_handler(DomainError)
+    async def _domain(_: Request, exc: DomainError) -> JSONResponse:
+        return JSONResponse(_body(exc.code, exc.detail), status_code=exc.status)
+
+    @app.exception_handler(MeshError)
+    async def _mesh(_: Request, exc: MeshError) -> JSONResponse:
+        return JSONResponse(_body(exc.code, exc.message), status_code=mesh_error_status(exc))
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
+        return JSONResponse(_body("invalid_input", _validation_sentence(exc)), status_code=422)
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+        code = _HTTP_CODES.get(exc.status_code, "error")
+        detail = exc.detail if isinstance(exc.detail, str) else "The request failed."
+        if exc.status_code == 404 and detail == "Not Found":
+            detail = "There is nothing at this address."
+        if not detail.endswith("."):
+            detail += "."
+        return JSONResponse(
+            _body(code, detail), status_code=exc.status_code, headers=getattr(exc, "headers", None)
+        )

@@ -1,0 +1,259 @@
+"""The collector: the one writer that turns queue results into database rows and index entries.
+
+Workers never touch the database. Every ``collector_interval_seconds`` the
+collector (a thread started in the app's lifespan) reads the results and
+heartbeats of unfinished jobs from the queue's key-value store and
+
+* stores a descriptor (with its preset name and version), marks the job
+  succeeded and the mesh ready, and adds the shape to the index at once;
+* marks job and mesh failed with the engine's sentence for a refused mesh;
+* marks job and mesh failed when the task raised on every Huey retry;
+* marks a queued job "processing" once its heartbeat appears;
+* re-enqueues a job whose heartbeat went stale (its worker died), at most
+  ``max_requeues`` times, then fails it with a sentence saying so.
+
+Results are read without removing them and deleted only after the commit, so
+a crash in between makes the collector store the same result again (at least
+once, idempotent), never lose it.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+import uuid
+from datetime import datetime
+
+from huey.utils import Error
+from sqlalchemy.exc import SQLAlchemyError
+
+from worker.queue import decode_descriptor
+
+from ..db import unit_of_work
+from ..gallery import save_index, vectors_of
+from ..meshes import repository as meshes
+from ..models import Descriptor, Job, JobStatus, Mesh, MeshStatus, utcnow
+from ..state import AppState
+from . import repository as jobs
+
+log = logging.getLogger("shapes.collector")
+
+BATCH = 500
+
+
+def new_job(state: AppState, mesh: Mesh) -> Job:
+    """A queued job describing ``mesh`` with the service's preset (task id chosen now,
+    so it can be enqueued after the commit that creates the row)."""
+    return Job(
+        mesh=mesh,
+        preset=state.preset.name,
+        preset_version=state.preset.version,
+        task_id=uuid.uuid4().hex,
+        status=JobStatus.queued.value,
+        enqueues=1,
+    )
+
+
+def enqueue_job(state: AppState, job: Job) -> None:
+    mesh = job.mesh
+    state.queue.enqueue_describe(
+        job.task_id,
+        state.store.path(mesh.storage_path),
+        mesh.filename,
+        job.preset,
+    )
+
+
+def _fail(job: Job, code: str, detail: str) -> None:
+    job.status = JobStatus.failed.value
+    job.error_code, job.error_detail = code, detail
+    job.finished_at = utcnow()
+    mesh = job.mesh
+    mesh.status = MeshStatus.failed.value
+    mesh.error_code, mesh.error_detail = code, detail
+
+
+class JobCollector:
+    def __init__(self, state: AppState) -> None:
+        self.state = state
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._last_save = time.monotonic()
+
+    # ---------------------------------------------------------------- startup
+    def recover(self) -> int:
+        """Re-enqueue unfinished jobs the queue no longer holds (lost with a dead worker
+        or never enqueued because the process stopped right after the commit), and
+        queue jobs for meshes not yet described with the current preset version."""
+        state = self.state
+        waiting = state.queue.waiting_task_ids()
+        to_enqueue: list[Job] = []
+        with unit_of_work(state.sessions) as session:
+            unfinished = jobs.unfinished(session)
+            ids = [j.task_id for j in unfinished]
+            results = state.queue.results(ids)
+            beats = state.queue.heartbeats(ids)
+            for job in unfinished:
+                if job.task_id in results or job.task_id in waiting:
+                    continue
+                beat = beats.get(job.task_id)
+                if beat is not None and not state.queue.is_stale(beat):
+                    continue  # running in a worker that is still alive
+                to_enqueue.append(job)
+            for mesh in meshes.meshes_missing_descriptor(
+                session, state.preset.name, state.preset.version
+            ):
+                job = jobs.add(session, new_job(state, mesh))
+                mesh.status = MeshStatus.queued.value
+                mesh.error_code = mesh.error_detail = None
+                to_enqueue.append(job)
+        for job in to_enqueue:
+            enqueue_job(state, job)
+        if to_enqueue:
+            log.info("re-enqueued %d unfinished jobs", len(to_enqueue))
+        return len(to_enqueue)
+
+    # ------------------------------------------------------------------- loop
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name="job-collector", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=30)
+
+    def _run(self) -> None:
+        interval = self.state.settings.collector_interval_seconds
+        while not self._stop.is_set():
+            try:
+                self.run_once()
+                self._maybe_save()
+            except SQLAlchemyError as exc:  # e.g. a mesh deleted meanwhile: next round
+                log.warning("collector round rolled back: %s", exc)
+            except Exception:
+                log.exception("collector round failed")
+            self._stop.wait(interval)
+
+    def _maybe_save(self) -> None:
+        index = self.state.index
+        interval = self.state.settings.index_save_interval_seconds
+        if index is not None and index.dirty and time.monotonic() - self._last_save > interval:
+            save_index(self.state, index)
+            self._last_save = time.monotonic()
+
+    def run_once(self) -> int:
+        """One pass over unfinished jobs; returns how many changed."""
+        state = self.state
+        index = state.index
+        ready: list[tuple[int, dict]] = []
+        finished: list[str] = []
+        requeue: list[Job] = []
+        changed = 0
+        with state.gallery_lock:
+            with unit_of_work(state.sessions) as session:
+                unfinished = jobs.unfinished(session, limit=BATCH)
+                state.metrics.jobs_unfinished.set(len(unfinished))
+                if not unfinished:
+                    return 0
+                ids = [j.task_id for j in unfinished]
+                results = state.queue.results(ids)
+                pending_beats = [j.task_id for j in unfinished if j.task_id not in results]
+                beats = state.queue.heartbeats(pending_beats)
+                for job in unfinished:
+                    result = results.get(job.task_id)
+                    if result is not None:
+                        vectors = self._finish(session, job, result)
+                        if vectors is not None:
+                            ready.append((job.mesh_id, vectors))
+                        finished.append(job.task_id)
+                        changed += 1
+                    elif (beat := beats.get(job.task_id)) is not None:
+                        changed += self._track(job, beat, requeue)
+            # Committed: now the index and the queue may follow.
+            if index is not None:
+                for mesh_id, vectors in ready:
+                    index.add(mesh_id, vectors)
+                state.metrics.index_size.labels(state.preset.name).set(len(index))
+        for task_id in finished:
+            state.queue.forget(task_id)
+        for job in requeue:
+            enqueue_job(state, job)
+        return changed
+
+    def _finish(self, session, job: Job, result) -> dict | None:
+        state, mesh = self.state, job.mesh
+        job.finished_at = utcnow()
+        state.metrics.job_seconds.observe((job.finished_at - job.created_at).total_seconds())
+        if isinstance(result, Error):
+            log.error("job %s crashed: %s", job.id, result.metadata.get("error"))
+            _fail(
+                job,
+                "describe_crashed",
+                "Computing the descriptor crashed on every try "
+                f"({str(result.metadata.get('error', 'unknown error'))[:200]}); "
+                "the file is kept, and an operator can look into it.",
+            )
+            state.metrics.jobs.labels("crashed").inc()
+            return None
+        if not result.get("ok"):
+            _fail(job, result["code"], result["message"])
+            state.metrics.jobs.labels("refused").inc()
+            return None
+        descriptor = decode_descriptor(result["descriptor"])
+        if (descriptor.preset, descriptor.preset_version) != (job.preset, job.preset_version):
+            _fail(job, "preset_mismatch", "The worker runs another version of the method.")
+            state.metrics.jobs.labels("crashed").inc()
+            return None
+        meshes.upsert_descriptor(
+            session,
+            Descriptor(
+                mesh_id=mesh.id,
+                preset=descriptor.preset,
+                preset_version=descriptor.preset_version,
+                data=descriptor.to_npz_bytes(),
+                input_vertices=descriptor.input_vertices,
+                input_faces=descriptor.input_faces,
+                vertices=descriptor.vertices,
+                timings=descriptor.timings,
+            ),
+        )
+        job.status = JobStatus.succeeded.value
+        job.error_code = job.error_detail = None
+        mesh.status = MeshStatus.ready.value
+        mesh.error_code = mesh.error_detail = None
+        state.metrics.jobs.labels("succeeded").inc()
+        state.metrics.describe_seconds.observe(descriptor.timings.get("total", 0.0))
+        return vectors_of(descriptor)
+
+    def _track(self, job: Job, beat: dict, requeue: list[Job]) -> int:
+        """Follow a running job's heartbeat; re-enqueue or fail it if its worker died."""
+        state = self.state
+        changed = 0
+        if job.status == JobStatus.queued.value:
+            job.status = JobStatus.processing.value
+            job.started_at = datetime.fromtimestamp(float(beat["started"]))
+            job.worker = f"{beat.get('pid')}@{beat.get('host')}"
+            job.mesh.status = MeshStatus.processing.value
+            changed = 1
+        if not state.queue.is_stale(beat):
+            return changed
+        if job.enqueues > state.settings.max_requeues:
+            _fail(
+                job,
+                "worker_lost",
+                f"The worker computing this descriptor stopped responding {job.enqueues} "
+                "times; the file is kept and can be uploaded again after a fix.",
+            )
+            state.queue.forget(job.task_id)
+            state.metrics.jobs.labels("lost").inc()
+            return 1
+        log.warning("job %s: worker %s stopped responding; re-enqueueing", job.id, job.worker)
+        job.enqueues += 1
+        job.status = JobStatus.queued.value
+        job.worker = None
+        job.mesh.status = MeshStatus.queued.value
+        state.metrics.jobs.labels("requeued").inc()
+        requeue.append(job)
+        return 1

@@ -1,0 +1,40 @@
+"""HTTP layer of /jobs."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter
+
+from ..deps import SessionDep
+from ..errors import NotFoundError
+from ..models import JobStatus
+from . import repository
+from .schemas import JobOut
+
+router = APIRouter(prefix="/jobs", tags=["jobs"])
+
+
+@router.get(
+    "/{job_id}",
+    response_model=JobOut,
+    summary="A descriptor job",
+    responses={404: {"description": "Unknown id"}},
+)
+def get_job(job_id: int, session: SessionDep) -> JobOut:
+    job = repository.get(session, job_id)
+    if job is None:
+        raise NotFoundError(f"There is no job with id {job_id}.")
+    return JobOut(
+        id=job.id,
+        mesh_id=job.mesh_id,
+        preset=job.preset,
+        preset_version=job.preset_version,
+        status=JobStatus(job.status),
+        enqueues=job.enqueues,
+        worker=job.worker,
+        error=job.error_code,
+        detail=job.error_detail,
+        created_at=job.created_at,
+        started_at=job.started_at,
+        finished_at=job.finished_at,
+        links={"self": f"/jobs/{job.id}", "mesh": f"/meshes/{job.mesh_id}"},
+    )

@@ -1,0 +1,107 @@
+"""The FastAPI application: ``create_app(settings)``; ``app`` for ``uvicorn app.main:app``."""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+import anyio
+from fastapi import FastAPI
+
+from worker.presets import get_preset
+
+from .config import Settings, get_settings
+from .db import make_engine, make_session_factory
+from .errors import install_error_handlers
+from .gallery import load_index, save_index
+from .jobs.collector import JobCollector
+from .jobs.router import router as jobs_router
+from .meshes.router import router as meshes_router
+from .metrics import Metrics, RequestMetricsMiddleware
+from .migrations import upgrade_head
+from .queue import DescriptorQueue
+from .search.router import router as search_router
+from .state import AppState
+from .storage import UploadStore
+from .system.router import router as system_router
+
+log = logging.getLogger("shapes")
+
+DESCRIPTION = """
+Pose-invariant 3D shape retrieval with the modal representation of Smeets et al.
+(2010): geodesic distance matrix (GDM) singular values and the diffusion distance
+tensor (DDT) core, compared with D1/D2 and fused with the sum or product rule.
+
+Enroll meshes with `POST /meshes`, wait until they are `ready`, then search with
+`POST /query` (a mesh file) or `POST /meshes/{id}/similar`. Errors are
+`{"error": code, "detail": sentence}`.
+"""
+
+
+def _start_background(state: AppState, collector: JobCollector) -> None:
+    """Load the index (can take a while for a big gallery), recover jobs, start collecting."""
+    try:
+        state.index = load_index(state)
+        state.metrics.index_size.labels(state.preset.name).set(len(state.index))
+        collector.recover()
+        collector.start()
+    except Exception as exc:  # shown by /ready; the process stays up for diagnosis
+        log.exception("startup failed")
+        state.index_error = f"error: {exc}"
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    settings = settings or get_settings()
+    metrics = Metrics()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        preset = get_preset(settings.preset)
+        for directory in (settings.data_dir, settings.uploads_dir, settings.tmp_dir):
+            directory.mkdir(parents=True, exist_ok=True)
+        await anyio.to_thread.run_sync(upgrade_head, settings.sqlalchemy_url)
+        engine = make_engine(settings.sqlalchemy_url)
+        state = AppState(
+            settings=settings,
+            preset=preset,
+            engine=engine,
+            sessions=make_session_factory(engine),
+            read_sessions=make_session_factory(engine, read_only=True),
+            queue=DescriptorQueue(settings),
+            store=UploadStore(settings.uploads_dir),
+            metrics=metrics,
+        )
+        app.state.shapes = state
+        collector = JobCollector(state)
+        starter = threading.Thread(
+            target=_start_background, args=(state, collector), name="startup", daemon=True
+        )
+        starter.start()
+        try:
+            yield
+        finally:
+            await anyio.to_thread.run_sync(starter.join)
+            await anyio.to_thread.run_sync(collector.stop)
+            if state.index is not None and state.index.dirty:
+                await anyio.to_thread.run_sync(save_index, state, state.index)
+            engine.dispose()
+
+    app = FastAPI(
+        title="Shape retrieval (GDM/DDT modal representation)",
+        version="0.1.0",
+        description=DESCRIPTION,
+        lifespan=lifespan,
+    )
+    install_error_handlers(app)
+    app.add_middleware(RequestMetricsMiddleware, metrics=metrics)
+    for router in (meshes_router, search_router, jobs_router, system_router):
+        app.include_router(router)
+    return app
+
+
+def __getattr__(name: str):  # ``uvicorn app.main:app`` builds the app from the environment
+    if name == "app":
+        return create_app()
+    raise AttributeError(name)

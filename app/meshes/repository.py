@@ -1,0 +1,130 @@
+"""All queries on meshes and their descriptors."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+from sqlalchemy import func, select
+from sqlalchemy.orm import Session, selectinload
+
+from ..models import Descriptor, Job, Mesh
+
+
+def get(session: Session, mesh_id: int) -> Mesh | None:
+    return session.get(Mesh, mesh_id)
+
+
+def get_by_sha256(session: Session, sha256: str) -> Mesh | None:
+    return session.scalar(select(Mesh).where(Mesh.sha256 == sha256))
+
+
+def add(session: Session, mesh: Mesh) -> Mesh:
+    session.add(mesh)
+    session.flush()
+    return mesh
+
+
+def delete(session: Session, mesh: Mesh) -> None:
+    session.delete(mesh)
+    session.flush()
+
+
+def list_page(
+    session: Session, *, label: str | None, status: str | None, offset: int, limit: int
+) -> tuple[list[Mesh], int]:
+    query = select(Mesh)
+    if label is not None:
+        query = query.where(Mesh.label == label)
+    if status is not None:
+        query = query.where(Mesh.status == status)
+    total = session.scalar(select(func.count()).select_from(query.subquery())) or 0
+    rows = session.scalars(
+        query.order_by(Mesh.id).offset(offset).limit(limit).options(selectinload(Mesh.jobs))
+    ).all()
+    return list(rows), total
+
+
+def by_ids(session: Session, ids: list[int]) -> dict[int, Mesh]:
+    if not ids:
+        return {}
+    return {m.id: m for m in session.scalars(select(Mesh).where(Mesh.id.in_(ids)))}
+
+
+def get_descriptor(session: Session, mesh_id: int, preset: str, version: int) -> Descriptor | None:
+    return session.scalar(
+        select(Descriptor).where(
+            Descriptor.mesh_id == mesh_id,
+            Descriptor.preset == preset,
+            Descriptor.preset_version == version,
+        )
+    )
+
+
+def upsert_descriptor(session: Session, descriptor: Descriptor) -> Descriptor:
+    existing = get_descriptor(
+        session, descriptor.mesh_id, descriptor.preset, descriptor.preset_version
+    )
+    if existing is not None:
+        session.delete(existing)
+        session.flush()
+    session.add(descriptor)
+    session.flush()
+    return descriptor
+
+
+def descriptor_mesh_ids(session: Session, preset: str, version: int) -> set[int]:
+    return set(
+        session.scalars(
+            select(Descriptor.mesh_id).where(
+                Descriptor.preset == preset, Descriptor.preset_version == version
+            )
+        )
+    )
+
+
+def iter_descriptors(
+    session: Session, preset: str, version: int, mesh_ids: set[int] | None = None, batch: int = 500
+) -> Iterator[tuple[int, bytes]]:
+    """(mesh id, npz bytes) of stored descriptors, streamed in batches."""
+    query = select(Descriptor.mesh_id, Descriptor.data).where(
+        Descriptor.preset == preset, Descriptor.preset_version == version
+    )
+    if mesh_ids is not None:
+        ids = sorted(mesh_ids)
+        for start in range(0, len(ids), batch):
+            chunk = ids[start : start + batch]
+            yield from session.execute(query.where(Descriptor.mesh_id.in_(chunk))).tuples()
+        return
+    yield from session.execute(query.execution_options(yield_per=batch)).tuples()
+
+
+def meshes_missing_descriptor(session: Session, preset: str, version: int) -> list[Mesh]:
+    """Meshes with neither a descriptor nor a job for this preset version."""
+    has_descriptor = select(Descriptor.id).where(
+        Descriptor.mesh_id == Mesh.id,
+        Descriptor.preset == preset,
+        Descriptor.preset_version == version,
+    )
+    has_job = select(Job.id).where(
+        Job.mesh_id == Mesh.id, Job.preset == preset, Job.preset_version == version
+    )
+    return list(session.scalars(select(Mesh).where(~has_descriptor.exists(), ~has_job.exists())))
+
+
+def count_by_status(session: Session) -> dict[str, int]:
+    return dict(session.execute(select(Mesh.status, func.count()).group_by(Mesh.status)).tuples())
+
+
+def descriptors_for(
+    session: Session, mesh_ids: list[int], preset: str, version: int
+) -> dict[int, Descriptor]:
+    if not mesh_ids:
+        return {}
+    rows = session.scalars(
+        select(Descriptor).where(
+            Descriptor.mesh_id.in_(mesh_ids),
+            Descriptor.preset == preset,
+            Descriptor.preset_version == version,
+        )
+    )
+    return {d.mesh_id: d for d in rows}

@@ -1,0 +1,212 @@
+"""HTTP layer of /meshes: parse, call the service, shape the response."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from fastapi import APIRouter, Query, Response, status
+from fastapi.responses import FileResponse
+
+from ..deps import MultipartDep, SessionDep, StateDep, require_file
+from ..errors import InvalidInputError
+from ..models import Descriptor, Mesh, MeshStatus
+from ..search import service as search_service
+from ..search.schemas import QueryOut
+from . import repository, service
+from .schemas import DescriptorInfo, Links, MeshOut, MeshPage
+
+router = APIRouter(prefix="/meshes", tags=["meshes"])
+
+ERRORS = {
+    404: {"description": 'Unknown id: `{"error": "not_found", "detail": ...}`'},
+}
+UPLOAD_ERRORS = {
+    413: {"description": "File over the size limit (`too_large`)"},
+    415: {"description": "Not a mesh file type (`unsupported_format`) or not multipart"},
+    422: {"description": "No file, empty file, or bad metadata"},
+}
+
+UPLOAD_BODY = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            "multipart/form-data": {
+                "schema": {
+                    "type": "object",
+                    "required": ["file"],
+                    "properties": {
+                        "file": {
+                            "type": "string",
+                            "format": "binary",
+                            "description": ".obj .ply .off .stl .glb .gltf, optionally .gz",
+                        },
+                        "name": {"type": "string", "description": "default: the file name"},
+                        "label": {"type": "string", "description": "class, e.g. 'wolf'"},
+                        "metadata": {
+                            "type": "string",
+                            "description": "a JSON object",
+                            "example": '{"source": "TOSCA"}',
+                        },
+                    },
+                },
+                "encoding": {"file": {"contentType": "application/octet-stream"}},
+            }
+        },
+    }
+}
+
+
+def mesh_out(mesh: Mesh, descriptor: Descriptor | None) -> MeshOut:
+    job = mesh.jobs[-1] if mesh.jobs else None
+    failed = mesh.status == MeshStatus.failed.value
+    return MeshOut(
+        id=mesh.id,
+        name=mesh.name,
+        label=mesh.label,
+        metadata=mesh.meta or {},
+        filename=mesh.filename,
+        size_bytes=mesh.size_bytes,
+        sha256=mesh.sha256,
+        status=MeshStatus(mesh.status),
+        error=mesh.error_code if failed else None,
+        detail=mesh.error_detail if failed else None,
+        descriptor=None
+        if descriptor is None
+        else DescriptorInfo(
+            preset=descriptor.preset,
+            preset_version=descriptor.preset_version,
+            input_vertices=descriptor.input_vertices,
+            input_faces=descriptor.input_faces,
+            vertices=descriptor.vertices,
+            timings=descriptor.timings,
+        ),
+        job_id=job.id if job else None,
+        created_at=mesh.created_at,
+        updated_at=mesh.updated_at,
+        links=Links(
+            self=f"/meshes/{mesh.id}",
+            file=f"/meshes/{mesh.id}/file",
+            job=f"/jobs/{job.id}" if job else None,
+            similar=f"/meshes/{mesh.id}/similar",
+        ),
+    )
+
+
+@router.post(
+    "",
+    status_code=status.HTTP_202_ACCEPTED,
+    response_model=MeshOut,
+    summary="Enroll a mesh",
+    description=(
+        "Stores the upload (content-addressed), creates the mesh and queues its descriptor "
+        "job: **202** with status `queued`. The same bytes again answer **200** with the "
+        "existing mesh. Poll `GET /meshes/{id}` until `ready` (or `failed`, with `detail`).\n\n"
+        "`curl -F file=@wolf0.off.gz -F label=wolf http://127.0.0.1:8000/meshes`"
+    ),
+    responses={200: {"description": "Already enrolled (same sha256)", "model": MeshOut}}
+    | UPLOAD_ERRORS,
+    openapi_extra=UPLOAD_BODY,
+)
+def enroll(
+    upload: MultipartDep, session: SessionDep, state: StateDep, response: Response
+) -> MeshOut:
+    file = require_file(upload)
+    unknown = set(upload.fields) - {"name", "label", "metadata"}
+    if unknown:
+        raise InvalidInputError(
+            f"Unknown form fields: {', '.join(sorted(unknown))}; "
+            "use file, name, label and metadata.",
+            code="unknown_field",
+        )
+    mesh, created = service.enroll(
+        session,
+        state,
+        file,
+        name=upload.fields.get("name"),
+        label=upload.fields.get("label"),
+        metadata=upload.fields.get("metadata"),
+    )
+    response.status_code = status.HTTP_202_ACCEPTED if created else status.HTTP_200_OK
+    response.headers["Location"] = f"/meshes/{mesh.id}"
+    return mesh_out(mesh, service.descriptor_of(session, state, mesh))
+
+
+@router.get("", response_model=MeshPage, summary="List meshes")
+def list_meshes(
+    session: SessionDep,
+    state: StateDep,
+    label: Annotated[str | None, Query(description="only this class")] = None,
+    status_: Annotated[MeshStatus | None, Query(alias="status")] = None,
+    offset: Annotated[int, Query(ge=0)] = 0,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 50,
+) -> MeshPage:
+    limit = min(limit, state.settings.max_page_size)
+    rows, total = repository.list_page(
+        session,
+        label=label,
+        status=status_.value if status_ else None,
+        offset=offset,
+        limit=limit,
+    )
+    descriptors = repository.descriptors_for(
+        session, [m.id for m in rows], state.preset.name, state.preset.version
+    )
+    return MeshPage(
+        items=[mesh_out(m, descriptors.get(m.id)) for m in rows],
+        total=total,
+        offset=offset,
+        limit=limit,
+    )
+
+
+@router.get("/{mesh_id}", response_model=MeshOut, summary="One mesh", responses=ERRORS)
+def get_mesh(mesh_id: int, session: SessionDep, state: StateDep) -> MeshOut:
+    mesh = service.get(session, mesh_id)
+    return mesh_out(mesh, service.descriptor_of(session, state, mesh))
+
+
+@router.get(
+    "/{mesh_id}/file",
+    summary="The original upload, byte for byte",
+    response_class=FileResponse,
+    responses=ERRORS,
+)
+def get_file(mesh_id: int, session: SessionDep, state: StateDep) -> FileResponse:
+    mesh, path = service.file_path(session, state, mesh_id)
+    return FileResponse(path, media_type="application/octet-stream", filename=mesh.filename)
+
+
+@router.delete(
+    "/{mesh_id}",
+    status_code=status.HTTP_204_NO_CONTENT,
+    summary="Delete a mesh (leaves the index at once)",
+    responses=ERRORS,
+)
+def delete_mesh(mesh_id: int, session: SessionDep, state: StateDep) -> Response:
+    service.delete(session, state, mesh_id)
+    return Response(status_code=status.HTTP_204_NO_CONTENT)
+
+
+@router.post(
+    "/{mesh_id}/similar",
+    response_model=QueryOut,
+    summary="Shapes most similar to an enrolled mesh",
+    description="Uses the stored descriptor (nothing is recomputed); the mesh itself is left out.",
+    responses=ERRORS | {409: {"description": "The mesh is not ready yet"}},
+)
+def similar(
+    mesh_id: int,
+    session: SessionDep,
+    state: StateDep,
+    k: Annotated[int, Query(ge=1, description="number of matches")] = 10,
+    preset: Annotated[str | None, Query(description="must be the enrolled preset")] = None,
+    fusion: Annotated[
+        Literal["sum", "product"] | None, Query(description="default: the preset's rule")
+    ] = None,
+    modalities: Annotated[
+        str | None, Query(description="comma-separated, e.g. gdm,ddt (default: the preset's)")
+    ] = None,
+) -> QueryOut:
+    return search_service.similar_to(
+        session, state, mesh_id, k=k, preset_name=preset, fusion=fusion, modalities=modalities
+    )

@@ -1,0 +1,87 @@
+"""Request and response models of the mesh endpoints."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from ..models import MeshStatus
+
+
+class Links(BaseModel):
+    self: str
+    file: str
+    job: str | None = None
+    similar: str
+
+
+class DescriptorInfo(BaseModel):
+    preset: str
+    preset_version: int
+    input_vertices: int = Field(description="vertices of the cleaned upload")
+    input_faces: int
+    vertices: int = Field(description="vertices after resampling")
+    timings: dict[str, float] = Field(description="seconds per pipeline stage, with 'total'")
+
+
+class MeshOut(BaseModel):
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "id": 1,
+                    "name": "wolf0",
+                    "label": "wolf",
+                    "metadata": {"source": "TOSCA"},
+                    "filename": "wolf0.off.gz",
+                    "size_bytes": 86745,
+                    "sha256": "3f1c…",
+                    "status": "ready",
+                    "error": None,
+                    "detail": None,
+                    "descriptor": {
+                        "preset": "smeets2010-shrec",
+                        "preset_version": 1,
+                        "input_vertices": 4344,
+                        "input_faces": 8684,
+                        "vertices": 2500,
+                        "timings": {"load": 0.1, "total": 2.3},
+                    },
+                    "job_id": 1,
+                    "created_at": "2025-01-01T00:00:00",
+                    "updated_at": "2025-01-01T00:00:03",
+                    "links": {
+                        "self": "/meshes/1",
+                        "file": "/meshes/1/file",
+                        "job": "/jobs/1",
+                        "similar": "/meshes/1/similar",
+                    },
+                }
+            ]
+        }
+    )
+
+    id: int
+    name: str
+    label: str | None
+    metadata: dict[str, Any]
+    filename: str
+    size_bytes: int
+    sha256: str
+    status: MeshStatus
+    error: str | None = Field(None, description="machine-readable reason when failed")
+    detail: str | None = Field(None, description="why it failed, as a sentence")
+    descriptor: DescriptorInfo | None = None
+    job_id: int | None = None
+    created_at: datetime
+    updated_at: datetime
+    links: Links
+
+
+class MeshPage(BaseModel):
+    items: list[MeshOut]
+    total: int
+    offset: int
+    limit: int

@@ -1,0 +1,134 @@
+"""Rules for enrolling, listing and deleting meshes (no HTTP types here)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from sqlalchemy.exc import IntegrityError
+from sqlalchemy.orm import Session
+
+from ..db import after_commit
+from ..errors import InvalidInputError, NotFoundError
+from ..jobs import repository as jobs
+from ..jobs.collector import enqueue_job, new_job
+from ..models import Mesh, MeshStatus
+from ..state import AppState
+from ..uploads import UploadedFile
+from . import repository as meshes
+
+MAX_NAME = 255
+
+
+def parse_metadata(text: str | None) -> dict[str, Any]:
+    """The ``metadata`` form field: a JSON object (or nothing)."""
+    if text is None or not text.strip():
+        return {}
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError:
+        raise InvalidInputError(
+            'The metadata field must be a JSON object, e.g. {"source": "scanner 3"}.',
+            code="invalid_metadata",
+        ) from None
+    if not isinstance(value, dict):
+        raise InvalidInputError(
+            "The metadata field must be a JSON object, not a list or a single value.",
+            code="invalid_metadata",
+        )
+    return value
+
+
+def _text(value: str | None, what: str) -> str | None:
+    if value is None:
+        return None
+    value = value.strip()
+    if len(value) > MAX_NAME:
+        raise InvalidInputError(f"The {what} is longer than {MAX_NAME} characters.")
+    return value or None
+
+
+def enroll(
+    session: Session,
+    state: AppState,
+    upload: UploadedFile,
+    *,
+    name: str | None,
+    label: str | None,
+    metadata: str | None,
+) -> tuple[Mesh, bool]:
+    """Store an upload and queue its descriptor; ``(mesh, created)``.
+
+    The same bytes uploaded again return the existing mesh (``created`` False).
+    The job is enqueued only after the commit that creates its row.
+    """
+    meta = parse_metadata(metadata)
+    name = _text(name, "name") or upload.filename.split(".")[0] or upload.filename
+    label = _text(label, "label")
+    existing = meshes.get_by_sha256(session, upload.sha256)
+    if existing is not None:
+        return existing, False
+    relative = state.store.put(upload.path, upload.sha256)
+    mesh = Mesh(
+        sha256=upload.sha256,
+        name=name,
+        label=label,
+        meta=meta,
+        filename=upload.filename,
+        size_bytes=upload.size,
+        storage_path=relative,
+        status=MeshStatus.queued.value,
+    )
+    try:
+        meshes.add(session, mesh)
+    except IntegrityError:  # the same bytes, uploaded concurrently, won the race
+        session.rollback()
+        existing = meshes.get_by_sha256(session, upload.sha256)
+        if existing is None:
+            raise
+        return existing, False
+    job = jobs.add(session, new_job(state, mesh))
+    after_commit(session, lambda: enqueue_job(state, job))
+    return mesh, True
+
+
+def get(session: Session, mesh_id: int) -> Mesh:
+    mesh = meshes.get(session, mesh_id)
+    if mesh is None:
+        raise NotFoundError(f"There is no mesh with id {mesh_id}.")
+    return mesh
+
+
+def file_path(session: Session, state: AppState, mesh_id: int) -> tuple[Mesh, Path]:
+    mesh = get(session, mesh_id)
+    path = state.store.path(mesh.storage_path)
+    if not path.is_file():
+        raise NotFoundError(
+            f"The file of mesh {mesh_id} is missing from storage.", code="file_missing"
+        )
+    return mesh, path
+
+
+def delete(session: Session, state: AppState, mesh_id: int) -> None:
+    """Delete a mesh, its descriptors and jobs; it leaves the index at once (after commit)."""
+    mesh = get(session, mesh_id)
+    task_ids = [j.task_id for j in mesh.jobs if j.status in ("queued", "processing")]
+    storage_path = mesh.storage_path
+    meshes.delete(session, mesh)
+
+    def _after() -> None:
+        # Waits for a collector round that may have just stored this mesh's
+        # descriptor, so its index.add cannot come after this removal.
+        with state.gallery_lock:
+            if state.index is not None:
+                state.index.remove(mesh_id)
+        for task_id in task_ids:
+            state.queue.cancel(task_id)
+        state.store.remove(storage_path)
+
+    after_commit(session, _after)
+
+
+def descriptor_of(session: Session, state: AppState, mesh: Mesh):
+    return meshes.get_descriptor(session, mesh.id, state.preset.name, state.preset.version)

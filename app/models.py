@@ -1,0 +1,111 @@
+"""Tables: meshes (uploads), descriptors (per preset and version) and jobs."""
+
+from __future__ import annotations
+
+from datetime import UTC, datetime
+from enum import StrEnum
+from typing import Any
+
+from sqlalchemy import JSON, ForeignKey, Index, LargeBinary, String, UniqueConstraint
+from sqlalchemy.orm import Mapped, mapped_column, relationship
+
+from .db import Base
+
+
+def utcnow() -> datetime:
+    return datetime.now(UTC).replace(tzinfo=None)
+
+
+class MeshStatus(StrEnum):
+    queued = "queued"
+    processing = "processing"
+    ready = "ready"
+    failed = "failed"
+
+
+class JobStatus(StrEnum):
+    queued = "queued"
+    processing = "processing"
+    succeeded = "succeeded"
+    failed = "failed"
+
+
+UNFINISHED_JOB = (JobStatus.queued.value, JobStatus.processing.value)
+
+
+class Mesh(Base):
+    """One uploaded file, stored content-addressed under ``uploads/``."""
+
+    __tablename__ = "meshes"
+    __table_args__ = {"sqlite_autoincrement": True}  # ids of deleted meshes are never reused
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    sha256: Mapped[str] = mapped_column(String(64), unique=True)
+    name: Mapped[str] = mapped_column(String(255))
+    label: Mapped[str | None] = mapped_column(String(255), index=True)
+    meta: Mapped[dict[str, Any]] = mapped_column("metadata", JSON, default=dict)
+    filename: Mapped[str] = mapped_column(String(255))
+    size_bytes: Mapped[int]
+    storage_path: Mapped[str] = mapped_column(String(512))
+    status: Mapped[str] = mapped_column(String(16), index=True, default=MeshStatus.queued.value)
+    error_code: Mapped[str | None] = mapped_column(String(64))
+    error_detail: Mapped[str | None] = mapped_column(String(1024))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
+
+    descriptors: Mapped[list[Descriptor]] = relationship(
+        back_populates="mesh", cascade="all, delete-orphan", passive_deletes=True
+    )
+    jobs: Mapped[list[Job]] = relationship(
+        back_populates="mesh",
+        cascade="all, delete-orphan",
+        passive_deletes=True,
+        order_by="Job.id",
+    )
+
+
+class Descriptor(Base):
+    """A mesh's modal descriptors under one preset version (``ShapeDescriptor`` as npz)."""
+
+    __tablename__ = "descriptors"
+    __table_args__ = (UniqueConstraint("mesh_id", "preset", "preset_version"),)
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    mesh_id: Mapped[int] = mapped_column(ForeignKey("meshes.id", ondelete="CASCADE"), index=True)
+    preset: Mapped[str] = mapped_column(String(64))
+    preset_version: Mapped[int]
+    data: Mapped[bytes] = mapped_column(LargeBinary)
+    input_vertices: Mapped[int]
+    input_faces: Mapped[int]
+    vertices: Mapped[int]
+    timings: Mapped[dict[str, float]] = mapped_column(JSON, default=dict)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    mesh: Mapped[Mesh] = relationship(back_populates="descriptors")
+
+
+class Job(Base):
+    """One attempt series at describing a mesh with a preset, run by the queue."""
+
+    __tablename__ = "jobs"
+    __table_args__ = (
+        Index("ix_jobs_status_id", "status", "id"),
+        {"sqlite_autoincrement": True},
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    mesh_id: Mapped[int] = mapped_column(ForeignKey("meshes.id", ondelete="CASCADE"), index=True)
+    preset: Mapped[str] = mapped_column(String(64))
+    preset_version: Mapped[int]
+    task_id: Mapped[str] = mapped_column(String(64), unique=True)
+    status: Mapped[str] = mapped_column(String(16), default=JobStatus.queued.value)
+    enqueues: Mapped[int] = mapped_column(default=1)
+    worker: Mapped[str | None] = mapped_column(String(255))
+    error_code: Mapped[str | None] = mapped_column(String(64))
+    error_detail: Mapped[str | None] = mapped_column(String(1024))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    started_at: Mapped[datetime | None]
+    finished_at: Mapped[datetime | None]
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
+
+    mesh: Mapped[Mesh] = relationship(back_populates="jobs")

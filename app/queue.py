@@ -1,0 +1,124 @@
+"""The service's side of the descriptor queue (``worker.queue``): enqueue, wait, collect."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+from huey.exceptions import ResultTimeout, TaskException
+from huey.utils import Error
+
+from worker.errors import MeshError
+from worker.pipeline import ShapeDescriptor
+from worker.queue import decode_descriptor, heartbeat_key, make_huey
+
+from .config import Settings
+from .errors import UnavailableError
+
+
+class QueryMeshError(MeshError):
+    """A mesh error reported by a worker for a query upload (keeps the worker's code)."""
+
+    def __init__(self, code: str, message: str) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+class DescriptorQueue:
+    def __init__(self, settings: Settings) -> None:
+        self.settings = settings
+        self.huey = make_huey(settings)
+        self._task = self.huey.describe_upload  # type: ignore[attr-defined]
+
+    def task_path(self, path: Path) -> str:
+        """The path handed to workers: relative to the data directory when inside it,
+        so workers that mount the data elsewhere (containers) still find it."""
+        try:
+            return str(path.resolve().relative_to(self.settings.data_dir.resolve()))
+        except ValueError:
+            return str(path.resolve())
+
+    def enqueue_describe(
+        self, task_id: str, path: Path, filename: str, preset: str, *, priority: int = 0
+    ) -> None:
+        self.huey.delete(heartbeat_key(task_id))
+        self.huey.enqueue(
+            self._task.s(
+                self.task_path(path),
+                filename,
+                preset,
+                self.settings.max_faces,
+                id=task_id,
+                priority=priority,
+            )
+        )
+
+    def describe_now(self, task_id: str, path: Path, filename: str, preset: str) -> ShapeDescriptor:
+        """Describe a file in the worker pool and wait (blocking) for it.
+
+        Raises
+        ------
+        MeshError
+            The worker refused the mesh (its code and sentence).
+        UnavailableError
+            No worker answered in time, or the task crashed on every try.
+        """
+        self.enqueue_describe(
+            task_id, path, filename, preset, priority=self.settings.query_priority
+        )
+        try:
+            result = self.huey.result(
+                task_id,
+                blocking=True,
+                timeout=self.settings.query_timeout_seconds,
+                max_delay=0.1,
+                revoke_on_timeout=True,
+            )
+        except ResultTimeout:
+            raise UnavailableError(
+                "No descriptor worker answered in time; try again later.", code="workers_busy"
+            ) from None
+        except TaskException:
+            raise UnavailableError(
+                "Describing the query mesh failed unexpectedly on every try.",
+                code="describe_crashed",
+            ) from None
+        finally:
+            self.huey.delete(heartbeat_key(task_id))
+        if not result["ok"]:
+            raise QueryMeshError(result["code"], result["message"])
+        return decode_descriptor(result["descriptor"])
+
+    # -- for the collector ----------------------------------------------------
+    def peek(self, keys: list[str]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for start in range(0, len(keys), 500):
+            chunk = keys[start : start + 500]
+            raw = self.huey.storage.peek_many(chunk)
+            for key, value in raw.items():
+                if value is not None:
+                    out[key] = self.huey.serializer.deserialize(value)
+        return out
+
+    def results(self, task_ids: list[str]) -> dict[str, dict | Error]:
+        return self.peek(task_ids)
+
+    def heartbeats(self, task_ids: list[str]) -> dict[str, dict]:
+        beats = self.peek([heartbeat_key(t) for t in task_ids])
+        return {t: beats[heartbeat_key(t)] for t in task_ids if heartbeat_key(t) in beats}
+
+    def forget(self, task_id: str) -> None:
+        self.huey.delete(task_id)
+        self.huey.delete(heartbeat_key(task_id))
+
+    def cancel(self, task_id: str) -> None:
+        self.huey.revoke_by_id(task_id, revoke_once=True)
+        self.forget(task_id)
+
+    def waiting_task_ids(self) -> set[str]:
+        """Ids of tasks still in the queue or scheduled for a retry."""
+        return {t.id for t in self.huey.pending()} | {t.id for t in self.huey.scheduled()}
+
+    def is_stale(self, beat: dict) -> bool:
+        return time.time() - float(beat.get("beat", 0)) > self.settings.stalled_after_seconds

@@ -1,0 +1,57 @@
+"""Response models of the search endpoints."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field
+
+
+class MatchOut(BaseModel):
+    mesh_id: int
+    name: str
+    label: str | None
+    rank: int = Field(description="1 = most similar")
+    score: float = Field(description="fused dissimilarity (lower is more similar)")
+    scores: dict[str, float] = Field(description="per-modality dissimilarity (D1 or D2)")
+
+
+class QueryOut(BaseModel):
+    model_config = ConfigDict(
+        json_schema_extra={
+            "examples": [
+                {
+                    "preset": "smeets2010-shrec",
+                    "preset_version": 1,
+                    "dissimilarity": "D2",
+                    "fusion": "product",
+                    "modalities": ["gdm", "ddt"],
+                    "k": 2,
+                    "gallery_size": 3,
+                    "matches": [
+                        {
+                            "mesh_id": 2,
+                            "name": "wolf1",
+                            "label": "wolf",
+                            "rank": 1,
+                            "score": 0.41,
+                            "scores": {"gdm": 0.52, "ddt": 0.79},
+                        }
+                    ],
+                    "timings": {"describe": 2.1, "search": 0.0004},
+                    "query": {"input_vertices": 4344, "vertices": 2500},
+                }
+            ]
+        }
+    )
+
+    preset: str
+    preset_version: int
+    dissimilarity: str
+    fusion: str
+    modalities: list[str]
+    k: int
+    gallery_size: int
+    matches: list[MatchOut]
+    timings: dict[str, float] = Field(
+        description="seconds: descriptor stages of the query (if computed), 'search', 'total'"
+    )
+    query: dict[str, int] = Field(default_factory=dict)
