@@ -1,0 +1,189 @@
+"""The service through HTTP: enroll, search, idempotency, delete, errors."""
+
+from __future__ import annotations
+
+import gzip
+
+from .conftest import GALLERY, TOSCA, Service
+
+
+def test_enrolled_meshes_are_ready_with_descriptor_info(service: Service, gallery):
+    body = service.client.get(f"/meshes/{gallery['wolf0']}").json()
+    assert body["status"] == "ready"
+    assert body["label"] == "wolf"
+    assert body["metadata"] == {"source": "TOSCA"}
+    assert body["descriptor"]["preset"] == "smeets2010-shrec"
+    assert body["descriptor"]["preset_version"] == 1
+    assert body["descriptor"]["input_vertices"] == 4344
+    assert 2400 <= body["descriptor"]["vertices"] <= 2500
+    assert body["descriptor"]["timings"]["total"] > 0
+    job = service.client.get(body["links"]["job"]).json()
+    assert job["status"] == "succeeded" and job["mesh_id"] == body["id"]
+    assert job["worker"]  # pid@host of the worker that ran it
+
+
+def test_query_with_another_pose_ranks_the_right_class_first(service: Service, gallery):
+    response = service.query("wolf2", k=4)
+    assert response.status_code == 200, response.text
+    body = response.json()
+    assert body["preset"] == "smeets2010-shrec"
+    assert body["dissimilarity"] == "D2" and body["fusion"] == "product"
+    assert body["gallery_size"] >= len(GALLERY)
+    matches = body["matches"]
+    assert [m["rank"] for m in matches] == [1, 2, 3, 4]
+    assert matches[0]["label"] == "wolf"
+    assert {m["label"] for m in matches[:2]} == {"wolf"}
+    scores = [m["score"] for m in matches]
+    assert scores == sorted(scores)
+    for m in matches:  # the fused score is the product of the per-modality D2
+        assert abs(m["score"] - m["scores"]["gdm"] * m["scores"]["ddt"]) <= 1e-9 * m["score"]
+    assert body["timings"]["total"] > 0 and body["timings"]["search"] < 1.0
+
+
+def test_query_options_fusion_and_modalities(service: Service, gallery):
+    body = service.query("centaur2", k=2, fusion="sum", modalities="gdm,ddt").json()
+    assert body["fusion"] == "sum"
+    assert body["matches"][0]["label"] == "centaur"
+    m = body["matches"][0]
+    assert abs(m["score"] - (m["scores"]["gdm"] + m["scores"]["ddt"])) <= 1e-9 * m["score"]
+
+
+def test_similar_uses_the_stored_descriptor_and_leaves_the_mesh_out(service: Service, gallery):
+    response = service.client.post(f"/meshes/{gallery['horse0']}/similar", params={"k": 3})
+    assert response.status_code == 200, response.text
+    matches = response.json()["matches"]
+    assert gallery["horse0"] not in [m["mesh_id"] for m in matches]
+    assert matches[0]["mesh_id"] == gallery["horse5"]
+
+
+def test_same_bytes_again_answer_200_with_the_existing_mesh(service: Service, gallery):
+    response = service.upload("wolf0", "something else")
+    assert response.status_code == 200
+    assert response.json()["id"] == gallery["wolf0"]
+    assert response.json()["label"] == "wolf"  # the stored mesh is not rewritten
+    listed = service.client.get("/meshes", params={"label": "wolf"}).json()
+    assert [m["name"] for m in listed["items"]].count("wolf0") == 1
+
+
+def test_file_returns_the_original_bytes(service: Service, gallery):
+    response = service.client.get(f"/meshes/{gallery['centaur0']}/file")
+    assert response.status_code == 200
+    assert response.content == (TOSCA / "centaur0.off.gz").read_bytes()
+    assert "centaur0.off.gz" in response.headers["content-disposition"]
+
+
+def test_list_is_paginated_and_filtered(service: Service, gallery):
+    page = service.client.get("/meshes", params={"status": "ready", "limit": 2}).json()
+    assert page["limit"] == 2 and len(page["items"]) == 2
+    assert page["total"] >= len(GALLERY)
+    second = service.client.get("/meshes", params={"status": "ready", "limit": 2, "offset": 2})
+    assert {m["id"] for m in page["items"]}.isdisjoint(m["id"] for m in second.json()["items"])
+    horses = service.client.get("/meshes", params={"label": "horse"}).json()
+    assert {m["label"] for m in horses["items"]} == {"horse"}
+
+
+def test_delete_removes_from_the_index_at_once(service: Service, gallery):
+    created = service.upload("horse7", "horse")
+    assert created.status_code == 202
+    mesh_id = created.json()["id"]
+    assert service.wait_mesh(mesh_id)["status"] == "ready"
+    before = service.client.post(f"/meshes/{gallery['horse0']}/similar", params={"k": 10})
+    assert mesh_id in [m["mesh_id"] for m in before.json()["matches"]]
+
+    assert service.client.delete(f"/meshes/{mesh_id}").status_code == 204
+
+    after = service.client.post(f"/meshes/{gallery['horse0']}/similar", params={"k": 10}).json()
+    assert mesh_id not in [m["mesh_id"] for m in after["matches"]]
+    assert after["gallery_size"] == before.json()["gallery_size"] - 1
+    assert service.client.get(f"/meshes/{mesh_id}").status_code == 404
+    assert service.client.get(f"/meshes/{mesh_id}/file").status_code == 404
+
+
+def _error(response, status: int, code: str | None = None) -> dict:
+    assert response.status_code == status, response.text
+    body = response.json()
+    assert set(body) >= {"error", "detail"}
+    assert body["detail"].endswith(".")
+    if code is not None:
+        assert body["error"] == code
+    return body
+
+
+def test_unknown_ids_are_404(service: Service):
+    _error(service.client.get("/meshes/999999"), 404, "not_found")
+    _error(service.client.get("/meshes/999999/file"), 404, "not_found")
+    _error(service.client.delete("/meshes/999999"), 404, "not_found")
+    _error(service.client.post("/meshes/999999/similar"), 404, "not_found")
+    _error(service.client.get("/jobs/999999"), 404, "not_found")
+    _error(service.client.get("/no/such/path"), 404)
+
+
+def test_unsupported_type_is_415(service: Service):
+    files = {"file": ("notes.txt", b"hello")}
+    _error(service.client.post("/meshes", files=files), 415, "unsupported_format")
+    _error(service.client.post("/query", files=files), 415, "unsupported_format")
+    not_multipart = service.client.post("/meshes", content=b"{}")
+    _error(not_multipart, 415, "expected_multipart")
+
+
+def test_too_large_is_413_and_nothing_is_stored(service: Service):
+    before = service.client.get("/meshes").json()["total"]
+    big = b"OFF\n" + b"0 0 0\n" * 200_000  # 1.2 MB, over the test limit of 1 MB
+    response = service.client.post("/meshes", files={"file": ("big.off", big)})
+    _error(response, 413, "too_large")
+    assert service.client.get("/meshes").json()["total"] == before
+    assert not list((service.data_dir / "tmp").glob("upload-*"))
+
+
+def test_unreadable_mesh_query_is_422_and_enrollment_fails_with_the_sentence(service: Service):
+    garbage = gzip.compress(b"this is not an OFF file at all\n" * 10)
+    body = _error(service.client.post("/query", files={"file": ("junk.off.gz", garbage)}), 422)
+    assert body["error"] in ("unreadable_mesh", "empty_mesh", "no_faces")
+
+    created = service.client.post("/meshes", files={"file": ("junk.off.gz", garbage)})
+    assert created.status_code == 202
+    failed = service.wait_mesh(created.json()["id"])
+    assert failed["status"] == "failed"
+    assert failed["error"] == body["error"]
+    assert failed["detail"] == body["detail"]
+    job = service.client.get(failed["links"]["job"]).json()
+    assert job["status"] == "failed" and job["enqueues"] == 1  # not retried
+
+
+def test_bad_fields_are_422(service: Service, gallery):
+    wolf = (TOSCA / "wolf0.off.gz").read_bytes()
+    _error(service.client.post("/meshes", data={"label": "x"}, files={}), 415)
+    no_file = service.client.post("/meshes", files={"label": (None, "wolf")})
+    _error(no_file, 422, "missing_file")
+    bad_meta = service.client.post(
+        "/meshes", files={"file": ("w.off.gz", wolf)}, data={"metadata": "[1, 2]"}
+    )
+    _error(bad_meta, 422, "invalid_metadata")
+    _error(service.client.post("/query", files={"file": ("w.off.gz", wolf)}, data={"k": "0"}), 422)
+    _error(
+        service.client.post("/query", files={"file": ("w.off.gz", wolf)}, data={"fusion": "max"}),
+        422,
+        "invalid_fusion",
+    )
+    _error(
+        service.client.post("/query", files={"file": ("w.off.gz", wolf)}, data={"preset": "nope"}),
+        422,
+        "unknown_preset",
+    )
+    _error(service.client.post(f"/meshes/{gallery['wolf0']}/similar", params={"k": "many"}), 422)
+
+
+def test_health_ready_metrics_and_docs(service: Service, gallery):
+    assert service.client.get("/health").json() == {"status": "ok"}
+    ready = service.client.get("/ready").json()
+    assert ready["status"] == "ready" and ready["checks"]["database"] == "ok"
+    metrics = service.client.get("/metrics")
+    assert metrics.headers["content-type"].startswith("text/plain")
+    text = metrics.text
+    assert 'shapes_http_requests_total{method="POST",route="/meshes"' in text
+    assert 'shapes_jobs_total{outcome="succeeded"}' in text
+    assert "shapes_index_size" in text and "shapes_search_seconds_bucket" in text
+    schema = service.client.get("/openapi.json").json()
+    assert "multipart/form-data" in schema["paths"]["/meshes"]["post"]["requestBody"]["content"]
+    assert schema["paths"]["/query"]["post"]["responses"]["200"]
+    assert service.client.get("/docs").status_code == 200
