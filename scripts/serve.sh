@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Set up the project in .venv (if needed) and start the service on its embedded
+# defaults: SQLite and uploads under ./data, one local worker, http://127.0.0.1:8000.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+if [ ! -x .venv/bin/python ]; then
+    python3 -m venv .venv
+fi
+.venv/bin/python -m pip install --quiet --upgrade pip
+.venv/bin/python -m pip install --quiet -e .
+exec .venv/bin/python -m app "$@"
