@@ -149,6 +149,23 @@ def test_too_few_vertices_after_cleaning():
         load_mesh(_off([[1, 1, 1]] * 4, [[0, 1, 2], [1, 2, 3]]), "point.off")
 
 
+def test_non_manifold_fan_is_refused_and_a_stray_edge_tolerated(sphere):
+    # 40 triangles hinged on one edge, like the pages of a book.
+    angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    ring = np.c_[np.cos(angles), np.sin(angles), np.full(40, 0.5)]
+    vertices = np.vstack([[0, 0, 0], [0, 0, 1], ring])
+    faces = [[0, 1, i + 2] for i in range(40)]
+    with pytest.raises(errors.NonManifoldError, match="non-manifold"):
+        load_mesh(_off(vertices.tolist(), faces), "fan.off")
+    # One extra triangle on an existing edge of a 1,280-face sphere is not refused.
+    v, f = sphere.vertices, sphere.faces
+    a, b = f[0][0], f[0][1]
+    extra_vertex = (v[a] + v[b]) / 2 + 0.3 * (v[a] + v[b])
+    vertices = np.vstack([v, extra_vertex])
+    faces = np.vstack([f, [[a, b, len(v)]]])
+    assert len(load_mesh(_off(vertices.tolist(), faces.tolist()), "s.off").faces) == len(f) + 1
+
+
 def test_face_limit(sphere):
     data = sphere.export(file_type="ply")
     with pytest.raises(errors.TooManyFacesError, match="limit"):

@@ -54,6 +54,12 @@ class TooFewVerticesError(MeshError):
     code = "too_few_vertices"
 
 
+class NonManifoldError(MeshError):
+    """Many faces meet at edges shared by three or more faces: not a surface."""
+
+    code = "non_manifold"
+
+
 class FileTooLargeError(MeshError):
     """The file (or what it decompresses to) is over the size limit."""
 

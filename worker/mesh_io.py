@@ -22,6 +22,7 @@ from .errors import (
     FileTooLargeError,
     MeshError,
     NonFiniteCoordinatesError,
+    NonManifoldError,
     PointCloudError,
     TooFewVerticesError,
     TooManyFacesError,
@@ -178,6 +179,17 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
     return Mesh(vertices=merged[used], faces=renumber[faces])
 
 
+def non_manifold_face_fraction(faces: np.ndarray) -> float:
+    """Fraction of ``faces`` (m, 3) that touch an edge shared by three or more faces."""
+    faces = np.asarray(faces, dtype=np.int64)
+    if not len(faces):
+        return 0.0
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    _, inverse, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
+    per_face = counts[inverse.reshape(3, -1)].max(axis=0)
+    return float(np.mean(per_face > 2))
+
+
 def load_mesh(
     source: str | Path | bytes,
     filename: str | None = None,
@@ -240,6 +252,13 @@ def load_mesh(
         raise TooFewVerticesError(
             f"After cleaning, the largest connected surface has only {mesh.n_vertices} "
             f"vertices; at least {min_vertices} are needed."
+        )
+    # Geodesics and the Laplace-Beltrami operator are defined on a 2-manifold; a
+    # fan of triangles hinged on one edge has no surface to walk on.
+    if non_manifold_face_fraction(mesh.faces) > TOL.max_non_manifold_face_fraction:
+        raise NonManifoldError(
+            "The mesh is not a surface: many triangles meet at edges shared by three or more "
+            "triangles (non-manifold); upload a manifold triangle mesh."
         )
     return mesh
 

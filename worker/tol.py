@@ -13,6 +13,9 @@ class Tolerances:
     degenerate_area_fraction: float = 1e-12
     # Coordinates above this magnitude overflow squared lengths and areas.
     max_abs_coordinate: float = 1e100
+    # A surface is refused when more than this fraction of its faces touch an edge
+    # shared by three or more faces (a stray one or two in a scan are tolerated).
+    max_non_manifold_face_fraction: float = 0.01
     # An interior edge is flipped when cot(alpha) + cot(beta) < -delaunay_slack.
     delaunay_slack: float = 1e-9
     # Shift of the shift-invert eigensolver, relative to the mean of diag(L)/diag(A).
