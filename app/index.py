@@ -72,6 +72,11 @@ FIT_SAMPLE = 5_000  # rows used to fit a projection (any orthonormal P keeps the
 BOUND_SAFETY = 1.0 - 1e-5  # float32 candidate distances: keep the bound a true lower bound
 FORMAT_VERSION = 1
 
+# One query at a time: faiss's OpenMP team costs more than it saves (2 ms per
+# search on a busy 2-core machine, even for 83 shapes), and the API's threads
+# and the workers already use the cores.
+faiss.omp_set_num_threads(1)
+
 
 @dataclass
 class Match:
