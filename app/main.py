@@ -61,6 +61,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         preset = get_preset(settings.preset)
         for directory in (settings.data_dir, settings.uploads_dir, settings.tmp_dir):
             directory.mkdir(parents=True, exist_ok=True)
+        # Uploads interrupted by a previous stop; this process is the only writer here.
+        for leftover in settings.tmp_dir.glob("upload-*"):
+            leftover.unlink(missing_ok=True)
         await anyio.to_thread.run_sync(upgrade_head, settings.sqlalchemy_url)
         engine = make_engine(settings.sqlalchemy_url)
         state = AppState(

@@ -29,7 +29,7 @@ import threading
 import time
 from pathlib import Path
 
-from huey import Huey, RedisHuey, SqliteHuey
+from huey import Huey, PriorityRedisHuey, SqliteHuey
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from .errors import MeshError
@@ -73,12 +73,13 @@ def decode_descriptor(text: str) -> ShapeDescriptor:
 def make_huey(settings: QueueSettings) -> Huey:
     """The Huey instance for ``settings``, with the ``describe_upload`` task registered.
 
-    SQLite (``<data_dir>/queue.sqlite3``, WAL) unless ``redis_url`` is set.
+    SQLite (``<data_dir>/queue.sqlite3``, WAL) unless ``redis_url`` is set; both
+    honour task priorities (queries jump ahead of enrollments).
     Intermediate errors are not stored, so a task's result is either its value
     or, after the last retry, its final error.
     """
     if settings.redis_url:
-        huey: Huey = RedisHuey(
+        huey: Huey = PriorityRedisHuey(
             settings.queue_name, url=settings.redis_url, store_intermediate_errors=False
         )
     else:
