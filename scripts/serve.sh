@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Set up the project in .venv (if needed) and start the service on its embedded
-# defaults: SQLite and uploads under ./data, one local worker, http://127.0.0.1:8000.
+# Set up the project in .venv (if needed) and serve on the embedded defaults:
+# SQLite + task queue + uploads under ./data, http://127.0.0.1:8000, one worker.
+# Options: python -m app --help (or SHAPES_* environment variables).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ ! -x .venv/bin/python ]; then
