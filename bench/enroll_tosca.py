@@ -1,0 +1,136 @@
+"""End-to-end enrollment of all 83 TOSCA meshes through the HTTP API.
+
+    python bench/enroll_tosca.py                      # starts `python -m app` on a fresh data dir
+    python bench/enroll_tosca.py --url http://127.0.0.1:8000   # against a running service
+
+Uploads every mesh (with its class label), polls ``GET /meshes`` until all are
+ready or failed, and prints the total wall time (first upload to last ready),
+the upload time, and per-mesh medians of the queue-to-ready time and of the
+worker's descriptor time. Then it runs every mesh's ``/similar`` (top-1
+nearest-neighbour accuracy by class) as a sanity check.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from datetime import datetime
+from pathlib import Path
+
+import httpx
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench._tosca import TOSCA, tosca_labels  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def start_service(port: int, workers: int, data_dir: Path) -> subprocess.Popen:
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "app",
+            "--port",
+            str(port),
+            "--workers",
+            str(workers),
+            "--data-dir",
+            str(data_dir),
+        ],
+        cwd=REPO,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        try:
+            if httpx.get(f"http://127.0.0.1:{port}/ready", timeout=2).status_code == 200:
+                return proc
+        except httpx.TransportError:
+            pass
+        time.sleep(0.3)
+    proc.terminate()
+    raise SystemExit("the service did not start")
+
+
+def run(url: str) -> None:
+    labels = tosca_labels()
+    client = httpx.Client(base_url=url, timeout=120)
+    start = time.perf_counter()
+    ids = {}
+    for name, label in sorted(labels.items()):
+        with open(TOSCA / name, "rb") as fh:
+            response = client.post("/meshes", files={"file": (name, fh)}, data={"label": label})
+        response.raise_for_status()
+        ids[name] = response.json()["id"]
+    uploaded = time.perf_counter() - start
+    pending = set(ids.values())
+    rows = {}
+    while pending:
+        time.sleep(0.5)
+        offset = 0
+        while True:
+            page = client.get("/meshes", params={"limit": 200, "offset": offset}).json()
+            for mesh in page["items"]:
+                if mesh["id"] in pending and mesh["status"] in ("ready", "failed"):
+                    pending.discard(mesh["id"])
+                    rows[mesh["id"]] = mesh
+            offset += page["limit"]
+            if offset >= page["total"]:
+                break
+    total = time.perf_counter() - start
+    failed = [m for m in rows.values() if m["status"] == "failed"]
+    latency, describe = [], []
+    for mesh in rows.values():
+        if mesh["status"] != "ready":
+            continue
+        job = client.get(mesh["links"]["job"]).json()
+        created = datetime.fromisoformat(job["created_at"])
+        finished = datetime.fromisoformat(job["finished_at"])
+        latency.append((finished - created).total_seconds())
+        describe.append(mesh["descriptor"]["timings"]["total"])
+    correct = 0
+    search = []
+    for name, mesh_id in ids.items():
+        body = client.post(f"/meshes/{mesh_id}/similar", params={"k": 1}).json()
+        correct += body["matches"][0]["label"] == labels[name]
+        search.append(body["timings"]["search"])
+    print(f"meshes: {len(ids)} ready: {len(rows) - len(failed)} failed: {len(failed)}")
+    print(f"upload all: {uploaded:.1f} s")
+    print(f"total wall time (first upload -> last ready): {total:.1f} s")
+    print(f"per mesh, median queue-to-ready: {statistics.median(latency):.1f} s")
+    print(f"per mesh, median descriptor time in the worker: {statistics.median(describe):.2f} s")
+    print(f"throughput: {len(ids) / total * 60:.1f} meshes/min")
+    print(f"/similar top-1 class accuracy: {correct}/{len(ids)}")
+    print(f"/similar search step, median: {statistics.median(search) * 1000:.2f} ms")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--url", help="a running service (default: start one)")
+    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser.add_argument("--port", type=int, default=8765)
+    args = parser.parse_args()
+    if args.url:
+        run(args.url)
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        proc = start_service(args.port, args.workers, Path(tmp) / "data")
+        try:
+            print(f"service: python -m app --workers {args.workers} (fresh data dir)")
+            run(f"http://127.0.0.1:{args.port}")
+        finally:
+            proc.send_signal(signal.SIGTERM)
+            proc.wait(60)
+
+
+if __name__ == "__main__":
+    main()
