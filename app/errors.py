@@ -11,7 +11,12 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from worker.errors import MeshError, TooManyFacesError, UnsupportedFormatError
+from worker.errors import (
+    FileTooLargeError,
+    MeshError,
+    TooManyFacesError,
+    UnsupportedFormatError,
+)
 
 
 class DomainError(Exception):
@@ -59,13 +64,17 @@ class UnavailableError(DomainError):
     code = "unavailable"
 
 
+# By code, not class: a worker's refusal reaches the API as its code and sentence only.
+_MESH_ERROR_STATUS = {
+    UnsupportedFormatError.code: 415,
+    TooManyFacesError.code: 413,
+    FileTooLargeError.code: 413,  # e.g. a gzip bomb
+}
+
+
 def mesh_error_status(error: MeshError) -> int:
     """HTTP status of a descriptor-engine refusal."""
-    if isinstance(error, UnsupportedFormatError):
-        return 415
-    if isinstance(error, TooManyFacesError):
-        return 413
-    return 422
+    return _MESH_ERROR_STATUS.get(error.code, 422)
 
 
 def from_mesh_error(error: MeshError) -> DomainError:
