@@ -22,6 +22,7 @@ ERRORS = {
 }
 UPLOAD_ERRORS = {
     413: {"description": "File over the size limit (`too_large`)"},
+    409: {"description": "Same bytes enrolled as another format (`same_bytes_other_format`)"},
     415: {"description": "Not a mesh file type (`unsupported_format`) or not multipart"},
     422: {"description": "No file, empty file, or bad metadata"},
 }

@@ -9,8 +9,10 @@ from typing import Any
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
+from worker.mesh_io import mesh_format
+
 from ..db import after_commit
-from ..errors import InvalidInputError, NotFoundError
+from ..errors import ConflictError, InvalidInputError, NotFoundError
 from ..jobs import repository as jobs
 from ..jobs.collector import enqueue_job, new_job
 from ..models import Mesh, MeshStatus
@@ -68,6 +70,7 @@ def enroll(
     label = _text(label, "label")
     existing = meshes.get_by_sha256(session, upload.sha256)
     if existing is not None:
+        _same_format(existing, upload)
         return existing, False
     relative = state.store.put(upload.path, upload.sha256)
     mesh = Mesh(
@@ -87,10 +90,23 @@ def enroll(
         existing = meshes.get_by_sha256(session, upload.sha256)
         if existing is None:
             raise
+        _same_format(existing, upload)
         return existing, False
     job = jobs.add(session, new_job(state, mesh))
     after_commit(session, lambda: enqueue_job(state, job))
     return mesh, True
+
+
+def _same_format(existing: Mesh, upload: UploadedFile) -> None:
+    """The stored mesh is these bytes read in its own file's format; the same bytes
+    named as another format would be read differently, so they are not the same mesh."""
+    if mesh_format(existing.filename) != mesh_format(upload.filename):
+        raise ConflictError(
+            f"These exact bytes are already enrolled as mesh {existing.id} "
+            f"({existing.filename!r}), in another file format than {upload.filename!r}; "
+            "upload them with the right extension.",
+            code="same_bytes_other_format",
+        )
 
 
 def get(session: Session, mesh_id: int) -> Mesh:
