@@ -1,0 +1,73 @@
+"""A real service with small limits for the hardening tests (same machinery as tests/service).
+
+The service runs with a 10,000-face limit and a 1 MB upload limit, two real
+worker processes and an Alembic-built SQLite database, and has two TOSCA
+meshes enrolled before any hostile input arrives, so tests can check that
+nothing about them changes.
+"""
+
+from __future__ import annotations
+
+import sqlite3
+from collections.abc import Iterator
+
+import pytest
+
+from app.migrations import upgrade_head
+from tests.service.conftest import Service
+
+MAX_FACES = 10_000  # over wolf0's 8,684 faces
+ENROLLED = {"wolf0": "wolf", "wolf1": "wolf"}
+
+
+def make_service(tmp_path_factory, name: str, **env: str) -> Service:
+    data_dir = tmp_path_factory.mktemp(name)
+    upgrade_head(f"sqlite:///{data_dir / 'shapes.sqlite3'}")
+    svc = Service(data_dir)
+    svc.env.update(SHAPES_MAX_FACES=str(MAX_FACES), **env)
+    return svc
+
+
+@pytest.fixture(scope="session")
+def hardened(tmp_path_factory) -> Iterator[Service]:
+    svc = make_service(tmp_path_factory, "hardened")
+    try:
+        svc.start_worker()
+        svc.start_worker()
+        svc.start_api()
+        yield svc
+    finally:
+        svc.close()
+
+
+@pytest.fixture(scope="session")
+def enrolled(hardened: Service) -> dict[str, int]:
+    ids = {}
+    for name, label in ENROLLED.items():
+        response = hardened.upload(name, label)
+        assert response.status_code in (200, 202), response.text
+        ids[name] = response.json()["id"]
+    for mesh_id in ids.values():
+        assert hardened.wait_mesh(mesh_id)["status"] == "ready"
+    return ids
+
+
+def db_rows(service: Service, mesh_ids) -> dict[str, list[tuple]]:
+    """The rows (every column) that belong to ``mesh_ids``, read straight from SQLite."""
+    marks = ",".join("?" * len(mesh_ids))
+    with sqlite3.connect(f"file:{service.data_dir / 'shapes.sqlite3'}?mode=ro", uri=True) as db:
+        return {
+            table: db.execute(
+                f"SELECT * FROM {table} WHERE {key} IN ({marks}) ORDER BY 1", list(mesh_ids)
+            ).fetchall()
+            for table, key in (("meshes", "id"), ("descriptors", "mesh_id"), ("jobs", "mesh_id"))
+        }
+
+
+def index_size(service: Service) -> str:
+    return service.client.get("/ready").json()["checks"]["index"]
+
+
+def integrity_check(service: Service) -> str:
+    with sqlite3.connect(service.data_dir / "shapes.sqlite3") as db:
+        return db.execute("PRAGMA integrity_check").fetchone()[0]
