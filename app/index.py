@@ -72,10 +72,14 @@ FIT_SAMPLE = 5_000  # rows used to fit a projection (any orthonormal P keeps the
 BOUND_SAFETY = 1.0 - 1e-5  # float32 candidate distances: keep the bound a true lower bound
 FORMAT_VERSION = 1
 
-# One query at a time: faiss's OpenMP team costs more than it saves (2 ms per
-# search on a busy 2-core machine, even for 83 shapes), and the API's threads
-# and the workers already use the cores.
-faiss.omp_set_num_threads(1)
+
+
+def _single_threaded_faiss() -> None:
+    """One query at a time: faiss's OpenMP team costs more than it saves (2-15 ms
+    per search on a busy 2-core machine, even for 83 shapes), and the API's
+    threads and the workers already use the cores. OpenMP's setting is per
+    calling thread, so this runs in every thread that searches."""
+    faiss.omp_set_num_threads(1)
 
 
 @dataclass
@@ -398,6 +402,7 @@ class GalleryIndex:
         Matches sorted by score (ties by id).
         """
         start = time.perf_counter()
+        _single_threaded_faiss()
         rule = fusion or self.preset.fusion
         mods = tuple(modalities or self.preset.fused_modalities)
         excluded = set(int(e) for e in exclude)
