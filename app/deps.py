@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import AsyncIterator, Iterator
 from typing import Annotated
 
-from fastapi import Depends, Request
+from fastapi import Depends, Path, Request
 from sqlalchemy.orm import Session
 
 from .config import Settings
@@ -13,6 +13,9 @@ from .db import unit_of_work
 from .errors import InvalidInputError
 from .state import AppState
 from .uploads import MultipartUpload, UploadedFile, receive_multipart
+
+# SQLite's INTEGER is 64-bit: a larger id in a path is invalid input, not a 500.
+RowId = Annotated[int, Path(ge=1, le=2**63 - 1, description="the row's id")]
 
 
 def get_state(request: Request) -> AppState:

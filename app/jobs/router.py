@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from ..deps import SessionDep
+from ..deps import RowId, SessionDep
 from ..errors import NotFoundError
 from ..models import JobStatus
+from ..schemas import ERROR_RESPONSES
 from . import repository
 from .schemas import JobOut
 
-router = APIRouter(prefix="/jobs", tags=["jobs"])
+router = APIRouter(prefix="/jobs", tags=["jobs"], responses=ERROR_RESPONSES)
 
 
 @router.get(
@@ -19,7 +20,7 @@ router = APIRouter(prefix="/jobs", tags=["jobs"])
     summary="A descriptor job",
     responses={404: {"description": "Unknown id"}},
 )
-def get_job(job_id: int, session: SessionDep) -> JobOut:
+def get_job(job_id: RowId, session: SessionDep) -> JobOut:
     job = repository.get(session, job_id)
     if job is None:
         raise NotFoundError(f"There is no job with id {job_id}.")

@@ -7,15 +7,16 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import FileResponse
 
-from ..deps import MultipartDep, SessionDep, StateDep, require_file
+from ..deps import MultipartDep, RowId, SessionDep, StateDep, require_file
 from ..errors import InvalidInputError
 from ..models import Descriptor, Mesh, MeshStatus
+from ..schemas import ERROR_RESPONSES
 from ..search import service as search_service
 from ..search.schemas import QueryOut
 from . import repository, service
 from .schemas import DescriptorInfo, Links, MeshOut, MeshPage
 
-router = APIRouter(prefix="/meshes", tags=["meshes"])
+router = APIRouter(prefix="/meshes", tags=["meshes"], responses=ERROR_RESPONSES)
 
 ERRORS = {
     404: {"description": 'Unknown id: `{"error": "not_found", "detail": ...}`'},
@@ -161,7 +162,7 @@ def list_meshes(
 
 
 @router.get("/{mesh_id}", response_model=MeshOut, summary="One mesh", responses=ERRORS)
-def get_mesh(mesh_id: int, session: SessionDep, state: StateDep) -> MeshOut:
+def get_mesh(mesh_id: RowId, session: SessionDep, state: StateDep) -> MeshOut:
     mesh = service.get(session, mesh_id)
     return mesh_out(mesh, service.descriptor_of(session, state, mesh))
 
@@ -172,7 +173,7 @@ def get_mesh(mesh_id: int, session: SessionDep, state: StateDep) -> MeshOut:
     response_class=FileResponse,
     responses=ERRORS,
 )
-def get_file(mesh_id: int, session: SessionDep, state: StateDep) -> FileResponse:
+def get_file(mesh_id: RowId, session: SessionDep, state: StateDep) -> FileResponse:
     mesh, path = service.file_path(session, state, mesh_id)
     return FileResponse(path, media_type="application/octet-stream", filename=mesh.filename)
 
@@ -183,7 +184,7 @@ def get_file(mesh_id: int, session: SessionDep, state: StateDep) -> FileResponse
     summary="Delete a mesh (leaves the index at once)",
     responses=ERRORS,
 )
-def delete_mesh(mesh_id: int, session: SessionDep, state: StateDep) -> Response:
+def delete_mesh(mesh_id: RowId, session: SessionDep, state: StateDep) -> Response:
     service.delete(session, state, mesh_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
 
@@ -196,7 +197,7 @@ def delete_mesh(mesh_id: int, session: SessionDep, state: StateDep) -> Response:
     responses=ERRORS | {409: {"description": "The mesh is not ready yet"}},
 )
 def similar(
-    mesh_id: int,
+    mesh_id: RowId,
     session: SessionDep,
     state: StateDep,
     k: Annotated[int, Query(ge=1, description="number of matches")] = 10,

@@ -190,3 +190,12 @@ def test_same_bytes_under_another_format_are_a_conflict_not_the_stored_mesh(hard
     other = hardened.client.post("/meshes", files={"file": ("tri.stl", data)})
     body = _error(other, 409, ("same_bytes_other_format",))
     assert f"mesh {first.json()['id']}" in body["detail"]
+
+
+def test_ids_beyond_64_bits_are_invalid_input_not_a_server_error(hardened: Service):
+    huge = 2**90  # found by schemathesis: SQLite raised OverflowError (500)
+    for method, path in (("GET", f"/meshes/{huge}"), ("GET", f"/meshes/{huge}/file"),
+                         ("DELETE", f"/meshes/{huge}"), ("POST", f"/meshes/{huge}/similar"),
+                         ("GET", f"/jobs/{huge}")):  # fmt: skip
+        _error(hardened.client.request(method, path), 422, ("invalid_input",))
+    _error(hardened.client.get(f"/meshes/{2**63 - 1}"), 404, ("not_found",))
