@@ -23,7 +23,7 @@ import logging
 import threading
 import time
 import uuid
-from datetime import datetime
+from datetime import UTC, datetime
 
 from huey.utils import Error
 from sqlalchemy.exc import SQLAlchemyError
@@ -233,7 +233,8 @@ class JobCollector:
         changed = 0
         if job.status == JobStatus.queued.value:
             job.status = JobStatus.processing.value
-            job.started_at = datetime.fromtimestamp(float(beat["started"]))
+            started = datetime.fromtimestamp(float(beat["started"]), UTC)
+            job.started_at = started.replace(tzinfo=None)  # stored naive, in UTC like utcnow
             job.worker = f"{beat.get('pid')}@{beat.get('host')}"
             job.mesh.status = MeshStatus.processing.value
             changed = 1

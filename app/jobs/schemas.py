@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-from datetime import datetime
-
 from pydantic import BaseModel, Field
 
 from ..models import JobStatus
+from ..schemas import UtcDatetime
 
 
 class JobOut(BaseModel):
@@ -21,7 +20,7 @@ class JobOut(BaseModel):
     worker: str | None = Field(None, description="pid@host of the worker that ran it")
     error: str | None = None
     detail: str | None = None
-    created_at: datetime
-    started_at: datetime | None
-    finished_at: datetime | None
+    created_at: UtcDatetime
+    started_at: UtcDatetime | None
+    finished_at: UtcDatetime | None
     links: dict[str, str]

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from datetime import datetime
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from ..models import MeshStatus
+from ..schemas import UtcDatetime
 
 
 class Links(BaseModel):
@@ -75,8 +75,8 @@ class MeshOut(BaseModel):
     detail: str | None = Field(None, description="why it failed, as a sentence")
     descriptor: DescriptorInfo | None = None
     job_id: int | None = None
-    created_at: datetime
-    updated_at: datetime
+    created_at: UtcDatetime
+    updated_at: UtcDatetime
     links: Links
 
 

@@ -6,10 +6,11 @@ from fastapi import APIRouter
 
 from ..deps import MultipartDep, SessionDep, StateDep, require_file
 from ..errors import InvalidInputError
+from ..schemas import ERROR_RESPONSES
 from . import service
 from .schemas import QueryOut
 
-router = APIRouter(tags=["search"])
+router = APIRouter(tags=["search"], responses=ERROR_RESPONSES)
 
 QUERY_BODY = {
     "requestBody": {

@@ -8,8 +8,9 @@ from sqlalchemy import text
 
 from ..deps import StateDep
 from ..metrics import CONTENT_TYPE
+from ..schemas import ERROR_RESPONSES
 
-router = APIRouter(tags=["system"])
+router = APIRouter(tags=["system"], responses=ERROR_RESPONSES)
 
 
 @router.get("/health", summary="The process is up")
