@@ -5,7 +5,7 @@ from __future__ import annotations
 from functools import lru_cache
 from pathlib import Path
 
-from pydantic import Field
+from pydantic import Field, SecretStr
 
 from worker.mesh_io import DEFAULT_MAX_FACES
 from worker.presets import DEFAULT_PRESET
@@ -28,6 +28,17 @@ class Settings(QueueSettings):
     host: str = "127.0.0.1"
     port: int = 8000
     workers: int = Field(default=1, ge=0, description="queue consumer processes started by serve")
+
+    # Access
+    api_key: SecretStr | None = Field(
+        default=None,
+        description="when set, every POST and DELETE needs it in the X-API-Key header",
+    )
+    cors_origins: list[str] = Field(
+        default=[],
+        description='browser origins allowed to call the API, e.g. ["https://app.example"]; '
+        "none by default (JSON list in SHAPES_CORS_ORIGINS)",
+    )
 
     # The method
     preset: str = Field(

@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+import hmac
 from collections.abc import AsyncIterator, Iterator
 from typing import Annotated
 
 from fastapi import Depends, Path, Request
+from fastapi.security import APIKeyHeader
 from sqlalchemy.orm import Session
 
 from .config import Settings
 from .db import unit_of_work
-from .errors import InvalidInputError
+from .errors import InvalidInputError, UnauthorizedError
 from .state import AppState
 from .uploads import MultipartUpload, UploadedFile, receive_multipart
 
@@ -43,6 +45,39 @@ def get_session(request: Request, state: StateDep) -> Iterator[Session]:
 # scope="function": the commit happens when the endpoint returns, before the
 # response is sent, so a client never sees an id that is not committed yet.
 SessionDep = Annotated[Session, Depends(get_session, scope="function")]
+
+
+API_KEY_HEADER = APIKeyHeader(
+    name="X-API-Key",
+    auto_error=False,
+    description="Needed by POST and DELETE when the service sets SHAPES_API_KEY.",
+)
+
+
+def require_api_key(
+    state: StateDep, key: Annotated[str | None, Depends(API_KEY_HEADER)] = None
+) -> None:
+    """Refuse a write without the configured key (no key configured: open, for local use).
+
+    Runs before the body is read, so an unauthorized upload costs no disk.
+    """
+    expected = state.settings.api_key
+    if expected is None:
+        return
+    # Constant time: how much of a guess matches must not show in the response time.
+    if key is None or not hmac.compare_digest(
+        key.encode("utf-8"), expected.get_secret_value().encode("utf-8")
+    ):
+        raise UnauthorizedError(
+            "This service needs an API key for changes and searches: "
+            "send it in the X-API-Key header."
+            if key is None
+            else "The API key in the X-API-Key header is not valid."
+        )
+
+
+WRITE_ACCESS = [Depends(require_api_key)]
+"""``dependencies=`` of every POST and DELETE route."""
 
 
 async def get_multipart(request: Request, state: StateDep) -> AsyncIterator[MultipartUpload]:

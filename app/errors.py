@@ -34,6 +34,11 @@ class DomainError(Exception):
             self.status = status
 
 
+class UnauthorizedError(DomainError):
+    status = 401
+    code = "unauthorized"
+
+
 class NotFoundError(DomainError):
     status = 404
     code = "not_found"
@@ -106,7 +111,8 @@ def _validation_sentence(exc: RequestValidationError) -> str:
 def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(DomainError)
     async def _domain(_: Request, exc: DomainError) -> JSONResponse:
-        return JSONResponse(_body(exc.code, exc.detail), status_code=exc.status)
+        headers = {"WWW-Authenticate": "X-API-Key"} if exc.status == 401 else None
+        return JSONResponse(_body(exc.code, exc.detail), status_code=exc.status, headers=headers)
 
     @app.exception_handler(MeshError)
     async def _mesh(_: Request, exc: MeshError) -> JSONResponse:

@@ -28,3 +28,8 @@ ERROR_RESPONSES: dict[int | str, dict] = {
     422: {"model": ErrorOut, "description": "Invalid input (`invalid_input` or a specific code)"},
 }
 """Responses every router declares, replacing FastAPI's default validation-error schema."""
+
+UNAUTHORIZED_RESPONSE: dict[int | str, dict] = {
+    401: {"model": ErrorOut, "description": "API key missing or wrong (`unauthorized`)"},
+}
+"""Declared by every POST and DELETE (they need the API key when one is configured)."""

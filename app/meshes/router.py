@@ -7,10 +7,10 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import FileResponse
 
-from ..deps import MultipartDep, RowId, SessionDep, StateDep, require_file
+from ..deps import WRITE_ACCESS, MultipartDep, RowId, SessionDep, StateDep, require_file
 from ..errors import InvalidInputError
 from ..models import Descriptor, Mesh, MeshStatus
-from ..schemas import ERROR_RESPONSES
+from ..schemas import ERROR_RESPONSES, UNAUTHORIZED_RESPONSE
 from ..search import service as search_service
 from ..search.schemas import QueryOut
 from . import repository, service
@@ -96,6 +96,7 @@ def mesh_out(mesh: Mesh, descriptor: Descriptor | None) -> MeshOut:
 
 @router.post(
     "",
+    dependencies=WRITE_ACCESS,
     status_code=status.HTTP_202_ACCEPTED,
     response_model=MeshOut,
     summary="Enroll a mesh",
@@ -106,7 +107,8 @@ def mesh_out(mesh: Mesh, descriptor: Descriptor | None) -> MeshOut:
         "`curl -F file=@wolf0.off.gz -F label=wolf http://127.0.0.1:8000/meshes`"
     ),
     responses={200: {"description": "Already enrolled (same sha256)", "model": MeshOut}}
-    | UPLOAD_ERRORS,
+    | UPLOAD_ERRORS
+    | UNAUTHORIZED_RESPONSE,
     openapi_extra=UPLOAD_BODY,
 )
 def enroll(
@@ -180,9 +182,10 @@ def get_file(mesh_id: RowId, session: SessionDep, state: StateDep) -> FileRespon
 
 @router.delete(
     "/{mesh_id}",
+    dependencies=WRITE_ACCESS,
     status_code=status.HTTP_204_NO_CONTENT,
     summary="Delete a mesh (leaves the index at once)",
-    responses=ERRORS,
+    responses=ERRORS | UNAUTHORIZED_RESPONSE,
 )
 def delete_mesh(mesh_id: RowId, session: SessionDep, state: StateDep) -> Response:
     service.delete(session, state, mesh_id)
@@ -191,10 +194,11 @@ def delete_mesh(mesh_id: RowId, session: SessionDep, state: StateDep) -> Respons
 
 @router.post(
     "/{mesh_id}/similar",
+    dependencies=WRITE_ACCESS,
     response_model=QueryOut,
     summary="Shapes most similar to an enrolled mesh",
     description="Uses the stored descriptor (nothing is recomputed); the mesh itself is left out.",
-    responses=ERRORS | {409: {"description": "The mesh is not ready yet"}},
+    responses=ERRORS | UNAUTHORIZED_RESPONSE | {409: {"description": "The mesh is not ready yet"}},
 )
 def similar(
     mesh_id: RowId,

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from ..deps import MultipartDep, SessionDep, StateDep, require_file
+from ..deps import WRITE_ACCESS, MultipartDep, SessionDep, StateDep, require_file
 from ..errors import InvalidInputError
-from ..schemas import ERROR_RESPONSES
+from ..schemas import ERROR_RESPONSES, UNAUTHORIZED_RESPONSE
 from . import service
 from .schemas import QueryOut
 
@@ -45,6 +45,7 @@ def _int_field(value: str | None, name: str, default: int) -> int:
 
 @router.post(
     "/query",
+    dependencies=WRITE_ACCESS,
     response_model=QueryOut,
     summary="Rank the gallery by similarity to an uploaded mesh",
     description=(
@@ -58,7 +59,8 @@ def _int_field(value: str | None, name: str, default: int) -> int:
         415: {"description": "Not a mesh file type"},
         422: {"description": "Unreadable mesh, bad k/preset/fusion/modalities"},
         503: {"description": "Index loading, or no worker answered in time"},
-    },
+    }
+    | UNAUTHORIZED_RESPONSE,
     openapi_extra=QUERY_BODY,
 )
 def query(upload: MultipartDep, session: SessionDep, state: StateDep) -> QueryOut:
