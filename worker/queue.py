@@ -32,9 +32,8 @@ from pathlib import Path
 from huey import Huey, PriorityRedisHuey, SqliteHuey
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
-from .errors import MeshError
-from .pipeline import ShapeDescriptor, describe_file
-from .presets import get_preset
+from .limits import describe_limited
+from .pipeline import ShapeDescriptor
 
 TASK_NAME = "describe_upload"
 TASK_RETRIES = 2
@@ -55,6 +54,9 @@ class QueueSettings(BaseSettings):
     redis_url: str | None = None
     queue_name: str = "shapes"
     heartbeat_seconds: float = 2.0
+    # Per job, in a child process; a job over either fails with a sentence (0: no limit).
+    job_time_limit_seconds: float = 600.0
+    job_memory_limit_mb: int = 4096
 
 
 def heartbeat_key(task_id: str) -> str:
@@ -92,6 +94,8 @@ def make_huey(settings: QueueSettings) -> Huey:
         )
     heartbeat_seconds = settings.heartbeat_seconds
     data_dir = settings.data_dir
+    time_limit = settings.job_time_limit_seconds
+    memory_limit = settings.job_memory_limit_mb * 1024 * 1024
 
     @huey.task(
         retries=TASK_RETRIES, retry_delay=TASK_RETRY_DELAY_SECONDS, context=True, name=TASK_NAME
@@ -125,18 +129,20 @@ def make_huey(settings: QueueSettings) -> Huey:
         beater.start()
         try:
             path = Path(upload_path)
-            descriptor = describe_file(
+            npz, code, message = describe_limited(
                 path if path.is_absolute() else data_dir / path,
-                get_preset(preset_name),
                 filename,
+                preset_name,
                 max_faces=max_faces,
+                time_limit=time_limit,
+                memory_limit_bytes=memory_limit,
             )
-        except MeshError as exc:  # deterministic: report, do not retry
-            return {"ok": False, "code": exc.code, "message": exc.message}
         finally:
             done.set()
             beater.join()
-        return {"ok": True, "descriptor": encode_descriptor(descriptor)}
+        if npz is None:  # refused or over a limit: deterministic, report, do not retry
+            return {"ok": False, "code": code, "message": message}
+        return {"ok": True, "descriptor": base64.b64encode(npz).decode("ascii")}
 
     huey.describe_upload = describe_upload  # type: ignore[attr-defined]
     return huey

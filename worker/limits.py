@@ -1,0 +1,103 @@
+"""Run one descriptor computation in a child process under a time and memory limit.
+
+A hostile or huge mesh must cost a job, not the worker: the computation runs
+in a process forked from a small fork server (``multiprocessing`` forkserver,
+with the engine preloaded), whose address space is capped with
+``RLIMIT_AS``; the parent waits at most ``time_limit`` seconds and kills it
+otherwise. The outcome is the same dict a worker task returns.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import pickle
+import resource
+from pathlib import Path
+
+from .errors import MeshError
+from .pipeline import describe_file
+from .presets import get_preset
+
+_CONTEXT = mp.get_context("forkserver")
+_CONTEXT.set_forkserver_preload(["worker.pipeline"])
+
+
+def _child(conn, path: str, filename: str, preset_name: str, max_faces: int, memory: int) -> None:
+    if memory > 0:
+        resource.setrlimit(resource.RLIMIT_AS, (memory, memory))
+    try:
+        descriptor = describe_file(
+            Path(path), get_preset(preset_name), filename, max_faces=max_faces
+        )
+        conn.send_bytes(b"D" + descriptor.to_npz_bytes())
+    except MeshError as exc:
+        conn.send((exc.code, exc.message))
+    except MemoryError:
+        conn.send(("out_of_memory", ""))
+    except Exception as exc:  # unexpected: the parent raises it so the queue retries
+        conn.send(("crashed", repr(exc)[:500]))
+    finally:
+        conn.close()
+
+
+def describe_limited(
+    path: Path,
+    filename: str,
+    preset_name: str,
+    *,
+    max_faces: int,
+    time_limit: float,
+    memory_limit_bytes: int,
+) -> tuple[bytes | None, str | None, str | None]:
+    """``(descriptor npz bytes, None, None)`` or ``(None, code, sentence)``.
+
+    Raises ``RuntimeError`` when the child died for another reason (a crash
+    worth a retry).
+    """
+    receive, send = _CONTEXT.Pipe(duplex=False)
+    child = _CONTEXT.Process(
+        target=_child,
+        args=(send, str(path), filename, preset_name, max_faces, memory_limit_bytes),
+        daemon=True,
+    )
+    child.start()
+    send.close()
+    try:
+        ready = receive.poll(time_limit if time_limit > 0 else None)
+        message = receive.recv_bytes() if ready else None
+    except EOFError:  # the child died without answering (e.g. killed by the kernel)
+        message = b""
+    finally:
+        if child.is_alive():
+            child.kill()
+        child.join()
+        receive.close()
+    if message is None:
+        return (
+            None,
+            "describe_timeout",
+            (
+                f"Describing this mesh took longer than this service's limit of {time_limit:g} "
+                "seconds; simplify it or upload a smaller mesh."
+            ),
+        )
+    if message.startswith(b"D"):
+        return message[1:], None, None
+    if message:
+        code, sentence = pickle.loads(message)
+        if code == "crashed":
+            raise RuntimeError(f"describing failed: {sentence}")
+        if code != "out_of_memory":
+            return None, code, sentence
+    # MemoryError under the cap, or a signal (C code failing to allocate, the OOM killer).
+    if message or (memory_limit_bytes > 0 and (child.exitcode or 0) < 0):
+        mb = memory_limit_bytes / (1024 * 1024)
+        return (
+            None,
+            "describe_out_of_memory",
+            (
+                f"Describing this mesh needed more memory than this service's limit of {mb:g} MB; "
+                "simplify it or upload a smaller mesh."
+            ),
+        )
+    raise RuntimeError(f"the descriptor process exited with code {child.exitcode}")
