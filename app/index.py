@@ -31,7 +31,7 @@ rule (``worker.compare``).
 * D1 has no cheap bound. Its candidates come from the L2 distance of
   log-descriptors (eq. 8's terms are ``2 tanh(|log a - log b| / 2)``, close
   to ``|log a - log b|`` for similar shapes) projected the same way, with
-  ``D1_CANDIDATES`` per modality, all scored exactly.
+  ``CANDIDATES`` per modality, all scored exactly.
 
 D2's sigma
 ----------
@@ -67,7 +67,6 @@ MAX_DIMS = 64  # columns of the candidate projection per modality
 CANDIDATES = 2048  # faiss candidates per modality (D2), first round
 MAX_CANDIDATES = 16_384  # per modality, when more rounds can still certify the top-k
 MAX_SCORED = 256  # long-modality exact scores per round, in fused-estimate order
-D1_CANDIDATES = 1024  # candidates per modality for D1 (all scored exactly)
 FIT_SAMPLE = 5_000  # rows used to fit a projection (any orthonormal P keeps the bound)
 BOUND_SAFETY = 1.0 - 1e-5  # float32 candidate distances: keep the bound a true lower bound
 FORMAT_VERSION = 1
@@ -456,7 +455,7 @@ class GalleryIndex:
         q = {m: np.asarray(query[m], dtype=np.float64).ravel() for m in mods}
         transformed = {m: self._transform(m, self._fits[m], q[m][None, :]) for m in mods}
         if not d2:
-            count = min(n, max(D1_CANDIDATES, 4 * want))
+            count = min(n, max(self.candidates, 4 * want))
             labels = [self._fits[m].index.search(transformed[m], count)[1][0] for m in mods]
             union = np.unique(np.concatenate(labels))
             positions = self._positions(union[union >= 0])

@@ -1,0 +1,121 @@
+"""The gallery index against the exhaustive ranking of ``worker.compare`` (no server)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from app.index import GalleryIndex, SearchStats, descriptor_dims
+from worker.compare import fuse, gallery_sigma, mean_normalized_manhattan, normalized_euclidean
+from worker.presets import MODALITIES, get_preset
+
+SHREC = get_preset("smeets2010-shrec")  # D2, product rule
+TOSCA = get_preset("smeets2010-tosca")  # D1, sum rule
+
+
+def _gallery(n: int, seed: int = 0) -> dict[str, np.ndarray]:
+    """Positive descriptors with class structure, shaped like the real ones."""
+    rng = np.random.default_rng(seed)
+    dims = descriptor_dims(SHREC)
+    classes = rng.integers(0, max(n // 8, 1), size=n)
+    out = {}
+    for m, d in dims.items():
+        centres = rng.normal(size=(max(n // 8, 1), d)) + np.linspace(3, -3, d)
+        out[m] = np.exp(centres[classes] + 0.3 * rng.normal(size=(n, d)))
+    return out
+
+
+def _exhaustive(preset, gallery, query, k, exclude=()):
+    per = {}
+    for m in preset.fused_modalities:
+        if preset.dissimilarity == "D2":
+            per[m] = normalized_euclidean(query[m][None], gallery[m], gallery_sigma(gallery[m]))[0]
+        else:
+            per[m] = mean_normalized_manhattan(query[m][None], gallery[m])[0]
+    fused = fuse(per, preset.fusion, {m: preset.weight(m) for m in preset.fused_modalities})
+    order = [int(i) for i in np.lexsort((np.arange(len(fused)), fused)) if i not in exclude]
+    return order[:k], fused
+
+
+def _index(preset, gallery, **options) -> GalleryIndex:
+    index = GalleryIndex(preset, descriptor_dims(preset), **options)
+    n = len(gallery["gdm"])
+    index.add_many((i, {m: gallery[m][i] for m in MODALITIES}) for i in range(n))
+    return index
+
+
+@pytest.mark.parametrize("preset", [SHREC, TOSCA], ids=["D2-product", "D1-sum"])
+def test_top_k_equals_the_exhaustive_ranking(preset):
+    gallery = _gallery(600)
+    # Small candidate counts, so the candidate path (not a full scan) is exercised.
+    index = _index(preset, gallery, candidates=64, max_candidates=256, max_scored=64)
+    rng = np.random.default_rng(1)
+    for i in rng.choice(600, size=20, replace=False):
+        query = {
+            m: gallery[m][i] * np.exp(0.05 * rng.normal(size=gallery[m].shape[1]))
+            for m in MODALITIES
+        }
+        expected, fused = _exhaustive(preset, gallery, query, 10)
+        found = index.search(query, 10)
+        assert [m.id for m in found] == expected
+        np.testing.assert_allclose([m.score for m in found], fused[expected], rtol=1e-9)
+
+
+def test_certified_searches_are_exact_and_sigma_is_the_current_gallerys():
+    gallery = _gallery(300)
+    index = _index(SHREC, gallery)
+    for m in MODALITIES:
+        np.testing.assert_allclose(index.sigma()[m], gallery_sigma(gallery[m]), rtol=1e-9)
+    stats = SearchStats()
+    query = {m: gallery[m][7] for m in MODALITIES}
+    found = index.search(query, 5, exclude=(7,), stats=stats)
+    expected, _ = _exhaustive(SHREC, gallery, query, 5, exclude=(7,))
+    assert stats.certified and [m.id for m in found] == expected
+
+
+def test_adds_and_deletes_keep_sigma_and_results_current():
+    gallery = _gallery(400)
+    index = _index(SHREC, {m: v[:300] for m, v in gallery.items()})
+    for i in range(300, 400):  # past the refit fraction: refits happen on the way
+        index.add(i, {m: gallery[m][i] for m in MODALITIES})
+    removed = list(range(0, 400, 7))
+    for i in removed:
+        assert index.remove(i)
+    assert not index.remove(removed[0])
+    keep = [i for i in range(400) if i not in removed]
+    current = {m: v[keep] for m, v in gallery.items()}
+    for m in MODALITIES:
+        np.testing.assert_allclose(index.sigma()[m], gallery_sigma(current[m]), rtol=1e-8)
+    assert index.refits > 1
+    query = {m: gallery[m][0] for m in MODALITIES}  # a deleted shape as the query
+    expected, _ = _exhaustive(SHREC, current, query, 10)
+    assert [m.id for m in index.search(query, 10)] == [keep[i] for i in expected]
+
+
+def test_save_load_roundtrip_and_corrupt_files_are_refused(tmp_path):
+    gallery = _gallery(200)
+    index = _index(SHREC, gallery)
+    index.save(tmp_path / "idx")
+    loaded = GalleryIndex.load(tmp_path / "idx", SHREC)
+    assert loaded.fingerprint() == index.fingerprint() and len(loaded) == 200
+    query = {m: gallery[m][3] for m in MODALITIES}
+    assert [m.id for m in loaded.search(query, 10)] == [m.id for m in index.search(query, 10)]
+
+    (tmp_path / "idx" / "ddt.faiss").write_bytes(b"garbage")
+    with pytest.raises(ValueError):
+        GalleryIndex.load(tmp_path / "idx", SHREC)
+    with pytest.raises(ValueError):
+        GalleryIndex.load(tmp_path / "missing", SHREC)
+    index.save(tmp_path / "idx")
+    with pytest.raises(ValueError):  # made for another preset
+        GalleryIndex.load(tmp_path / "idx", TOSCA)
+
+
+def test_empty_and_tiny_galleries():
+    index = GalleryIndex(SHREC, descriptor_dims(SHREC))
+    query = {m: np.ones(d) for m, d in descriptor_dims(SHREC).items()}
+    assert index.search(query, 5) == []
+    index.add(42, query)
+    (only,) = index.search(query, 5)
+    assert only.id == 42 and only.score == 0.0
+    assert index.search(query, 5, exclude=(42,)) == []
