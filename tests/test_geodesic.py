@@ -59,4 +59,5 @@ def test_fast_path_equals_per_source_reference():
     noisy = sphere.vertices * (1 + 0.05 * np.random.default_rng(1).random((642, 1)))
     mesh, ops, fast = _gdm(noisy, sphere.faces)
     reference = geodesic_distances_reference(mesh, ops)
-    np.testing.assert_allclose(fast, reference, rtol=1e-7, atol=1e-9)
+    # The fast path's Poisson step runs in single precision (float32 eps 6e-8).
+    np.testing.assert_allclose(fast, reference, rtol=1e-5, atol=1e-6 * reference.max())

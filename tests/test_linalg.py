@@ -37,3 +37,12 @@ def test_mesh_heat_operator_matches_superlu():
     solver = BandedCholesky(a)
     assert solver.bandwidth < a.shape[0] // 4  # RCM made it banded
     np.testing.assert_allclose(solver.solve(rhs), sla.splu(a).solve(rhs), rtol=1e-9, atol=1e-12)
+
+
+def test_single_precision_solves_agree_to_single_precision():
+    a = _random_spd(200, 0.05, 9)
+    rhs = np.random.default_rng(9).standard_normal((200, 5))
+    solver = BandedCholesky(a, dtype=np.float32)
+    x = solver.solve(rhs)
+    assert x.dtype == np.float32
+    np.testing.assert_allclose(x, sla.splu(a).solve(rhs), rtol=1e-4, atol=1e-5)

@@ -16,8 +16,6 @@ per-source version with SuperLU that the fast path is tested against.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
@@ -37,9 +35,12 @@ class HeatMethod:
     mesh : intrinsic triangulation (its Delaunay one gives the best accuracy).
     ops : the mesh's finite-element operators.
     time_factor : heat time in units of the squared mean edge length.
-    factor : builds a solver object with a ``solve(rhs)`` method from a sparse SPD
-        matrix (``BandedCholesky`` by default, ``scipy.sparse.linalg.splu`` for the
-        reference).
+    reference : solve with SuperLU in double precision throughout (the plain
+        version the fast path is tested against). The fast path factors both
+        systems with :class:`BandedCholesky` and runs the Poisson step in single
+        precision: its input is a unit vector field and its output a distance, both
+        of order one, whereas the heat step needs double precision (``u`` decays
+        like ``exp(-d / h)`` and reaches 1e-60 across a mesh).
     """
 
     def __init__(
@@ -47,18 +48,24 @@ class HeatMethod:
         mesh: IntrinsicMesh,
         ops: FEMOperators,
         time_factor: float = 1.0,
-        factor: Callable = BandedCholesky,
+        reference: bool = False,
     ):
         self.n = mesh.n_vertices
         t = time_factor * mesh.mean_edge_length**2
         mass = sp.diags(ops.vertex_areas)
-        self._heat = factor((mass + t * ops.stiffness).tocsc())
+        heat = (mass + t * ops.stiffness).tocsc()
         # L is singular (constants); a tiny mass term makes it definite and only
         # shifts phi by a constant, which the source normalization removes.
         eps = TOL.poisson_regularization * ops.stiffness.diagonal().mean() / ops.vertex_areas.mean()
-        self._poisson = factor((ops.stiffness + eps * mass).tocsc())
+        poisson = (ops.stiffness + eps * mass).tocsc()
         self._gradient = ops.gradient
-        self._divergence = ops.divergence
+        if reference:
+            self._heat, self._poisson = sla.splu(heat), sla.splu(poisson)
+            self._divergence = ops.divergence
+        else:
+            self._heat = BandedCholesky(heat)
+            self._poisson = BandedCholesky(poisson, dtype=np.float32)
+            self._divergence = ops.divergence.astype(np.float32)
 
     def distances_from(self, sources: np.ndarray) -> np.ndarray:
         """Geodesic distances from each source to every vertex.
@@ -85,7 +92,8 @@ class HeatMethod:
         np.divide(-1.0, scale, out=scale)
         gx *= scale
         gy *= scale
-        phi = self._poisson.solve(self._divergence @ g)
+        phi = self._poisson.solve(self._divergence @ g.astype(self._divergence.dtype))
+        phi = phi.astype(np.float64)
         phi -= phi[sources, np.arange(len(sources))]
         return np.maximum(phi, 0.0)
 
@@ -120,7 +128,7 @@ def geodesic_distances_reference(
     mesh: IntrinsicMesh, ops: FEMOperators, time_factor: float = 1.0
 ) -> np.ndarray:
     """The same GDM, one source at a time with SuperLU: the plain reference."""
-    solver = HeatMethod(mesh, ops, time_factor, factor=sla.splu)
+    solver = HeatMethod(mesh, ops, time_factor, reference=True)
     n = mesh.n_vertices
     gdm = np.column_stack([solver.distances_from(np.array([s]))[:, 0] for s in range(n)])
     gdm = 0.5 * (gdm + gdm.T)
