@@ -39,7 +39,7 @@ def _row(name, errors):
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--sources", type=int, default=20)
+    parser.add_argument("--sources", type=int, default=10)
     args = parser.parse_args()
     print("| mesh | median rel. error | mean | 95th percentile |")
     print("|---|---|---|---|")
@@ -50,7 +50,7 @@ def main() -> None:
     gdm = _gdm(sphere.vertices, sphere.faces)
     print(_row("icosphere (2,562 v) vs great circles", [np.abs(gdm - exact)[mask] / exact[mask]]))
     rng = np.random.default_rng(0)
-    for name in ("michael0", "cat0", "horse0", "centaur0"):
+    for name in ("michael0", "horse0", "centaur0", "dog0"):
         mesh = resample_mesh(load_mesh(TOSCA / f"{name}.off.gz"), 2500)
         solver = PyGeodesicAlgorithmExact(mesh.vertices, mesh.faces.astype(np.int32))
         sources = rng.choice(mesh.n_vertices, size=args.sources, replace=False)
