@@ -23,14 +23,20 @@ EXAMPLES = 50  # per operation; well under a minute in all
 # A schema-valid upload may still be refused: the file's format is told by its name's
 # extension, which OpenAPI cannot constrain (a generated "file.png" is rightly a 415).
 EXCLUDED = [positive_data_acceptance]
+# With the key set, schemathesis also checks that writes without it (or with a wrong one)
+# are refused.
+KEY = "fuzzing-key"
 
 
 @pytest.fixture(scope="session")
 def fuzzed(tmp_path_factory) -> Iterator[Service]:
-    svc = make_service(tmp_path_factory, "fuzzed", SHAPES_QUERY_TIMEOUT_SECONDS="20")
+    svc = make_service(
+        tmp_path_factory, "fuzzed", SHAPES_QUERY_TIMEOUT_SECONDS="20", SHAPES_API_KEY=KEY
+    )
     try:
         svc.start_worker()
         svc.start_api()
+        svc.client.headers["X-API-Key"] = KEY
         created = svc.upload("wolf0", "wolf")
         assert svc.wait_mesh(created.json()["id"])["status"] == "ready"
         yield svc
@@ -56,7 +62,7 @@ def test_no_server_error_and_responses_match_the_schema(fuzzed: Service):
             phases=[Phase.explicit, Phase.generate],  # no shrinking: report, keep going
         )
         def check(case) -> None:
-            case.call_and_validate(timeout=60, excluded_checks=EXCLUDED)
+            case.call_and_validate(timeout=60, excluded_checks=EXCLUDED, headers={"X-API-Key": KEY})
 
         try:
             check()
