@@ -141,7 +141,7 @@ def list_meshes(
     state: StateDep,
     label: Annotated[str | None, Query(description="only this class")] = None,
     status_: Annotated[MeshStatus | None, Query(alias="status")] = None,
-    offset: Annotated[int, Query(ge=0)] = 0,
+    offset: Annotated[int, Query(ge=0, le=2**63 - 1)] = 0,  # SQLite: 64-bit
     limit: Annotated[int, Query(ge=1, le=1000)] = 50,
 ) -> MeshPage:
     limit = min(limit, state.settings.max_page_size)

@@ -199,3 +199,5 @@ def test_ids_beyond_64_bits_are_invalid_input_not_a_server_error(hardened: Servi
                          ("GET", f"/jobs/{huge}")):  # fmt: skip
         _error(hardened.client.request(method, path), 422, ("invalid_input",))
     _error(hardened.client.get(f"/meshes/{2**63 - 1}"), 404, ("not_found",))
+    _error(hardened.client.get("/meshes", params={"offset": huge}), 422, ("invalid_input",))
+    assert hardened.client.get("/meshes", params={"offset": 2**63 - 1}).json()["items"] == []
