@@ -4,12 +4,13 @@ The modal representation compares matrices of the same size, so every mesh is
 brought to the preset's vertex count first (sec. 4.2: 2,500 points for SHREC).
 
 Method: quadric error decimation (Garland-Heckbert, via ``fast_simplification``).
-It keeps the shape better than isotropic remeshing at this density (measured on
-TOSCA, see docs/resampling.md), at the price of badly shaped triangles; the
-operators built on the result therefore use its intrinsic Delaunay triangulation
-(:mod:`worker.intrinsic`), which makes them insensitive to triangle shape.
-Meshes with fewer vertices than the target are first refined by midpoint
-subdivision, which does not change the surface.
+It keeps the shape's features at this density (an earlier measurement on TOSCA
+found isotropic remeshing worse for every modality; not repeated here), at the
+price of badly shaped triangles; the operators built on the result therefore use
+its intrinsic Delaunay triangulation (:mod:`worker.intrinsic`), which makes them
+insensitive to triangle shape (measured: docs/engine.md). Meshes with fewer
+vertices than the target are first refined by midpoint subdivision, which does not
+change the surface.
 """
 
 from __future__ import annotations
