@@ -41,18 +41,18 @@ def load_index(state: AppState) -> GalleryIndex:
     preset, settings = state.preset, state.settings
     directory = index_directory(state)
     started = time.perf_counter()
-    options = {"refit_fraction": settings.index_refit_fraction}
+    refit = settings.index_refit_fraction
     with state.read_sessions() as session:
         db_ids = meshes.descriptor_mesh_ids(session, preset.name, preset.version)
         try:
-            index = GalleryIndex.load(directory, preset, **options)
+            index = GalleryIndex.load(directory, preset, refit_fraction=refit)
             how = "loaded"
         except ValueError as exc:
             if directory.exists():
                 log.warning(
                     "index at %s unusable (%s); rebuilding from the database", directory, exc
                 )
-            index = GalleryIndex(preset, descriptor_dims(preset), **options)
+            index = GalleryIndex(preset, descriptor_dims(preset), refit_fraction=refit)
             index.add_many(_decoded(meshes.iter_descriptors(session, preset.name, preset.version)))
             how = "rebuilt"
         else:

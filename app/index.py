@@ -72,7 +72,6 @@ BOUND_SAFETY = 1.0 - 1e-5  # float32 candidate distances: keep the bound a true 
 FORMAT_VERSION = 1
 
 
-
 def _single_threaded_faiss() -> None:
     """One query at a time: faiss's OpenMP team costs more than it saves (2-15 ms
     per search on a busy 2-core machine, even for 83 shapes), and the API's
@@ -226,7 +225,8 @@ class GalleryIndex:
             self._vectors[m][i] = self._vectors[m][last]
             if self._fits is not None:
                 self._reduced[m][i] = self._reduced[m][last]
-                self._fits[m].index.remove_ids(np.array([item], dtype=np.int64))
+                # faiss's Python wrapper accepts an id array in place of an IDSelector.
+                self._fits[m].index.remove_ids(np.array([item], dtype=np.int64))  # type: ignore[arg-type]
         if i != last:
             moved = int(self._ids[last])
             self._ids[i] = moved
@@ -459,9 +459,9 @@ class GalleryIndex:
             labels = [self._fits[m].index.search(transformed[m], count)[1][0] for m in mods]
             union = np.unique(np.concatenate(labels))
             positions = self._positions(union[union >= 0])
-            fused, per = self.exact_scores(query, positions, mods, rule)
+            fused, exact = self.exact_scores(query, positions, mods, rule)
             stats.rounds, stats.candidates, stats.certified = 1, len(positions), count >= n
-            return positions, fused, per
+            return positions, fused, exact
 
         sigma = self.sigma()
         rho = {m: float(np.min(self._fits[m].scale / sigma[m])) * BOUND_SAFETY for m in mods}
@@ -517,7 +517,7 @@ class GalleryIndex:
             refined = order[:done]
             stats.candidates, stats.scored = len(positions), done
             out = positions[refined], fused[refined], {m: v[refined] for m, v in per.items()}
-            outside = float(fuse({m: np.float64(t) for m, t in threshold.items()}, rule, weights))
+            outside = float(fuse({m: np.asarray(t) for m, t in threshold.items()}, rule, weights))
             if exact_in_union and (count >= n or kth <= outside):
                 stats.certified = True
                 return out
@@ -542,9 +542,11 @@ class GalleryIndex:
             shutil.rmtree(tmp, ignore_errors=True)
             tmp.mkdir(parents=True)
             n = self._n
-            arrays = {"ids": self._ids[:n]}
+            fits = self._fits
+            assert fits is not None
+            arrays: dict[str, np.ndarray] = {"ids": self._ids[:n]}
             for m in self.modalities:
-                fit = self._fits[m]
+                fit = fits[m]
                 arrays.update(
                     {
                         f"{m}.vectors": self._vectors[m][:n],
@@ -559,7 +561,7 @@ class GalleryIndex:
                     }
                 )
                 faiss.write_index(fit.index, str(tmp / f"{m}.faiss"))
-            np.savez(tmp / "arrays.npz", **arrays)
+            np.savez(tmp / "arrays.npz", **arrays)  # type: ignore[arg-type]  # numpy stubs
             manifest = {
                 "format": FORMAT_VERSION,
                 "preset": self.preset.name,

@@ -13,7 +13,7 @@ import os
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath, PureWindowsPath
-from typing import BinaryIO
+from typing import TYPE_CHECKING, BinaryIO
 
 from python_multipart.exceptions import MultipartParseError
 from python_multipart.multipart import MultipartParser, parse_options_header
@@ -22,6 +22,9 @@ from starlette.requests import ClientDisconnect, Request
 from worker.mesh_io import mesh_format
 
 from .errors import InvalidInputError, PayloadTooLargeError, UnsupportedMediaTypeError
+
+if TYPE_CHECKING:  # defined for type checkers only
+    from python_multipart.multipart import MultipartCallbacks
 
 FILE_FIELD = "file"
 MAX_FIELDS = 16
@@ -154,8 +157,8 @@ class _Receiver:
             self.fields[self._name] = self._buffer.decode("utf-8", "replace")
 
     # ---------------------------------------------------------------------
-    def callbacks(self) -> dict:
-        return {
+    def callbacks(self) -> MultipartCallbacks:
+        return {  # type: ignore[return-value]
             name: getattr(self, name)
             for name in (
                 "on_part_begin",

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import FileResponse
@@ -18,10 +18,11 @@ from .schemas import DescriptorInfo, Links, MeshOut, MeshPage
 
 router = APIRouter(prefix="/meshes", tags=["meshes"], responses=ERROR_RESPONSES)
 
-ERRORS = {
+Responses = dict[int | str, dict[str, Any]]
+ERRORS: Responses = {
     404: {"description": 'Unknown id: `{"error": "not_found", "detail": ...}`'},
 }
-UPLOAD_ERRORS = {
+UPLOAD_ERRORS: Responses = {
     413: {"description": "File over the size limit (`too_large`)"},
     409: {"description": "Same bytes enrolled as another format (`same_bytes_other_format`)"},
     415: {"description": "Not a mesh file type (`unsupported_format`) or not multipart"},
@@ -106,7 +107,7 @@ def mesh_out(mesh: Mesh, descriptor: Descriptor | None) -> MeshOut:
         "existing mesh. Poll `GET /meshes/{id}` until `ready` (or `failed`, with `detail`).\n\n"
         "`curl -F file=@wolf0.off.gz -F label=wolf http://127.0.0.1:8000/meshes`"
     ),
-    responses={200: {"description": "Already enrolled (same sha256)", "model": MeshOut}}
+    responses=Responses({200: {"description": "Already enrolled (same sha256)", "model": MeshOut}})
     | UPLOAD_ERRORS
     | UNAUTHORIZED_RESPONSE,
     openapi_extra=UPLOAD_BODY,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from fastapi import APIRouter
 
 from ..deps import WRITE_ACCESS, MultipartDep, SessionDep, StateDep, require_file
@@ -34,6 +36,14 @@ QUERY_BODY = {
 }
 
 
+QUERY_ERRORS: dict[int | str, dict[str, Any]] = {
+    413: {"description": "File over the size limit, or too many faces"},
+    415: {"description": "Not a mesh file type"},
+    422: {"description": "Unreadable mesh, bad k/preset/fusion/modalities"},
+    503: {"description": "Index loading, or no worker answered in time"},
+}
+
+
 def _int_field(value: str | None, name: str, default: int) -> int:
     if value is None or not value.strip():
         return default
@@ -54,13 +64,7 @@ def _int_field(value: str | None, name: str, default: int) -> int:
         "default preset; lower is more similar).\n\n"
         "`curl -F file=@wolf2.off.gz -F k=3 http://127.0.0.1:8000/query`"
     ),
-    responses={
-        413: {"description": "File over the size limit, or too many faces"},
-        415: {"description": "Not a mesh file type"},
-        422: {"description": "Unreadable mesh, bad k/preset/fusion/modalities"},
-        503: {"description": "Index loading, or no worker answered in time"},
-    }
-    | UNAUTHORIZED_RESPONSE,
+    responses=QUERY_ERRORS | UNAUTHORIZED_RESPONSE,
     openapi_extra=QUERY_BODY,
 )
 def query(upload: MultipartDep, session: SessionDep, state: StateDep) -> QueryOut:

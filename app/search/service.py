@@ -91,7 +91,7 @@ def rank(
     state.metrics.search_seconds.observe(stats.seconds)
     timings = {**timings, "search": stats.seconds}
     rows = meshes.by_ids(session, [m.id for m in matches])
-    out = []
+    out: list[MatchOut] = []
     for match in matches:
         mesh = rows.get(match.id)
         if mesh is None:  # deleted a moment ago
