@@ -64,6 +64,10 @@ def serve(settings: Settings) -> int:
 
     consumers = [start_consumer() for _ in range(settings.workers)]
     api_env = dict(os.environ, SHAPES_DATA_DIR=env["SHAPES_DATA_DIR"])
+    # The API's numeric work is many small searches: BLAS threads only add
+    # synchronisation (a refit took 3x longer with two threads on a busy machine).
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        api_env.setdefault(var, "1")
     api = subprocess.Popen(
         [
             sys.executable,
