@@ -30,7 +30,7 @@ from .errors import (
     UnsupportedFormatError,
 )
 from .tol import TOL
-from .topology import unique_rows
+from .topology import edge_keys, unique_rows
 
 MESH_FORMATS = ("obj", "ply", "off", "stl", "glb", "gltf")
 DEFAULT_MAX_FACES = 2_000_000
@@ -179,14 +179,14 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
     return Mesh(vertices=merged[used], faces=renumber[faces])
 
 
-def non_manifold_face_fraction(faces: np.ndarray) -> float:
+def non_manifold_face_fraction(faces: np.ndarray, n_vertices: int) -> float:
     """Fraction of ``faces`` (m, 3) that touch an edge shared by three or more faces."""
-    faces = np.asarray(faces, dtype=np.int64)
     if not len(faces):
         return 0.0
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    _, inverse, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
-    per_face = counts[inverse.reshape(3, -1)].max(axis=0)
+    _, inverse, counts = np.unique(
+        edge_keys(faces, n_vertices).ravel(), return_inverse=True, return_counts=True
+    )
+    per_face = counts[inverse].reshape(-1, 3).max(axis=1)
     return float(np.mean(per_face > 2))
 
 
@@ -255,7 +255,7 @@ def load_mesh(
         )
     # Geodesics and the Laplace-Beltrami operator are defined on a 2-manifold; a
     # fan of triangles hinged on one edge has no surface to walk on.
-    if non_manifold_face_fraction(mesh.faces) > TOL.max_non_manifold_face_fraction:
+    if non_manifold_face_fraction(mesh.faces, mesh.n_vertices) > TOL.max_non_manifold_face_fraction:
         raise NonManifoldError(
             "The mesh is not a surface: many triangles meet at edges shared by three or more "
             "triangles (non-manifold); upload a manifold triangle mesh."
