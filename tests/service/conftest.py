@@ -44,7 +44,8 @@ class Service:
             os.environ,
             SHAPES_DATA_DIR=str(data_dir),
             SHAPES_HEARTBEAT_SECONDS="1",
-            SHAPES_STALLED_AFTER_SECONDS="5",
+            # Long enough that a slow job on a loaded CI machine never looks dead.
+            SHAPES_STALLED_AFTER_SECONDS="15",
             SHAPES_COLLECTOR_INTERVAL_SECONDS="0.2",
             SHAPES_MAX_UPLOAD_BYTES=str(1_000_000),
             SHAPES_QUERY_TIMEOUT_SECONDS="90",
