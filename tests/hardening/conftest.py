@@ -13,31 +13,20 @@ from collections.abc import Iterator
 
 import pytest
 
-from app.migrations import upgrade_head
-from tests.service.conftest import Service
+from tests.service.conftest import Service, migrated_service, running
 
 MAX_FACES = 10_000  # over wolf0's 8,684 faces
 ENROLLED = {"wolf0": "wolf", "wolf1": "wolf"}
 
 
 def make_service(tmp_path_factory, name: str, **env: str) -> Service:
-    data_dir = tmp_path_factory.mktemp(name)
-    upgrade_head(f"sqlite:///{data_dir / 'shapes.sqlite3'}")
-    svc = Service(data_dir)
-    svc.env.update(SHAPES_MAX_FACES=str(MAX_FACES), **env)
-    return svc
+    return migrated_service(tmp_path_factory, name, SHAPES_MAX_FACES=str(MAX_FACES), **env)
 
 
 @pytest.fixture(scope="session")
 def hardened(tmp_path_factory) -> Iterator[Service]:
-    svc = make_service(tmp_path_factory, "hardened")
-    try:
-        svc.start_worker()
-        svc.start_worker()
-        svc.start_api()
+    with running(make_service(tmp_path_factory, "hardened")) as svc:
         yield svc
-    finally:
-        svc.close()
 
 
 @pytest.fixture(scope="session")

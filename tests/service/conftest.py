@@ -15,6 +15,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import httpx
@@ -143,18 +144,31 @@ class Service:
         self.client.close()
 
 
-@pytest.fixture(scope="session")
-def service(tmp_path_factory) -> Iterator[Service]:
-    data_dir = tmp_path_factory.mktemp("shapes-data")
+def migrated_service(tmp_path_factory, name: str, **env: str) -> Service:
+    """A service (not started) on a fresh data dir whose database Alembic built."""
+    data_dir = tmp_path_factory.mktemp(name)
     upgrade_head(f"sqlite:///{data_dir / 'shapes.sqlite3'}")
     svc = Service(data_dir)
+    svc.env.update(env)
+    return svc
+
+
+@contextmanager
+def running(svc: Service, workers: int = 2) -> Iterator[Service]:
+    """Start ``workers`` queue consumers and the API; stop them all on exit."""
     try:
-        svc.start_worker()
-        svc.start_worker()
+        for _ in range(workers):
+            svc.start_worker()
         svc.start_api()
         yield svc
     finally:
         svc.close()
+
+
+@pytest.fixture(scope="session")
+def service(tmp_path_factory) -> Iterator[Service]:
+    with running(migrated_service(tmp_path_factory, "shapes-data")) as svc:
+        yield svc
 
 
 GALLERY = {
