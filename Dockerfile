@@ -21,7 +21,7 @@ COPY app ./app
 COPY alembic ./alembic
 COPY alembic.ini ./
 # Editable install: the service finds alembic.ini and alembic/ next to app/.
-RUN pip install -e . && python -c "import app.main, worker.queue"
+RUN pip install -e . && python -c "import app.main, worker.jobs.queue"
 
 USER shapes
 VOLUME ["/data"]

@@ -7,9 +7,9 @@ from pathlib import Path
 
 from pydantic import Field, SecretStr
 
-from worker.mesh_io import DEFAULT_MAX_FACES
-from worker.presets import DEFAULT_PRESET
-from worker.queue import QueueSettings
+from worker.engine.mesh_io import DEFAULT_MAX_FACES
+from worker.engine.presets import DEFAULT_PRESET
+from worker.jobs.settings import QueueSettings
 
 
 class Settings(QueueSettings):

@@ -11,7 +11,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from worker.errors import (
+from worker.engine.errors import (
     FileTooLargeError,
     MeshError,
     TooManyFacesError,

@@ -8,7 +8,7 @@ import time
 import numpy as np
 from sqlalchemy.orm import Session
 
-from worker.pipeline import ShapeDescriptor
+from worker.engine.pipeline import ShapeDescriptor
 
 from .index import GalleryIndex, descriptor_dims
 from .meshes import repository as meshes

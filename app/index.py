@@ -6,7 +6,7 @@ Each modality ``m`` of the gallery is kept twice: the exact vectors (float64,
 for scoring) and a faiss ``IndexFlatL2`` over a transformed vector ``t_m(x)``
 that gives candidates. The final ranking is always the exact fused score of
 the preset: eq. (8) D1 or eq. (9) D2 per modality, then the sum or product
-rule (``worker.compare``).
+rule (``worker.engine.compare``).
 
 * D2 (the default preset): ``t_m(x) = P_m^T (x / sigma_fit_m - mu_m)`` with
   ``P_m`` orthonormal (PCA of the whitened gallery, at most ``MAX_DIMS``
@@ -60,8 +60,8 @@ from pathlib import Path
 import faiss
 import numpy as np
 
-from worker.compare import fuse, mean_normalized_manhattan, normalized_euclidean
-from worker.presets import MODALITIES, Preset
+from worker.engine.compare import fuse, mean_normalized_manhattan, normalized_euclidean
+from worker.engine.presets import MODALITIES, Preset
 
 MAX_DIMS = 64  # columns of the candidate projection per modality
 CANDIDATES = 2048  # faiss candidates per modality (D2), first round

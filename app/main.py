@@ -11,7 +11,7 @@ import anyio
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
 
-from worker.presets import get_preset
+from worker.engine.presets import get_preset
 
 from .config import Settings, get_settings
 from .db import make_engine, make_session_factory

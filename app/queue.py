@@ -1,4 +1,4 @@
-"""The service's side of the descriptor queue (``worker.queue``): enqueue, wait, collect."""
+"""The service's side of the descriptor queue (``worker.jobs.queue``): enqueue, wait, collect."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ from typing import Any
 from huey.exceptions import ResultTimeout, TaskException
 from huey.utils import Error
 
-from worker.errors import MeshError
-from worker.pipeline import ShapeDescriptor
-from worker.queue import decode_descriptor, heartbeat_key, make_huey
+from worker.engine.errors import MeshError
+from worker.engine.pipeline import ShapeDescriptor
+from worker.jobs.queue import descriptor_npz, heartbeat_key, make_huey
 
 from .config import Settings
 from .errors import UnavailableError
@@ -88,7 +88,7 @@ class DescriptorQueue:
             self.huey.delete(heartbeat_key(task_id))
         if not result["ok"]:
             raise QueryMeshError(result["code"], result["message"])
-        return decode_descriptor(result["descriptor"])
+        return ShapeDescriptor.from_npz_bytes(descriptor_npz(result))
 
     # -- for the collector ----------------------------------------------------
     def peek(self, keys: list[str]) -> dict[str, Any]:

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
-from worker.presets import Preset
+from worker.engine.presets import Preset
 
 from .config import Settings
 from .index import GalleryIndex

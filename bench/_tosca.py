@@ -6,11 +6,12 @@ import csv
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from worker.pipeline import ShapeDescriptor, describe_file
-from worker.presets import get_preset
+from worker.engine.pipeline import ShapeDescriptor, describe_file
+from worker.engine.presets import get_preset
+from worker.evaluation.datasets import shared_dataset
 
 REPO = Path(__file__).resolve().parents[1]
-TOSCA = REPO / "../shared/datasets/tosca"
+TOSCA = shared_dataset("tosca")
 CACHE = REPO / ".cache" / "tosca-descriptors"
 
 

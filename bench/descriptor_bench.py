@@ -18,9 +18,10 @@ import subprocess
 import sys
 import time
 from dataclasses import replace
-from pathlib import Path
 
-TOSCA = Path(__file__).resolve().parents[1].parent / "shared" / "datasets" / "tosca"
+from worker.evaluation.datasets import shared_dataset
+
+TOSCA = shared_dataset("tosca")
 MESHES = ("michael0.off.gz", "cat0.off.gz", "horse0.off.gz")
 
 
@@ -29,13 +30,17 @@ def _measure(n: int, repeats: int) -> dict:
     from lapy import TriaMesh
     from lapy.shapedna import compute_shapedna
 
-    from worker.diffusion import LaplaceBeltrami, laplace_beltrami_eigenpairs, normalized_spectrum
-    from worker.geodesic import geodesic_distance_matrix
-    from worker.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
-    from worker.mesh_io import load_mesh
-    from worker.modal import ddt_core, modal_gdm
-    from worker.presets import get_preset
-    from worker.resample import resample_mesh
+    from worker.engine.diffusion import (
+        LaplaceBeltrami,
+        laplace_beltrami_eigenpairs,
+        normalized_spectrum,
+    )
+    from worker.engine.geodesic import geodesic_distance_matrix
+    from worker.engine.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
+    from worker.engine.mesh_io import load_mesh
+    from worker.engine.modal import ddt_core, modal_gdm
+    from worker.engine.presets import get_preset
+    from worker.engine.resample import resample_mesh
 
     preset = replace(get_preset("smeets2010-shrec"), n_vertices=n)
     rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -93,12 +98,16 @@ def main() -> None:
     for n in args.sizes:
         out = subprocess.run(
             [sys.executable, __file__, "--child", str(n), "--repeats", str(args.repeats)],
-            check=True, capture_output=True, text=True,
+            check=True,
+            capture_output=True,
+            text=True,
         )
         rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
     print(f"meshes: {', '.join(MESHES)}; {args.repeats} repeats each; medians in seconds\n")
-    print("| N | load+resample | GDM | eigen+DDT | modal | descriptor (GDM+DDT+modal) "
-          "| ShapeDNA (lapy) | ratio | peak RSS MB |")
+    print(
+        "| N | load+resample | GDM | eigen+DDT | modal | descriptor (GDM+DDT+modal) "
+        "| ShapeDNA (lapy) | ratio | peak RSS MB |"
+    )
     print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(

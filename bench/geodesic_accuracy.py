@@ -11,18 +11,18 @@ all (source, target) pairs with target != source.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 import trimesh
 from pygeodesic.geodesic import PyGeodesicAlgorithmExact
 
-from worker.geodesic import geodesic_distance_matrix
-from worker.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
-from worker.mesh_io import load_mesh
-from worker.resample import resample_mesh
+from worker.engine.geodesic import geodesic_distance_matrix
+from worker.engine.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
+from worker.engine.mesh_io import load_mesh
+from worker.engine.resample import resample_mesh
+from worker.evaluation.datasets import shared_dataset
 
-TOSCA = Path(__file__).resolve().parents[1].parent / "shared" / "datasets" / "tosca"
+TOSCA = shared_dataset("tosca")
 
 
 def _gdm(vertices, faces, delaunay=True):

@@ -8,7 +8,7 @@
 * Synthetic: descriptors shaped like real ones (below), N enrolled, 200 fresh
   queries from the same classes.
 
-The reference ranking is the exhaustive one computed with ``worker.compare``
+The reference ranking is the exhaustive one computed with ``worker.engine.compare``
 alone (``gallery_sigma`` over the whole gallery, eq. 8/9, ``fuse``), not with
 the index's code. Latency is the search step alone (``GalleryIndex.search``),
 one query at a time, after one warm-up query.
@@ -36,27 +36,20 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.index import GalleryIndex, SearchStats, descriptor_dims  # noqa: E402
 from bench._tosca import tosca_descriptors, tosca_labels  # noqa: E402
-from worker.compare import (  # noqa: E402
-    fuse,
-    gallery_sigma,
-    mean_normalized_manhattan,
-    normalized_euclidean,
-)
-from worker.presets import MODALITIES, get_preset  # noqa: E402
+from worker.engine.compare import dissimilarity, fuse, gallery_sigma  # noqa: E402
+from worker.engine.presets import MODALITIES, get_preset  # noqa: E402
 
 K = 10
 
 
 def exhaustive_topk(preset, gallery: dict, sigma: dict | None, queries: list[dict], k: int):
     """(p, k) positions of the best gallery rows per query by the exact fused score,
-    computed with ``worker.compare`` alone over the whole gallery."""
+    computed with ``worker.engine.compare`` alone over the whole gallery."""
     per = {}
     for m in preset.fused_modalities:
         q = np.stack([query[m] for query in queries])
-        if preset.dissimilarity == "D2":
-            per[m] = normalized_euclidean(q, gallery[m], sigma[m])
-        else:
-            per[m] = mean_normalized_manhattan(q, gallery[m])
+        scale = None if sigma is None else sigma[m]
+        per[m] = dissimilarity(q, gallery[m], preset.dissimilarity, scale)
     fused = fuse(per, preset.fusion, {m: preset.weight(m) for m in preset.fused_modalities})
     n = fused.shape[1]
     return np.stack([np.lexsort((np.arange(n), row))[:k] for row in fused])

@@ -22,12 +22,13 @@ import sys
 import time
 import uuid
 from collections import Counter
-from pathlib import Path
 from urllib.parse import urlparse
 
 import httpx
 
-TOSCA = Path(__file__).resolve().parents[1] / "../shared/datasets/tosca"
+from worker.evaluation.datasets import shared_dataset
+
+TOSCA = shared_dataset("tosca")
 
 
 def percentile(values: list[float], q: float) -> float:

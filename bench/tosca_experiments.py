@@ -1,6 +1,6 @@
 """Accuracy experiments on TOSCA: what limits each modality, and weighted fusion.
 
-    python bench/tosca_experiments.py [--cache /work/cache/experiments] [--n 2500]
+    python bench/tosca_experiments.py [--cache .cache/experiments] [--n 2500]
 
 Stage 1 caches, per mesh, the expensive intermediates of the default pipeline
 (resampled mesh, GDM, 150 eigenpairs of eq. 3, vertex areas). Stage 2 varies only
@@ -20,17 +20,23 @@ from pathlib import Path
 
 import numpy as np
 
-from worker import metrics
-from worker.compare import fuse, gallery_sigma, mean_normalized_manhattan, normalized_euclidean
-from worker.diffusion import LaplaceBeltrami, laplace_beltrami_eigenpairs, normalized_spectrum
-from worker.geodesic import geodesic_distance_matrix
-from worker.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
-from worker.mesh_io import load_mesh
-from worker.modal import ddt_core, modal_gdm
-from worker.presets import get_preset
-from worker.resample import resample_mesh
+from worker.engine.compare import dissimilarity, fuse
+from worker.engine.diffusion import (
+    LaplaceBeltrami,
+    laplace_beltrami_eigenpairs,
+    normalized_spectrum,
+)
+from worker.engine.geodesic import geodesic_distance_matrix
+from worker.engine.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
+from worker.engine.mesh_io import load_mesh
+from worker.engine.modal import ddt_core, modal_gdm
+from worker.engine.presets import get_preset
+from worker.engine.resample import resample_mesh
+from worker.evaluation import metrics
+from worker.evaluation.datasets import shared_dataset
 
-TOSCA = Path(__file__).resolve().parents[1].parent / "shared" / "datasets" / "tosca"
+TOSCA = shared_dataset("tosca")
+CACHE = Path(__file__).resolve().parents[1] / ".cache" / "experiments"
 WEIGHTS = (0.0, 0.25, 0.5, 1.0)
 
 
@@ -66,11 +72,10 @@ def cache_intermediates(cache: Path, n: int) -> list[dict]:
     return out
 
 
-def dissimilarity(x: np.ndarray, kind: str) -> np.ndarray:
+def all_to_all(x: np.ndarray, kind: str) -> np.ndarray:
+    """(n, n) ``kind`` dissimilarity of n descriptors (any shape per object), sigma over all n."""
     x = x.reshape(len(x), -1)
-    if kind == "D1":
-        return mean_normalized_manhattan(x, x)
-    return normalized_euclidean(x, x, gallery_sigma(x))
+    return dissimilarity(x, x, kind)
 
 
 def scores(dis: np.ndarray, names: list[str], labels: np.ndarray) -> dict[str, float]:
@@ -125,7 +130,7 @@ def cross_validated_fusion(mats: dict[str, np.ndarray], labels, rule: str, k: in
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cache", type=Path, default=Path("/work/cache/experiments"))
+    parser.add_argument("--cache", type=Path, default=CACHE)
     parser.add_argument("--n", type=int, default=2500)
     args = parser.parse_args()
     preset = get_preset("smeets2010-shrec")
@@ -143,33 +148,29 @@ def main() -> None:
     print("| variant | NN | R1RR | EER | FT | mAP |\n|---|---|---|---|---|---|")
     for kind in ("D1", "D2"):
         for k in (5, 10, 19, 30, 40):
-            print(
-                row(f"GDM k={k}, {kind}", scores(dissimilarity(gdm40[:, :k], kind), names, labels))
-            )
+            print(row(f"GDM k={k}, {kind}", scores(all_to_all(gdm40[:, :k], kind), names, labels)))
         for shape, cores in core.items():
             label = "x".join(map(str, shape))
-            print(
-                row(f"DDT core {label}, {kind}", scores(dissimilarity(cores, kind), names, labels))
-            )
+            print(row(f"DDT core {label}, {kind}", scores(all_to_all(cores, kind), names, labels)))
         for size in (10, 20, 50, 100, 149):
             print(
                 row(
                     f"spectrum {size}, {kind}",
-                    scores(dissimilarity(spectrum[:, :size], kind), names, labels),
+                    scores(all_to_all(spectrum[:, :size], kind), names, labels),
                 )
             )
     raw = np.array([d["spectrum_no_flips"] for d in data])
     print(
         row(
             "spectrum 50, D1, cotan L of the decimated triangles (no intrinsic flips)",
-            scores(dissimilarity(raw, "D1"), names, labels),
+            scores(all_to_all(raw, "D1"), names, labels),
         )
     )
 
     mats = {
-        "gdm": dissimilarity(gdm40[:, :19], "D1"),
-        "ddt": dissimilarity(core[(20, 20, 5)], "D1"),
-        "spectrum": dissimilarity(spectrum[:, :50], "D1"),
+        "gdm": all_to_all(gdm40[:, :19], "D1"),
+        "ddt": all_to_all(core[(20, 20, 5)], "D1"),
+        "spectrum": all_to_all(spectrum[:, :50], "D1"),
     }
     print(
         "\nFusion (D1 per modality)\n\n"

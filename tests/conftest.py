@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from worker.presets import Preset
+from worker.engine.presets import Preset
+from worker.evaluation.datasets import shared_dataset
 
-TOSCA_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "datasets" / "tosca"
+TOSCA_DIR = shared_dataset("tosca")
 
 
 @pytest.fixture(scope="session")

@@ -7,9 +7,9 @@ import json
 import numpy as np
 import trimesh
 
-from worker import presets
 from worker.cli import main
-from worker.pipeline import ShapeDescriptor
+from worker.engine import presets
+from worker.engine.pipeline import ShapeDescriptor
 
 
 def test_describe_saves_npz_and_json(tmp_path, capsys, monkeypatch, small_preset):

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from .queue import QueueSettings, run_consumer
+from .jobs.queue import run_consumer
+from .jobs.settings import QueueSettings
 
 
 def main(argv: list[str] | None = None) -> None:

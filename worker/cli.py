@@ -1,4 +1,4 @@
-"""Command line: ``shapes describe MESH...`` (and ``shapes evaluate``, see worker.evaluate)."""
+"""Command line: ``shapes describe MESH...`` (and ``shapes evaluate``, see worker.evaluation)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .errors import MeshError
-from .pipeline import describe_file
-from .presets import DEFAULT_PRESET, PRESETS, get_preset
+from .engine.errors import MeshError
+from .engine.pipeline import describe_file
+from .engine.presets import DEFAULT_PRESET, PRESETS, get_preset
 
 
 def _describe(args: argparse.Namespace) -> int:
@@ -62,7 +62,10 @@ def _git_revision() -> str:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from .evaluate import COLUMNS, EvaluationError, run_evaluation
+    # The harness (lapy, matplotlib, tqdm) is loaded only by the command that needs it.
+    from .evaluation.datasets import EvaluationError
+    from .evaluation.run import run_evaluation
+    from .evaluation.scoring import COLUMNS
 
     preset = get_preset(args.preset)
     dataset = Path(args.dataset_dir)

@@ -28,7 +28,8 @@ from datetime import UTC, datetime
 from huey.utils import Error
 from sqlalchemy.exc import SQLAlchemyError
 
-from worker.queue import decode_descriptor
+from worker.engine.pipeline import ShapeDescriptor
+from worker.jobs.queue import descriptor_npz
 
 from ..db import unit_of_work
 from ..gallery import save_index, vectors_of
@@ -201,7 +202,9 @@ class JobCollector:
             _fail(job, result["code"], result["message"])
             state.metrics.jobs.labels("refused").inc()
             return None
-        descriptor = decode_descriptor(result["descriptor"])
+        # Stored as the worker made it; decoded once, for the index and the row's columns.
+        npz = descriptor_npz(result)
+        descriptor = ShapeDescriptor.from_npz_bytes(npz)
         if (descriptor.preset, descriptor.preset_version) != (job.preset, job.preset_version):
             _fail(job, "preset_mismatch", "The worker runs another version of the method.")
             state.metrics.jobs.labels("crashed").inc()
@@ -212,7 +215,7 @@ class JobCollector:
                 mesh_id=mesh.id,
                 preset=descriptor.preset,
                 preset_version=descriptor.preset_version,
-                data=descriptor.to_npz_bytes(),
+                data=npz,
                 input_vertices=descriptor.input_vertices,
                 input_faces=descriptor.input_faces,
                 vertices=descriptor.vertices,

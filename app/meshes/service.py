@@ -9,7 +9,7 @@ from typing import Any
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from worker.mesh_io import mesh_format
+from worker.engine.mesh_io import mesh_format
 
 from ..db import after_commit
 from ..errors import ConflictError, InvalidInputError, NotFoundError

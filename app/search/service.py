@@ -7,8 +7,8 @@ import uuid
 
 from sqlalchemy.orm import Session
 
-from worker.pipeline import ShapeDescriptor
-from worker.presets import MODALITIES, PRESETS, Preset
+from worker.engine.pipeline import ShapeDescriptor
+from worker.engine.presets import MODALITIES, PRESETS, Preset
 
 from ..errors import ConflictError, InvalidInputError, NotFoundError, UnavailableError
 from ..gallery import vectors_of

@@ -7,8 +7,8 @@ from collections.abc import Iterator
 import pytest
 
 from tests.service.conftest import TOSCA, Service
-from worker.limits import describe_limited
-from worker.pipeline import ShapeDescriptor
+from worker.engine.pipeline import ShapeDescriptor
+from worker.jobs.limits import describe_limited
 
 from .conftest import make_service
 

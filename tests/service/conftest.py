@@ -22,9 +22,10 @@ import httpx
 import pytest
 
 from app.migrations import upgrade_head
+from worker.evaluation.datasets import shared_dataset
 
 REPO = Path(__file__).resolve().parents[2]
-TOSCA = REPO / "../shared/datasets/tosca"
+TOSCA = shared_dataset("tosca")
 TIMEOUT = 120.0
 
 

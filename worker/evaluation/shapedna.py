@@ -26,6 +26,8 @@ from lapy.shapedna import compute_distance, compute_shapedna, normalize_ev, rewe
 
 #: Number of eigenvalues, lapy's default for ``compute_shapedna``.
 SHAPEDNA_K = 50
+#: The baseline's name: its report row and its cache entries.
+BASELINE = "shapedna"
 
 
 @dataclass

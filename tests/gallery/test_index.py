@@ -1,4 +1,4 @@
-"""The gallery index against the exhaustive ranking of ``worker.compare`` (no server)."""
+"""The gallery index against the exhaustive ranking of ``worker.engine.compare`` (no server)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from app.index import GalleryIndex, SearchStats, descriptor_dims
-from worker.compare import fuse, gallery_sigma, mean_normalized_manhattan, normalized_euclidean
-from worker.presets import MODALITIES, get_preset
+from worker.engine.compare import dissimilarity, fuse, gallery_sigma
+from worker.engine.presets import MODALITIES, get_preset
 
 SHREC = get_preset("smeets2010-shrec")  # D2, product rule
 TOSCA = get_preset("smeets2010-tosca")  # D1, sum rule
@@ -28,10 +28,7 @@ def _gallery(n: int, seed: int = 0) -> dict[str, np.ndarray]:
 def _exhaustive(preset, gallery, query, k, exclude=()):
     per = {}
     for m in preset.fused_modalities:
-        if preset.dissimilarity == "D2":
-            per[m] = normalized_euclidean(query[m][None], gallery[m], gallery_sigma(gallery[m]))[0]
-        else:
-            per[m] = mean_normalized_manhattan(query[m][None], gallery[m])[0]
+        per[m] = dissimilarity(query[m][None], gallery[m], preset.dissimilarity)[0]
     fused = fuse(per, preset.fusion, {m: preset.weight(m) for m in preset.fused_modalities})
     order = [int(i) for i in np.lexsort((np.arange(len(fused)), fused)) if i not in exclude]
     return order[:k], fused

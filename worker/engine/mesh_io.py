@@ -2,7 +2,7 @@
 
 ``load_mesh`` accepts OBJ, PLY, OFF, STL, GLB and GLTF, optionally gzip-compressed,
 from a path or from bytes plus the original file name, and returns one clean,
-connected triangle surface or raises a :class:`~worker.errors.MeshError` whose
+connected triangle surface or raises a :class:`~worker.engine.errors.MeshError` whose
 message can be shown to the person who uploaded the file.
 """
 

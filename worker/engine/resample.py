@@ -7,7 +7,7 @@ Method: quadric error decimation (Garland-Heckbert, via ``fast_simplification``)
 It keeps the shape's features at this density (an earlier measurement on TOSCA
 found isotropic remeshing worse for every modality; not repeated here), at the
 price of badly shaped triangles; the operators built on the result therefore use
-its intrinsic Delaunay triangulation (:mod:`worker.intrinsic`), which makes them
+its intrinsic Delaunay triangulation (:mod:`worker.engine.intrinsic`), which makes them
 insensitive to triangle shape (measured: docs/engine.md). Meshes with fewer
 vertices than the target are first refined by midpoint subdivision, which does not
 change the surface.
@@ -50,7 +50,7 @@ def resample_mesh(mesh: Mesh, n_vertices: int) -> Mesh:
     n_vertices : target vertex count. Quadric decimation stops on a face budget,
         so the result can differ from the target by a few vertices on surfaces
         with boundaries or handles; the descriptors are normalized to be
-        insensitive to that (see :func:`worker.modal.normalize_slices`).
+        insensitive to that (see :func:`worker.engine.modal.normalize_slices`).
 
     Returns
     -------

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from worker import errors
-from worker.mesh_io import clean_mesh, load_mesh, mesh_format
+from worker.engine import errors
+from worker.engine.mesh_io import clean_mesh, load_mesh, mesh_format
 
 
 @pytest.fixture(scope="module")

@@ -7,10 +7,10 @@ import pytest
 import robust_laplacian
 import trimesh
 
-from worker.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
-from worker.mesh_io import load_mesh
-from worker.resample import resample_mesh
-from worker.topology import edge_keys
+from worker.engine.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
+from worker.engine.mesh_io import load_mesh
+from worker.engine.resample import resample_mesh
+from worker.engine.topology import edge_keys
 
 
 def _edge_cotan_sums(mesh: IntrinsicMesh) -> np.ndarray:

@@ -7,16 +7,16 @@ import pytest
 import scipy.linalg as la
 import trimesh
 
-from worker.diffusion import (
+from worker.engine.diffusion import (
     LaplaceBeltrami,
     diffusion_distance_tensor,
     laplace_beltrami_eigenpairs,
     normalized_spectrum,
 )
-from worker.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
-from worker.mesh_io import load_mesh
-from worker.presets import get_preset
-from worker.resample import resample_mesh
+from worker.engine.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
+from worker.engine.mesh_io import load_mesh
+from worker.engine.presets import get_preset
+from worker.engine.resample import resample_mesh
 
 
 def _operator(vertices, faces) -> LaplaceBeltrami:

@@ -7,8 +7,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 import trimesh
 
-from worker.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
-from worker.linalg import BandedCholesky
+from worker.engine.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
+from worker.engine.linalg import BandedCholesky
 
 
 def _random_spd(n: int, density: float, seed: int) -> sp.csc_matrix:

@@ -9,20 +9,31 @@ otherwise. The outcome is the same dict a worker task returns.
 
 from __future__ import annotations
 
+import functools
 import multiprocessing as mp
 import pickle
 import resource
+from multiprocessing.connection import Connection
+from multiprocessing.context import ForkServerContext
 from pathlib import Path
 
-from .errors import MeshError
-from .pipeline import describe_file
-from .presets import get_preset
-
-_CONTEXT = mp.get_context("forkserver")
-_CONTEXT.set_forkserver_preload(["worker.pipeline"])
+from worker.engine.errors import MeshError
+from worker.engine.pipeline import describe_file
+from worker.engine.presets import get_preset
 
 
-def _child(conn, path: str, filename: str, preset_name: str, max_faces: int, memory: int) -> None:
+@functools.cache
+def _context() -> ForkServerContext:
+    """The fork server, set up at the first job rather than at import: importing this
+    module (the queue, the tests) must not configure process-wide multiprocessing."""
+    context = mp.get_context("forkserver")
+    context.set_forkserver_preload(["worker.engine.pipeline"])
+    return context
+
+
+def _child(
+    conn: Connection, path: str, filename: str, preset_name: str, max_faces: int, memory: int
+) -> None:
     if memory > 0:
         resource.setrlimit(resource.RLIMIT_AS, (memory, memory))
     try:
@@ -54,8 +65,9 @@ def describe_limited(
     Raises ``RuntimeError`` when the child died for another reason (a crash
     worth a retry).
     """
-    receive, send = _CONTEXT.Pipe(duplex=False)
-    child = _CONTEXT.Process(
+    context = _context()
+    receive, send = context.Pipe(duplex=False)
+    child = context.Process(
         target=_child,
         args=(send, str(path), filename, preset_name, max_faces, memory_limit_bytes),
         daemon=True,

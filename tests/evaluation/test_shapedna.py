@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from worker.shapedna_baseline import SHAPEDNA_K, ShapeDNA, shapedna, shapedna_dissimilarity
+from worker.evaluation.shapedna import SHAPEDNA_K, ShapeDNA, shapedna, shapedna_dissimilarity
 
 # Linear FEM on a 642-vertex icosphere overestimates the sphere's first
 # eigenvalues by about 0.1%; 1% leaves room for lapy's solver.

@@ -4,7 +4,7 @@ Discretization as in the paper: the cotangent Laplacian
 ``L = diag(sum_l w_il) - w_ij`` with ``w_ij = cot(alpha_ij) + cot(beta_ij)``, and a
 diagonal ``A`` with ``a_i = (5 / mean triangle area) * (sum of the areas of the
 triangles at vertex i)``. Both are built on the intrinsic Delaunay triangulation
-(:mod:`worker.intrinsic`). The eigenpairs solve ``L phi = lambda A phi`` (eq. 3)
+(:mod:`worker.engine.intrinsic`). The eigenpairs solve ``L phi = lambda A phi`` (eq. 3)
 with ``phi^T A phi = 1``, and the average diffusion distance is eq. (4):
 
     d_t(i, j) = sum_l exp(-2 lambda_l t) (phi_l(i) - phi_l(j))^2.

@@ -7,9 +7,13 @@ import tensorly as tl
 import trimesh
 from tensorly.decomposition import tucker
 
-from worker.diffusion import LaplaceBeltrami, diffusion_distance_tensor, laplace_beltrami_eigenpairs
-from worker.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
-from worker.modal import (
+from worker.engine.diffusion import (
+    LaplaceBeltrami,
+    diffusion_distance_tensor,
+    laplace_beltrami_eigenpairs,
+)
+from worker.engine.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
+from worker.engine.modal import (
     ddt_core,
     hosvd_core,
     modal_gdm,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from worker.compare import (
+from worker.engine.compare import (
     fuse,
     gallery_sigma,
     mean_normalized_manhattan,

@@ -14,8 +14,8 @@ import pytest
 import trimesh
 from conftest import bent_cylinder, random_rotation
 
-from worker.mesh_io import Mesh, clean_mesh, load_mesh
-from worker.pipeline import ShapeDescriptor, describe_file, describe_mesh
+from worker.engine.mesh_io import Mesh, clean_mesh, load_mesh
+from worker.engine.pipeline import ShapeDescriptor, describe_file, describe_mesh
 
 MODALITIES = ("gdm", "ddt", "spectrum")
 EXACT = 1e-6  # vertex permutation

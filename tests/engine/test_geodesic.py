@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from worker.geodesic import geodesic_distance_matrix, geodesic_distances_reference
-from worker.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
-from worker.mesh_io import load_mesh
-from worker.resample import resample_mesh
+from worker.engine.geodesic import geodesic_distance_matrix, geodesic_distances_reference
+from worker.engine.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
+from worker.engine.mesh_io import load_mesh
+from worker.engine.resample import resample_mesh
 
 MEDIAN_RELATIVE_ERROR = 0.02
 

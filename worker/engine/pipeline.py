@@ -148,7 +148,7 @@ def describe_file(
 
     Raises
     ------
-    worker.errors.MeshError
+    worker.engine.errors.MeshError
         When the file cannot be described; its ``message`` is for the user.
     """
     start = time.perf_counter()

@@ -10,7 +10,7 @@ Result of ``describe_upload``::
     {"ok": true, "descriptor": "<base64 of ShapeDescriptor.to_npz_bytes()>"}
     {"ok": false, "code": "<MeshError.code>", "message": "<sentence for the user>"}
 
-A :class:`~worker.errors.MeshError` is deterministic (the same file fails the
+A :class:`~worker.engine.errors.MeshError` is deterministic (the same file fails the
 same way), so it is returned, not raised, and never retried. Any other
 exception is raised so that Huey retries the task (``TASK_RETRIES`` times); the
 final failure is stored by Huey as the task's error.
@@ -23,17 +23,19 @@ show "processing" and tell a dead worker (stale heartbeat) from a slow one.
 from __future__ import annotations
 
 import base64
+import logging
 import os
 import socket
 import threading
 import time
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 from huey import Huey, PriorityRedisHuey, SqliteHuey
-from pydantic_settings import BaseSettings, SettingsConfigDict
 
 from .limits import describe_limited
-from .pipeline import ShapeDescriptor
+from .settings import QueueSettings
 
 TASK_NAME = "describe_upload"
 TASK_RETRIES = 2
@@ -41,35 +43,15 @@ TASK_RETRY_DELAY_SECONDS = 1
 QUEUE_FILE = "queue.sqlite3"
 
 
-class QueueSettings(BaseSettings):
-    """Queue settings, read from ``SHAPES_*`` environment variables.
-
-    The service's settings class extends this one, so the API process and the
-    worker processes read the same variables the same way.
-    """
-
-    model_config = SettingsConfigDict(env_prefix="SHAPES_", extra="ignore")
-
-    data_dir: Path = Path("data")
-    redis_url: str | None = None
-    queue_name: str = "shapes"
-    heartbeat_seconds: float = 2.0
-    # Per job, in a child process; a job over either fails with a sentence (0: no limit).
-    job_time_limit_seconds: float = 600.0
-    job_memory_limit_mb: int = 4096
-
-
 def heartbeat_key(task_id: str) -> str:
     """Key of a running task's heartbeat in the queue's key-value store."""
     return f"heartbeat:{task_id}"
 
 
-def encode_descriptor(descriptor: ShapeDescriptor) -> str:
-    return base64.b64encode(descriptor.to_npz_bytes()).decode("ascii")
-
-
-def decode_descriptor(text: str) -> ShapeDescriptor:
-    return ShapeDescriptor.from_npz_bytes(base64.b64decode(text))
+def descriptor_npz(result: Mapping[str, Any]) -> bytes:
+    """The descriptor of a successful ``describe_upload`` result, as the npz bytes the
+    worker made (``ShapeDescriptor.to_npz_bytes``), so they can be stored unchanged."""
+    return base64.b64decode(result["descriptor"])
 
 
 def make_huey(settings: QueueSettings) -> Huey:
@@ -155,8 +137,6 @@ def run_consumer(settings: QueueSettings | None = None, workers: int = 1) -> Non
     a task interrupted either way is re-enqueued by the service's collector
     once its heartbeat goes stale.
     """
-    import logging
-
     logging.basicConfig(
         level=logging.INFO, format="%(asctime)s %(process)d %(name)s %(levelname)s %(message)s"
     )

@@ -11,6 +11,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from .presets import Dissimilarity
+
 _TINY = np.finfo(float).tiny
 
 
@@ -71,6 +73,40 @@ def normalized_euclidean(queries: np.ndarray, gallery: np.ndarray, sigma: np.nda
     g = np.atleast_2d(np.asarray(gallery, dtype=np.float64)) / sigma
     sq = (q**2).sum(1)[:, None] + (g**2).sum(1)[None, :] - 2.0 * q @ g.T
     return np.sqrt(np.maximum(sq, 0.0))
+
+
+def dissimilarity(
+    queries: np.ndarray,
+    gallery: np.ndarray,
+    kind: Dissimilarity | str,
+    sigma: np.ndarray | None = None,
+) -> np.ndarray:
+    """The preset's dissimilarity between every query and every gallery descriptor.
+
+    The one place that chooses between eq. (8) and eq. (9): the index, the
+    evaluation and the benchmarks all rank with it.
+
+    Parameters
+    ----------
+    queries : (p, M) float
+    gallery : (q, M) float
+    kind : ``"D1"`` (eq. 8, :func:`mean_normalized_manhattan`) or ``"D2"``
+        (eq. 9, :func:`normalized_euclidean`).
+    sigma : (M,) float, D2 only: the sigma_i of eq. (9). Default
+        ``gallery_sigma(gallery)``; pass it when the gallery rows given are not the
+        whole gallery (a subset, or one kept elsewhere with running sums).
+
+    Returns
+    -------
+    (p, q) float
+    """
+    if kind == "D1":
+        return mean_normalized_manhattan(queries, gallery)
+    if kind == "D2":
+        return normalized_euclidean(
+            queries, gallery, gallery_sigma(gallery) if sigma is None else sigma
+        )
+    raise ValueError(f"unknown dissimilarity {kind!r}; use 'D1' or 'D2'")
 
 
 def sum_fusion(

@@ -8,7 +8,7 @@ triangulation, which solves the same problem with two sparse linear systems:
 2. the unit field ``X = -grad u / |grad u|`` points along geodesics,
 3. ``L phi = div X`` recovers the distance ``phi`` up to a constant.
 
-Both systems are factored once per mesh (banded Cholesky, :mod:`worker.linalg`)
+Both systems are factored once per mesh (banded Cholesky, :mod:`worker.engine.linalg`)
 and solved for a whole block of sources at once; the result is symmetrized, since
 the exact GDM is symmetric. :func:`geodesic_distances_reference` is the plain
 per-source version with SuperLU that the fast path is tested against.

@@ -1,0 +1,145 @@
+"""The on-disk descriptor cache of the evaluation, keyed by file bytes, preset and engine source."""
+
+from __future__ import annotations
+
+import ast
+import hashlib
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from worker.engine.pipeline import ShapeDescriptor
+from worker.engine.presets import Preset
+
+from .shapedna import BASELINE, SHAPEDNA_K, ShapeDNA
+
+#: The modules a cache entry is made by; everything they import from ``worker`` counts too.
+FINGERPRINT_ROOTS = ("worker.engine.pipeline", "worker.evaluation.shapedna")
+_WORKER_DIR = Path(__file__).resolve().parents[1]
+
+
+def _module_file(name: str) -> Path | None:
+    """Source file of module ``worker.<...>`` (its ``__init__.py`` for a package), if any."""
+    parts = name.split(".")
+    if parts[0] != "worker":
+        return None
+    base = _WORKER_DIR.joinpath(*parts[1:])
+    for candidate in (base.with_suffix(".py"), base / "__init__.py"):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def _worker_imports(name: str, path: Path) -> set[str]:
+    """Names a module's source imports (anywhere in it) that may be ``worker`` modules.
+
+    ``from .x import y`` yields both ``<package>.x`` and ``<package>.x.y`` (``y`` may be
+    a submodule); names that are not modules are dropped by :func:`_module_file`.
+    """
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1])
+                module = f"{base}.{node.module}" if node.module else base
+            else:
+                module = node.module or ""
+            found.add(module)
+            found.update(f"{module}.{alias.name}" for alias in node.names)
+        elif isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+    return {m for m in found if m == "worker" or m.startswith("worker.")}
+
+
+def engine_modules() -> dict[str, Path]:
+    """Every ``worker`` module a cached entry depends on: :data:`FINGERPRINT_ROOTS` and,
+    transitively, the ``worker`` modules they import (the engine's)."""
+    seen: dict[str, Path] = {}
+    todo = list(FINGERPRINT_ROOTS)
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        path = _module_file(name)
+        if path is None:
+            continue
+        seen[name] = path
+        todo.extend(_worker_imports(name, path))
+    return seen
+
+
+def engine_fingerprint() -> str:
+    """sha256 of the source of every module of :func:`engine_modules`.
+
+    Editing the engine (even without a preset version bump) or the baseline never
+    serves stale descriptors, while editing the service, the job runner, the
+    metrics or this harness keeps the cache.
+    """
+    digest = hashlib.sha256()
+    for name, path in sorted(engine_modules().items()):
+        digest.update(name.encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def cache_namespace(preset: Preset) -> str:
+    """Directory name of a preset's cache entries.
+
+    ``<name>-v<version>-<digest>``: the digest covers every preset field and the
+    engine source (:func:`engine_fingerprint`), so a preset edited without a
+    version bump, or an edited pipeline, gets a fresh namespace.
+    """
+    digest = hashlib.sha256()
+    digest.update(json.dumps(preset.to_dict(), sort_keys=True, default=list).encode())
+    digest.update(engine_fingerprint().encode())
+    return f"{preset.name}-v{preset.version}-{digest.hexdigest()[:12]}"
+
+
+@dataclass
+class DescriptorCache:
+    """Descriptors on disk as npz, keyed by sha256(file bytes) within a preset namespace.
+
+    Layout: ``<root>/<cache_namespace(preset)>/<sha256>.descriptor.npz`` and
+    ``<sha256>.shapedna-k<k>.npz`` for the baseline (same resampled mesh, so the
+    same namespace).
+    """
+
+    root: Path
+    preset: Preset
+
+    @property
+    def directory(self) -> Path:
+        return Path(self.root) / cache_namespace(self.preset)
+
+    def _path(self, sha256: str, kind: str) -> Path:
+        suffix = "descriptor" if kind == "descriptor" else f"{BASELINE}-k{SHAPEDNA_K}"
+        return self.directory / f"{sha256}.{suffix}.npz"
+
+    def load_descriptor(self, sha256: str) -> ShapeDescriptor | None:
+        path = self._path(sha256, "descriptor")
+        if not path.is_file():
+            return None
+        descriptor = ShapeDescriptor.from_npz_bytes(path.read_bytes())
+        same = (descriptor.preset, descriptor.preset_version) == (
+            self.preset.name,
+            self.preset.version,
+        )
+        return descriptor if same else None
+
+    def load_baseline(self, sha256: str) -> ShapeDNA | None:
+        path = self._path(sha256, BASELINE)
+        return ShapeDNA.from_npz_bytes(path.read_bytes()) if path.is_file() else None
+
+    def store(self, sha256: str, kind: str, data: bytes) -> None:
+        """Write atomically, so an interrupted run never leaves a truncated entry."""
+        path = self._path(sha256, kind)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+
+
+def file_sha256(path: str | Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()

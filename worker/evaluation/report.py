@@ -1,0 +1,210 @@
+"""report.json and report.md: the protocol in words, the rows' numbers, the errors, timings."""
+
+from __future__ import annotations
+
+import platform
+import time
+from collections import Counter
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from worker.engine.presets import MODALITIES, Preset
+
+from . import metrics
+from .cache import engine_fingerprint
+from .compute import ComputedSet
+from .scoring import COLUMNS, ROWS, dissimilarity_matrices, score_dissimilarity
+from .shapedna import SHAPEDNA_K
+
+
+def protocol_text(preset: Preset, n_objects: int, n_classes: int, gallery: Sequence[str]) -> dict:
+    """The protocol in words, for report.json and report.md."""
+    sigma = (
+        "D2 (eq. 9), sigma_i = standard deviation of descriptor element i over all "
+        f"{n_objects} evaluated objects (all-to-all protocol: the whole set is the gallery)"
+        if preset.dissimilarity == "D2"
+        else "D1 (eq. 8), mean normalized Manhattan distance"
+    )
+    weights = ", ".join(f"{m}={preset.weight(m):g}" for m in MODALITIES)
+    return {
+        "objects": n_objects,
+        "classes": n_classes,
+        "dissimilarity": sigma,
+        "fusion": (
+            "sum = sum_m w_m D_m, product = prod_m D_m ** w_m over the raw per-modality "
+            f"matrices, preset weights ({weights})"
+        ),
+        "preset_score": "+".join(preset.fused_modalities) + f" {preset.fusion}",
+        "verification": (
+            f"all {n_objects * (n_objects - 1) // 2} unordered pairs; genuine = same class; "
+            "ROC = FRR against FAR over the threshold; EER where FRR = FAR"
+        ),
+        "identification": (
+            f"gallery = first instance of each class in natural file-name order "
+            f"({n_classes} objects: {', '.join(gallery)}); probes = the other "
+            f"{n_objects - n_classes}; CMC with pessimistic ties; R1RR = CMC at rank 1"
+        ),
+        "retrieval": (
+            "leave-one-out, each object queries the other n-1; NN, first tier, second "
+            "tier, E-measure (top 32), normalized DCG, mean average precision; ties "
+            "broken by file order"
+        ),
+        "baseline": (
+            f"ShapeDNA via lapy on the same resampled mesh ({preset.n_vertices} vertices): "
+            f"compute_shapedna(k={SHAPEDNA_K}), normalize_ev(method='geometry') "
+            "(times surface area), reweight_ev (lambda_i / i), compute_distance(dist='euc')"
+        ),
+    }
+
+
+def _mean_timings(timings: Sequence[Mapping[str, float]]) -> dict[str, float]:
+    keys = sorted({k for t in timings for k in t})
+    return {k: float(np.mean([t[k] for t in timings if k in t])) for k in keys}
+
+
+def build_report(
+    computed: ComputedSet,
+    preset: Preset,
+    *,
+    command: str = "",
+    environment: Mapping[str, str] | None = None,
+    dataset: str = "",
+) -> tuple[dict, dict[str, np.ndarray]]:
+    """Dissimilarities and metrics of every row, as one JSON-ready dict.
+
+    Parameters
+    ----------
+    computed : the described set (:func:`compute_descriptors`).
+    preset : the preset the descriptors were made with.
+    command, environment, dataset : recorded as given.
+
+    Returns
+    -------
+    report : dict, see report.json.
+    matrices : row key -> (n, n) dissimilarity matrix.
+    """
+    start = time.perf_counter()
+    names = [m.name for m in computed.meshes]
+    labels = [m.label for m in computed.meshes]
+    vectors = {m: np.stack([d.vector(m) for d in computed.descriptors]) for m in MODALITIES}
+    baseline = np.stack([b.descriptor for b in computed.baselines])
+    matrices, info = dissimilarity_matrices(vectors, preset, baseline)
+    gallery_idx, probe_idx = metrics.first_instance_split(names, labels)
+    rows = {}
+    for key, matrix in matrices.items():
+        title, members, rule = ROWS[key]
+        rows[key] = {
+            "title": title,
+            "members": list(members),
+            "rule": rule,
+            **{k: v for k, v in info.get(key, {}).items() if k != "sigma"},
+            **score_dissimilarity(matrix, labels, names, gallery_idx, probe_idx),
+        }
+    metrics_seconds = time.perf_counter() - start
+    classes = Counter(labels)
+    gallery = [names[i] for i in gallery_idx]
+    d2_sigma = {m: info[m]["sigma"].tolist() for m in MODALITIES if "sigma" in info[m]}
+    report = {
+        "dataset": dataset,
+        "command": command,
+        "preset": preset.to_dict(),
+        "protocol": protocol_text(preset, len(names), len(classes), gallery),
+        "objects": [
+            {"file": n, "class": c, "gallery": n in gallery}
+            for n, c in zip(names, labels, strict=True)
+        ],
+        "class_sizes": dict(sorted(classes.items())),
+        "failures": computed.failures,
+        "rows": rows,
+        "d2_sigma": d2_sigma,
+        "timings": {
+            **computed.stats,
+            "metrics_seconds": metrics_seconds,
+            "descriptor_stage_seconds_mean": _mean_timings(
+                [d.timings for d in computed.descriptors]
+            ),
+            "shapedna_seconds_mean": float(np.mean([b.seconds for b in computed.baselines])),
+            "note": (
+                "per-mesh stage times are those recorded when each descriptor was "
+                "computed (possibly in an earlier run, under other load)"
+            ),
+        },
+        "environment": dict(environment or {}),
+    }
+    return report, matrices
+
+
+def _pct(value: float, digits: int) -> str:
+    return f"{100.0 * value:.{digits}f}"
+
+
+def _confusion_summary(errors: Sequence[Mapping[str, str]], true_key: str, got_key: str) -> str:
+    pairs = Counter((e[true_key], e[got_key]) for e in errors)
+    return ", ".join(f"{a}->{b} x{c}" for (a, b), c in sorted(pairs.items(), key=lambda x: -x[1]))
+
+
+def render_markdown(report: Mapping) -> str:
+    """report.md: the protocol, the table (percent) and which classes were confused."""
+    protocol = report["protocol"]
+    preset = report["preset"]
+    lines = [
+        f"# Evaluation: preset `{preset['name']}` v{preset['version']}",
+        "",
+        f"Dataset: `{report['dataset']}`, {protocol['objects']} objects, "
+        f"{protocol['classes']} classes "
+        f"({', '.join(f'{k} {v}' for k, v in report['class_sizes'].items())}).",
+        "",
+        f"Command: `{report['command'] or '(not recorded)'}`",
+        "",
+        "All numbers in percent. NN, FT, ST, E, DCG, mAP: leave-one-out retrieval; "
+        "R1RR: identification; EER: verification (lower is better). "
+        f"The preset's own score is **{protocol['preset_score']}**.",
+        "",
+        "| | " + " | ".join(COLUMNS.values()) + " |",
+        "|---|" + "---:|" * len(COLUMNS),
+    ]
+    for row in report["rows"].values():
+        cells = [_pct(row[k], 2 if k == "eer" else 1) for k in COLUMNS]
+        lines.append(f"| {row['title']} | " + " | ".join(cells) + " |")
+    lines += ["", "## Protocol", ""]
+    lines += [f"- **{key}**: {text}" for key, text in protocol.items()]
+    lines += ["", "## Errors", "", "| | NN errors (class->nearest) | R1 errors (class->match) |"]
+    lines.append("|---|---|---|")
+    for row in report["rows"].values():
+        nn = _confusion_summary(row["nn_errors"], "class", "nearest_class") or "none"
+        r1 = _confusion_summary(row["rank1_errors"], "class", "matched_class") or "none"
+        lines.append(f"| {row['title']} | {nn} | {r1} |")
+    if report["failures"]:
+        lines += ["", "## Meshes left out", ""]
+        lines += [f"- `{name}`: {why}" for name, why in report["failures"].items()]
+    timings = report["timings"]
+    lines += [
+        "",
+        "## Timings",
+        "",
+        f"{timings['meshes']} meshes: {timings['from_cache']} from cache, "
+        f"{timings['computed']} computed in {timings['compute_seconds']:.1f} s "
+        f"with {timings['jobs']} worker process(es); metrics {timings['metrics_seconds']:.1f} s. "
+        "Mean seconds per mesh when computed: "
+        + ", ".join(f"{k} {v:.2f}" for k, v in timings["descriptor_stage_seconds_mean"].items())
+        + f"; ShapeDNA {timings['shapedna_seconds_mean']:.2f}.",
+        "",
+        "![CMC](cmc.png) ![ROC](roc.png)",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def environment_info() -> dict[str, str]:
+    """Versions that can change the numbers."""
+    import lapy
+    import scipy
+
+    return {
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "lapy": lapy.__version__,
+        "engine_fingerprint": engine_fingerprint()[:16],
+    }
