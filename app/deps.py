@@ -10,11 +10,11 @@ from fastapi import Depends, Path, Request
 from fastapi.security import APIKeyHeader
 from sqlalchemy.orm import Session
 
-from .config import Settings
 from .db import unit_of_work
 from .errors import InvalidInputError, UnauthorizedError
 from .state import AppState
-from .uploads import MultipartUpload, UploadedFile, receive_multipart
+from .storage import ReceivedFile
+from .uploads import MultipartUpload, receive_multipart
 
 # SQLite's INTEGER is 64-bit: a larger id in a path is invalid input, not a 500.
 RowId = Annotated[int, Path(ge=1, le=2**63 - 1, description="the row's id")]
@@ -25,13 +25,6 @@ def get_state(request: Request) -> AppState:
 
 
 StateDep = Annotated[AppState, Depends(get_state)]
-
-
-def get_settings(state: StateDep) -> Settings:
-    return state.settings
-
-
-SettingsDep = Annotated[Settings, Depends(get_settings)]
 
 
 def get_session(request: Request, state: StateDep) -> Iterator[Session]:
@@ -97,7 +90,7 @@ async def get_multipart(request: Request, state: StateDep) -> AsyncIterator[Mult
 MultipartDep = Annotated[MultipartUpload, Depends(get_multipart)]
 
 
-def require_file(upload: MultipartUpload) -> UploadedFile:
+def require_file(upload: MultipartUpload) -> ReceivedFile:
     if upload.file is None:
         raise InvalidInputError(
             "The request has no mesh file: send it in a multipart field called 'file'.",

@@ -10,6 +10,7 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
+from starlette.routing import BaseRoute, Match
 
 from worker.engine.errors import (
     FileTooLargeError,
@@ -82,10 +83,6 @@ def mesh_error_status(error: MeshError) -> int:
     return _MESH_ERROR_STATUS.get(error.code, 422)
 
 
-def from_mesh_error(error: MeshError) -> DomainError:
-    return DomainError(error.message, code=error.code, status=mesh_error_status(error))
-
-
 def _body(code: str, detail: str) -> dict[str, str]:
     return {"error": code, "detail": detail}
 
@@ -108,6 +105,25 @@ def _validation_sentence(exc: RequestValidationError) -> str:
     return "Invalid request: " + "; ".join(parts) + "."
 
 
+_METHODS = ("DELETE", "GET", "HEAD", "OPTIONS", "PATCH", "POST", "PUT")
+
+
+def allowed_methods(routes: list[BaseRoute], request: Request) -> list[str]:
+    """Every method some route serves at the request's path, sorted.
+
+    Starlette answers a 405 with the ``Allow`` of the first route whose path
+    matched, but one path's methods are often split over several routes
+    (``GET`` and ``POST /meshes``); each method is asked of every route instead.
+    """
+    return [
+        method
+        for method in _METHODS
+        if any(
+            route.matches({**request.scope, "method": method})[0] == Match.FULL for route in routes
+        )
+    ]
+
+
 def install_error_handlers(app: FastAPI) -> None:
     @app.exception_handler(DomainError)
     async def _domain(_: Request, exc: DomainError) -> JSONResponse:
@@ -123,13 +139,14 @@ def install_error_handlers(app: FastAPI) -> None:
         return JSONResponse(_body("invalid_input", _validation_sentence(exc)), status_code=422)
 
     @app.exception_handler(StarletteHTTPException)
-    async def _http(_: Request, exc: StarletteHTTPException) -> JSONResponse:
+    async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
         code = _HTTP_CODES.get(exc.status_code, "error")
         detail = exc.detail if isinstance(exc.detail, str) else "The request failed."
         if exc.status_code == 404 and detail == "Not Found":
             detail = "There is nothing at this address."
         if not detail.endswith("."):
             detail += "."
-        return JSONResponse(
-            _body(code, detail), status_code=exc.status_code, headers=getattr(exc, "headers", None)
-        )
+        headers = dict(exc.headers or {})
+        if exc.status_code == 405:
+            headers["Allow"] = ", ".join(allowed_methods(app.router.routes, request))
+        return JSONResponse(_body(code, detail), status_code=exc.status_code, headers=headers)

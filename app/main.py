@@ -16,7 +16,7 @@ from worker.engine.presets import get_preset
 from .config import Settings, get_settings
 from .db import make_engine, make_session_factory
 from .errors import install_error_handlers
-from .gallery import load_index, save_index
+from .gallery.service import Gallery
 from .jobs.collector import JobCollector
 from .jobs.router import router as jobs_router
 from .meshes.router import router as meshes_router
@@ -44,13 +44,12 @@ Enroll meshes with `POST /meshes`, wait until they are `ready`, then search with
 def _start_background(state: AppState, collector: JobCollector) -> None:
     """Load the index (can take a while for a big gallery), recover jobs, start collecting."""
     try:
-        state.index = load_index(state)
-        state.metrics.index_size.labels(state.preset.name).set(len(state.index))
+        state.gallery.load(state.read_sessions)
         collector.recover()
         collector.start()
     except Exception as exc:  # shown by /ready; the process stays up for diagnosis
         log.exception("startup failed")
-        state.index_error = f"error: {exc}"
+        state.gallery.error = f"error: {exc}"
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -76,6 +75,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             queue=DescriptorQueue(settings),
             store=UploadStore(settings.uploads_dir),
             metrics=metrics,
+            gallery=Gallery(
+                preset,
+                settings.index_dir / f"{preset.name}-v{preset.version}",
+                refit_fraction=settings.index_refit_fraction,
+                metrics=metrics,
+            ),
         )
         app.state.shapes = state
         collector = JobCollector(state)
@@ -88,8 +93,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         finally:
             await anyio.to_thread.run_sync(starter.join)
             await anyio.to_thread.run_sync(collector.stop)
-            if state.index is not None and state.index.dirty:
-                await anyio.to_thread.run_sync(save_index, state, state.index)
+            await anyio.to_thread.run_sync(state.gallery.save)
             engine.dispose()
 
     app = FastAPI(

@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session, sessionmaker
@@ -11,7 +10,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from worker.engine.presets import Preset
 
 from .config import Settings
-from .index import GalleryIndex
+from .gallery.service import Gallery
 from .metrics import Metrics
 from .queue import DescriptorQueue
 from .storage import UploadStore
@@ -27,8 +26,4 @@ class AppState:
     queue: DescriptorQueue
     store: UploadStore
     metrics: Metrics
-    index: GalleryIndex | None = None
-    index_error: str | None = None
-    # Held while the database and the index change together (collector, delete),
-    # so a shape deleted while its descriptor is being stored never reaches the index.
-    gallery_lock: threading.Lock = field(default_factory=threading.Lock)
+    gallery: Gallery

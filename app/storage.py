@@ -7,7 +7,19 @@ so storing twice is a no-op and a crash can leave at most an unreferenced file.
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
+
+
+@dataclass(frozen=True)
+class ReceivedFile:
+    """An upload received into a temporary file: where it waits, its original name,
+    its size in bytes and its sha256 (hex). What the services take, free of HTTP types."""
+
+    path: Path
+    filename: str
+    size: int
+    sha256: str
 
 
 class UploadStore:

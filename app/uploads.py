@@ -22,6 +22,7 @@ from starlette.requests import ClientDisconnect, Request
 from worker.engine.mesh_io import mesh_format
 
 from .errors import InvalidInputError, PayloadTooLargeError, UnsupportedMediaTypeError
+from .storage import ReceivedFile
 
 if TYPE_CHECKING:  # defined for type checkers only
     from python_multipart.multipart import MultipartCallbacks
@@ -31,18 +32,8 @@ MAX_FIELDS = 16
 
 
 @dataclass
-class UploadedFile:
-    """A received file: where it waits, its original name and its digest."""
-
-    path: Path
-    filename: str
-    size: int
-    sha256: str
-
-
-@dataclass
 class MultipartUpload:
-    file: UploadedFile | None
+    file: ReceivedFile | None
     fields: dict[str, str] = field(default_factory=dict)
 
     def discard(self) -> None:
@@ -68,7 +59,7 @@ class _Receiver:
         self.max_bytes = max_bytes
         self.max_field_bytes = max_field_bytes
         self.fields: dict[str, str] = {}
-        self.file: UploadedFile | None = None
+        self.file: ReceivedFile | None = None
         self._header_field = b""
         self._header_value = b""
         self._headers: dict[bytes, bytes] = {}
@@ -150,7 +141,7 @@ class _Receiver:
             os.fsync(self._fh.fileno())  # the original upload must survive a crash
             self._fh.close()
             self._fh = None
-            self.file = UploadedFile(
+            self.file = ReceivedFile(
                 self._path, self._filename, self._size, self._digest.hexdigest()
             )
         elif self._name:

@@ -34,7 +34,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from app.index import GalleryIndex, SearchStats, descriptor_dims  # noqa: E402
+from app.gallery.index import GalleryIndex, SearchStats  # noqa: E402
+from app.gallery.vectors import descriptor_dims  # noqa: E402
 from bench._tosca import tosca_descriptors, tosca_labels  # noqa: E402
 from worker.engine.compare import dissimilarity, fuse, gallery_sigma  # noqa: E402
 from worker.engine.presets import MODALITIES, get_preset  # noqa: E402

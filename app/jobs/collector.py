@@ -22,48 +22,25 @@ from __future__ import annotations
 import logging
 import threading
 import time
-import uuid
 from datetime import UTC, datetime
 
 from huey.utils import Error
 from sqlalchemy.exc import SQLAlchemyError
+from sqlalchemy.orm import Session
 
 from worker.engine.pipeline import ShapeDescriptor
 from worker.jobs.queue import descriptor_npz
 
 from ..db import unit_of_work
-from ..gallery import save_index, vectors_of
 from ..meshes import repository as meshes
-from ..models import Descriptor, Job, JobStatus, Mesh, MeshStatus, utcnow
+from ..models import Descriptor, Job, JobStatus, MeshStatus, utcnow
 from ..state import AppState
 from . import repository as jobs
+from .service import enqueue_job, new_job
 
 log = logging.getLogger("shapes.collector")
 
 BATCH = 500
-
-
-def new_job(state: AppState, mesh: Mesh) -> Job:
-    """A queued job describing ``mesh`` with the service's preset (task id chosen now,
-    so it can be enqueued after the commit that creates the row)."""
-    return Job(
-        mesh=mesh,
-        preset=state.preset.name,
-        preset_version=state.preset.version,
-        task_id=uuid.uuid4().hex,
-        status=JobStatus.queued.value,
-        enqueues=1,
-    )
-
-
-def enqueue_job(state: AppState, job: Job) -> None:
-    mesh = job.mesh
-    state.queue.enqueue_describe(
-        job.task_id,
-        state.store.path(mesh.storage_path),
-        mesh.filename,
-        job.preset,
-    )
 
 
 def _fail(job: Job, code: str, detail: str) -> None:
@@ -138,21 +115,20 @@ class JobCollector:
             self._stop.wait(interval)
 
     def _maybe_save(self) -> None:
-        index = self.state.index
+        gallery = self.state.gallery
         interval = self.state.settings.index_save_interval_seconds
-        if index is not None and index.dirty and time.monotonic() - self._last_save > interval:
-            save_index(self.state, index)
+        if gallery.dirty and time.monotonic() - self._last_save > interval:
+            gallery.save()
             self._last_save = time.monotonic()
 
     def run_once(self) -> int:
         """One pass over unfinished jobs; returns how many changed."""
         state = self.state
-        index = state.index
-        ready: list[tuple[int, dict]] = []
+        ready: list[tuple[int, ShapeDescriptor]] = []
         finished: list[str] = []
         requeue: list[Job] = []
         changed = 0
-        with state.gallery_lock:
+        with state.gallery.changing():
             with unit_of_work(state.sessions) as session:
                 unfinished = jobs.unfinished(session, limit=BATCH)
                 state.metrics.jobs_unfinished.set(len(unfinished))
@@ -165,25 +141,23 @@ class JobCollector:
                 for job in unfinished:
                     result = results.get(job.task_id)
                     if result is not None:
-                        vectors = self._finish(session, job, result)
-                        if vectors is not None:
-                            ready.append((job.mesh_id, vectors))
+                        descriptor = self._finish(session, job, result)
+                        if descriptor is not None:
+                            ready.append((job.mesh_id, descriptor))
                         finished.append(job.task_id)
                         changed += 1
                     elif (beat := beats.get(job.task_id)) is not None:
                         changed += self._track(job, beat, requeue)
             # Committed: now the index and the queue may follow.
-            if index is not None:
-                for mesh_id, vectors in ready:
-                    index.add(mesh_id, vectors)
-                state.metrics.index_size.labels(state.preset.name).set(len(index))
+            for mesh_id, descriptor in ready:
+                state.gallery.add(mesh_id, descriptor)
         for task_id in finished:
             state.queue.forget(task_id)
         for job in requeue:
             enqueue_job(state, job)
         return changed
 
-    def _finish(self, session, job: Job, result) -> dict | None:
+    def _finish(self, session: Session, job: Job, result: dict | Error) -> ShapeDescriptor | None:
         state, mesh = self.state, job.mesh
         job.finished_at = utcnow()
         state.metrics.job_seconds.observe((job.finished_at - job.created_at).total_seconds())
@@ -228,7 +202,7 @@ class JobCollector:
         mesh.error_code = mesh.error_detail = None
         state.metrics.jobs.labels("succeeded").inc()
         state.metrics.describe_seconds.observe(descriptor.timings.get("total", 0.0))
-        return vectors_of(descriptor)
+        return descriptor
 
     def _track(self, job: Job, beat: dict, requeue: list[Job]) -> int:
         """Follow a running job's heartbeat; re-enqueue or fail it if its worker died."""

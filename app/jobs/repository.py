@@ -28,9 +28,3 @@ def unfinished(session: Session, limit: int | None = None) -> list[Job]:
     if limit is not None:
         query = query.limit(limit)
     return list(session.scalars(query))
-
-
-def latest_for_mesh(session: Session, mesh_id: int) -> Job | None:
-    return session.scalar(
-        select(Job).where(Job.mesh_id == mesh_id).order_by(Job.id.desc()).limit(1)
-    )

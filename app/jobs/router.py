@@ -5,10 +5,9 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from ..deps import RowId, SessionDep
-from ..errors import NotFoundError
 from ..models import JobStatus
 from ..schemas import ERROR_RESPONSES
-from . import repository
+from . import service
 from .schemas import JobOut
 
 router = APIRouter(prefix="/jobs", tags=["jobs"], responses=ERROR_RESPONSES)
@@ -17,13 +16,12 @@ router = APIRouter(prefix="/jobs", tags=["jobs"], responses=ERROR_RESPONSES)
 @router.get(
     "/{job_id}",
     response_model=JobOut,
+    operation_id="get_job",
     summary="A descriptor job",
     responses={404: {"description": "Unknown id"}},
 )
 def get_job(job_id: RowId, session: SessionDep) -> JobOut:
-    job = repository.get(session, job_id)
-    if job is None:
-        raise NotFoundError(f"There is no job with id {job_id}.")
+    job = service.get(session, job_id)
     return JobOut(
         id=job.id,
         mesh_id=job.mesh_id,

@@ -111,10 +111,6 @@ def meshes_missing_descriptor(session: Session, preset: str, version: int) -> li
     return list(session.scalars(select(Mesh).where(~has_descriptor.exists(), ~has_job.exists())))
 
 
-def count_by_status(session: Session) -> dict[str, int]:
-    return dict(session.execute(select(Mesh.status, func.count()).group_by(Mesh.status)).tuples())
-
-
 def descriptors_for(
     session: Session, mesh_ids: list[int], preset: str, version: int
 ) -> dict[int, Descriptor]:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import FileResponse
@@ -11,9 +11,7 @@ from ..deps import WRITE_ACCESS, MultipartDep, RowId, SessionDep, StateDep, requ
 from ..errors import InvalidInputError
 from ..models import Descriptor, Mesh, MeshStatus
 from ..schemas import ERROR_RESPONSES, UNAUTHORIZED_RESPONSE
-from ..search import service as search_service
-from ..search.schemas import QueryOut
-from . import repository, service
+from . import service
 from .schemas import DescriptorInfo, Links, MeshOut, MeshPage
 
 router = APIRouter(prefix="/meshes", tags=["meshes"], responses=ERROR_RESPONSES)
@@ -28,6 +26,25 @@ UPLOAD_ERRORS: Responses = {
     415: {"description": "Not a mesh file type (`unsupported_format`) or not multipart"},
     422: {"description": "No file, empty file, or bad metadata"},
 }
+
+
+def mesh_links(pointer: str) -> dict[str, Any]:
+    """OpenAPI links from a response whose body holds a mesh id at JSON pointer ``pointer``
+    to every operation that takes one (clients and stateful fuzzers follow them)."""
+    mesh_id = {"mesh_id": f"$response.body#{pointer}"}
+    return {
+        "GetMesh": {"operationId": "get_mesh", "parameters": mesh_id},
+        "GetMeshFile": {"operationId": "get_mesh_file", "parameters": mesh_id},
+        "DeleteMesh": {"operationId": "delete_mesh", "parameters": mesh_id},
+        "SimilarMeshes": {"operationId": "similar_meshes", "parameters": mesh_id},
+    }
+
+
+#: A mesh's descriptor job, from a response that is one mesh.
+JOB_LINK = {
+    "GetJob": {"operationId": "get_job", "parameters": {"job_id": "$response.body#/job_id"}}
+}
+MESH_LINKS = mesh_links("/id") | JOB_LINK
 
 UPLOAD_BODY = {
     "requestBody": {
@@ -52,7 +69,20 @@ UPLOAD_BODY = {
                         },
                     },
                 },
-                "encoding": {"file": {"contentType": "application/octet-stream"}},
+                "encoding": {
+                    "file": {
+                        "contentType": "application/octet-stream",
+                        "headers": {
+                            "Content-Disposition": {
+                                "description": "the file name's extension tells the format",
+                                "schema": {
+                                    "type": "string",
+                                    "example": 'form-data; name="file"; filename="wolf0.off"',
+                                },
+                            }
+                        },
+                    }
+                },
             }
         },
     }
@@ -100,6 +130,7 @@ def mesh_out(mesh: Mesh, descriptor: Descriptor | None) -> MeshOut:
     dependencies=WRITE_ACCESS,
     status_code=status.HTTP_202_ACCEPTED,
     response_model=MeshOut,
+    operation_id="enroll_mesh",
     summary="Enroll a mesh",
     description=(
         "Stores the upload (content-addressed), creates the mesh and queues its descriptor "
@@ -107,7 +138,16 @@ def mesh_out(mesh: Mesh, descriptor: Descriptor | None) -> MeshOut:
         "existing mesh. Poll `GET /meshes/{id}` until `ready` (or `failed`, with `detail`).\n\n"
         "`curl -F file=@wolf0.off.gz -F label=wolf http://127.0.0.1:8000/meshes`"
     ),
-    responses=Responses({200: {"description": "Already enrolled (same sha256)", "model": MeshOut}})
+    responses=Responses(
+        {
+            200: {
+                "description": "Already enrolled (same sha256)",
+                "model": MeshOut,
+                "links": MESH_LINKS,
+            },
+            202: {"description": "Enrolled, descriptor job queued", "links": MESH_LINKS},
+        }
+    )
     | UPLOAD_ERRORS
     | UNAUTHORIZED_RESPONSE,
     openapi_extra=UPLOAD_BODY,
@@ -136,7 +176,13 @@ def enroll(
     return mesh_out(mesh, service.descriptor_of(session, state, mesh))
 
 
-@router.get("", response_model=MeshPage, summary="List meshes")
+@router.get(
+    "",
+    response_model=MeshPage,
+    operation_id="list_meshes",
+    summary="List meshes",
+    responses={200: {"description": "One page of meshes", "links": mesh_links("/items/0/id")}},
+)
 def list_meshes(
     session: SessionDep,
     state: StateDep,
@@ -145,26 +191,24 @@ def list_meshes(
     offset: Annotated[int, Query(ge=0, le=2**63 - 1)] = 0,  # SQLite: 64-bit
     limit: Annotated[int, Query(ge=1, le=1000)] = 50,
 ) -> MeshPage:
-    limit = min(limit, state.settings.max_page_size)
-    rows, total = repository.list_page(
-        session,
-        label=label,
-        status=status_.value if status_ else None,
-        offset=offset,
-        limit=limit,
-    )
-    descriptors = repository.descriptors_for(
-        session, [m.id for m in rows], state.preset.name, state.preset.version
+    page = service.list_page(
+        session, state, label=label, status=status_, offset=offset, limit=limit
     )
     return MeshPage(
-        items=[mesh_out(m, descriptors.get(m.id)) for m in rows],
-        total=total,
-        offset=offset,
-        limit=limit,
+        items=[mesh_out(m, d) for m, d in page.items],
+        total=page.total,
+        offset=page.offset,
+        limit=page.limit,
     )
 
 
-@router.get("/{mesh_id}", response_model=MeshOut, summary="One mesh", responses=ERRORS)
+@router.get(
+    "/{mesh_id}",
+    response_model=MeshOut,
+    operation_id="get_mesh",
+    summary="One mesh",
+    responses=ERRORS | {200: {"description": "The mesh", "links": JOB_LINK}},
+)
 def get_mesh(mesh_id: RowId, session: SessionDep, state: StateDep) -> MeshOut:
     mesh = service.get(session, mesh_id)
     return mesh_out(mesh, service.descriptor_of(session, state, mesh))
@@ -172,6 +216,7 @@ def get_mesh(mesh_id: RowId, session: SessionDep, state: StateDep) -> MeshOut:
 
 @router.get(
     "/{mesh_id}/file",
+    operation_id="get_mesh_file",
     summary="The original upload, byte for byte",
     response_class=FileResponse,
     responses=ERRORS,
@@ -185,35 +230,10 @@ def get_file(mesh_id: RowId, session: SessionDep, state: StateDep) -> FileRespon
     "/{mesh_id}",
     dependencies=WRITE_ACCESS,
     status_code=status.HTTP_204_NO_CONTENT,
+    operation_id="delete_mesh",
     summary="Delete a mesh (leaves the index at once)",
     responses=ERRORS | UNAUTHORIZED_RESPONSE,
 )
 def delete_mesh(mesh_id: RowId, session: SessionDep, state: StateDep) -> Response:
     service.delete(session, state, mesh_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)
-
-
-@router.post(
-    "/{mesh_id}/similar",
-    dependencies=WRITE_ACCESS,
-    response_model=QueryOut,
-    summary="Shapes most similar to an enrolled mesh",
-    description="Uses the stored descriptor (nothing is recomputed); the mesh itself is left out.",
-    responses=ERRORS | UNAUTHORIZED_RESPONSE | {409: {"description": "The mesh is not ready yet"}},
-)
-def similar(
-    mesh_id: RowId,
-    session: SessionDep,
-    state: StateDep,
-    k: Annotated[int, Query(ge=1, description="number of matches")] = 10,
-    preset: Annotated[str | None, Query(description="must be the enrolled preset")] = None,
-    fusion: Annotated[
-        Literal["sum", "product"] | None, Query(description="default: the preset's rule")
-    ] = None,
-    modalities: Annotated[
-        str | None, Query(description="comma-separated, e.g. gdm,ddt (default: the preset's)")
-    ] = None,
-) -> QueryOut:
-    return search_service.similar_to(
-        session, state, mesh_id, k=k, preset_name=preset, fusion=fusion, modalities=modalities
-    )

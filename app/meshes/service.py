@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -14,10 +15,10 @@ from worker.engine.mesh_io import mesh_format
 from ..db import after_commit
 from ..errors import ConflictError, InvalidInputError, NotFoundError
 from ..jobs import repository as jobs
-from ..jobs.collector import enqueue_job, new_job
-from ..models import Mesh, MeshStatus
+from ..jobs.service import enqueue_job, new_job
+from ..models import Descriptor, Mesh, MeshStatus
 from ..state import AppState
-from ..uploads import UploadedFile
+from ..storage import ReceivedFile
 from . import repository as meshes
 
 MAX_NAME = 255
@@ -54,7 +55,7 @@ def _text(value: str | None, what: str) -> str | None:
 def enroll(
     session: Session,
     state: AppState,
-    upload: UploadedFile,
+    upload: ReceivedFile,
     *,
     name: str | None,
     label: str | None,
@@ -97,7 +98,7 @@ def enroll(
     return mesh, True
 
 
-def _same_format(existing: Mesh, upload: UploadedFile) -> None:
+def _same_format(existing: Mesh, upload: ReceivedFile) -> None:
     """The stored mesh is these bytes read in its own file's format; the same bytes
     named as another format would be read differently, so they are not the same mesh."""
     if mesh_format(existing.filename) != mesh_format(upload.filename):
@@ -135,10 +136,8 @@ def delete(session: Session, state: AppState, mesh_id: int) -> None:
 
     def _after() -> None:
         # Waits for a collector round that may have just stored this mesh's
-        # descriptor, so its index.add cannot come after this removal.
-        with state.gallery_lock:
-            if state.index is not None:
-                state.index.remove(mesh_id)
+        # descriptor (it holds the gallery), so its add cannot come after this removal.
+        state.gallery.remove(mesh_id)
         for task_id in task_ids:
             state.queue.cancel(task_id)
         state.store.remove(storage_path)
@@ -146,5 +145,40 @@ def delete(session: Session, state: AppState, mesh_id: int) -> None:
     after_commit(session, _after)
 
 
-def descriptor_of(session: Session, state: AppState, mesh: Mesh):
+def descriptor_of(session: Session, state: AppState, mesh: Mesh) -> Descriptor | None:
+    """The mesh's descriptor under the service's preset, if it has one yet."""
     return meshes.get_descriptor(session, mesh.id, state.preset.name, state.preset.version)
+
+
+@dataclass
+class MeshPage:
+    """One page of meshes, each with its descriptor (None until described)."""
+
+    items: list[tuple[Mesh, Descriptor | None]]
+    total: int
+    offset: int
+    limit: int
+
+
+def list_page(
+    session: Session,
+    state: AppState,
+    *,
+    label: str | None,
+    status: MeshStatus | None,
+    offset: int,
+    limit: int,
+) -> MeshPage:
+    """Meshes in id order, filtered by label and status; ``limit`` capped by the settings."""
+    limit = min(limit, state.settings.max_page_size)
+    rows, total = meshes.list_page(
+        session,
+        label=label,
+        status=status.value if status else None,
+        offset=offset,
+        limit=limit,
+    )
+    descriptors = meshes.descriptors_for(
+        session, [m.id for m in rows], state.preset.name, state.preset.version
+    )
+    return MeshPage([(m, descriptors.get(m.id)) for m in rows], total, offset, limit)

@@ -1,18 +1,44 @@
-"""HTTP layer of POST /query."""
+"""HTTP layer of the searches: ``POST /query`` and ``POST /meshes/{mesh_id}/similar``."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Depends, Request
 
-from ..deps import WRITE_ACCESS, MultipartDep, SessionDep, StateDep, require_file
+from ..deps import WRITE_ACCESS, MultipartDep, RowId, SessionDep, StateDep, require_file
 from ..errors import InvalidInputError
 from ..schemas import ERROR_RESPONSES, UNAUTHORIZED_RESPONSE
 from . import service
-from .schemas import QueryOut
+from .schemas import MatchOut, QueryOut
 
 router = APIRouter(tags=["search"], responses=ERROR_RESPONSES)
+
+# The options, documented once: form fields of /query, query parameters of /similar.
+# Both arrive as strings and are validated by service.parse_options.
+OPTION_SCHEMAS: dict[str, dict[str, Any]] = {
+    "k": {
+        "type": "integer",
+        "default": service.DEFAULT_K,
+        "minimum": 1,
+        "description": "number of matches",
+    },
+    "preset": {
+        "type": "string",
+        "example": "smeets2010-shrec",
+        "description": "must be the enrolled preset",
+    },
+    "fusion": {
+        "type": "string",
+        "enum": ["sum", "product"],
+        "description": "default: the preset's rule",
+    },
+    "modalities": {
+        "type": "string",
+        "example": "gdm,ddt",
+        "description": "comma-separated, among gdm, ddt, spectrum (default: the preset's)",
+    },
+}
 
 QUERY_BODY = {
     "requestBody": {
@@ -22,19 +48,25 @@ QUERY_BODY = {
                 "schema": {
                     "type": "object",
                     "required": ["file"],
-                    "properties": {
-                        "file": {"type": "string", "format": "binary"},
-                        "k": {"type": "integer", "default": 10, "minimum": 1},
-                        "preset": {"type": "string", "example": "smeets2010-shrec"},
-                        "fusion": {"type": "string", "enum": ["sum", "product"]},
-                        "modalities": {"type": "string", "example": "gdm,ddt"},
-                    },
+                    "properties": {"file": {"type": "string", "format": "binary"}} | OPTION_SCHEMAS,
                 }
             }
         },
     }
 }
 
+SIMILAR_PARAMETERS = {
+    "parameters": [
+        {
+            "name": name,
+            "in": "query",
+            "required": False,
+            "description": schema["description"],
+            "schema": {k: v for k, v in schema.items() if k != "description"},
+        }
+        for name, schema in OPTION_SCHEMAS.items()
+    ]
+}
 
 QUERY_ERRORS: dict[int | str, dict[str, Any]] = {
     413: {"description": "File over the size limit, or too many faces"},
@@ -42,21 +74,45 @@ QUERY_ERRORS: dict[int | str, dict[str, Any]] = {
     422: {"description": "Unreadable mesh, bad k/preset/fusion/modalities"},
     503: {"description": "Index loading, or no worker answered in time"},
 }
+SIMILAR_ERRORS: dict[int | str, dict[str, Any]] = {
+    404: {"description": 'Unknown id: `{"error": "not_found", "detail": ...}`'},
+    409: {"description": "The mesh is not ready yet (`mesh_not_ready`)"},
+    422: {"description": "Bad k/preset/fusion/modalities"},
+    503: {"description": "Index loading"},
+}
 
 
-def _int_field(value: str | None, name: str, default: int) -> int:
-    if value is None or not value.strip():
-        return default
-    try:
-        return int(value)
-    except ValueError:
-        raise InvalidInputError(f"{name} must be a whole number.", code=f"invalid_{name}") from None
+def query_out(result: service.SearchResult) -> QueryOut:
+    options = result.options
+    return QueryOut(
+        preset=options.preset.name,
+        preset_version=options.preset.version,
+        dissimilarity=options.preset.dissimilarity,
+        fusion=result.fusion,
+        modalities=list(options.modalities),
+        k=options.k,
+        gallery_size=result.gallery_size,
+        matches=[
+            MatchOut(
+                mesh_id=m.mesh.id,
+                name=m.mesh.name,
+                label=m.mesh.label,
+                rank=m.rank,
+                score=m.score,
+                scores=m.scores,
+            )
+            for m in result.matches
+        ],
+        timings=result.timings,
+        query=result.query,
+    )
 
 
 @router.post(
     "/query",
     dependencies=WRITE_ACCESS,
     response_model=QueryOut,
+    operation_id="query",
     summary="Rank the gallery by similarity to an uploaded mesh",
     description=(
         "Computes the query's descriptor in the worker pool (a few seconds), then ranks the "
@@ -70,22 +126,49 @@ def _int_field(value: str | None, name: str, default: int) -> int:
 def query(upload: MultipartDep, session: SessionDep, state: StateDep) -> QueryOut:
     file = require_file(upload)
     fields = upload.fields
-    unknown = set(fields) - {"k", "preset", "fusion", "modalities"}
+    unknown = set(fields) - set(service.OPTION_NAMES)
     if unknown:
         raise InvalidInputError(
             f"Unknown form fields: {', '.join(sorted(unknown))}; "
             "use file, k, preset, fusion and modalities.",
             code="unknown_field",
         )
-    fusion = (fields.get("fusion") or "").strip() or None
-    if fusion not in (None, "sum", "product"):
-        raise InvalidInputError("fusion must be 'sum' or 'product'.", code="invalid_fusion")
-    return service.query_by_upload(
-        session,
+    options = service.parse_options(
         state,
-        file,
-        k=_int_field(fields.get("k"), "k", 10),
-        preset_name=(fields.get("preset") or "").strip() or None,
-        fusion=fusion,
+        k=fields.get("k"),
+        preset=fields.get("preset"),
+        fusion=fields.get("fusion"),
         modalities=fields.get("modalities"),
     )
+    return query_out(service.query_by_upload(session, state, file, options))
+
+
+def similar_options(request: Request, state: StateDep) -> service.SearchOptions:
+    """The options of /similar, read as sent (documented by ``SIMILAR_PARAMETERS``)."""
+    params = request.query_params
+    return service.parse_options(
+        state,
+        k=params.get("k"),
+        preset=params.get("preset"),
+        fusion=params.get("fusion"),
+        modalities=params.get("modalities"),
+    )
+
+
+@router.post(
+    "/meshes/{mesh_id}/similar",
+    dependencies=WRITE_ACCESS,
+    response_model=QueryOut,
+    operation_id="similar_meshes",
+    summary="Shapes most similar to an enrolled mesh",
+    description="Uses the stored descriptor (nothing is recomputed); the mesh itself is left out.",
+    responses=SIMILAR_ERRORS | UNAUTHORIZED_RESPONSE,
+    openapi_extra=SIMILAR_PARAMETERS,
+)
+def similar(
+    mesh_id: RowId,
+    session: SessionDep,
+    state: StateDep,
+    options: Annotated[service.SearchOptions, Depends(similar_options)],
+) -> QueryOut:
+    return query_out(service.similar_to(session, state, mesh_id, options))

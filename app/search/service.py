@@ -1,23 +1,70 @@
-"""Rules for similarity search: query descriptors, index search, ranked matches."""
+"""Rules for similarity search: the options, the query's descriptor, the ranked matches.
+
+No HTTP types: the options arrive as the strings a client sent (form fields of
+``POST /query``, query parameters of ``POST /meshes/{id}/similar``), so both are
+validated by :func:`parse_options` with the same codes and sentences, and the
+results are domain objects the router turns into responses.
+"""
 
 from __future__ import annotations
 
 import time
 import uuid
+from dataclasses import dataclass, field
 
 from sqlalchemy.orm import Session
 
 from worker.engine.pipeline import ShapeDescriptor
 from worker.engine.presets import MODALITIES, PRESETS, Preset
 
-from ..errors import ConflictError, InvalidInputError, NotFoundError, UnavailableError
-from ..gallery import vectors_of
-from ..index import GalleryIndex, SearchStats
+from ..errors import ConflictError, InvalidInputError
 from ..meshes import repository as meshes
-from ..models import MeshStatus
+from ..meshes import service as mesh_service
+from ..models import Mesh, MeshStatus
 from ..state import AppState
-from ..uploads import UploadedFile
-from .schemas import MatchOut, QueryOut
+from ..storage import ReceivedFile
+
+#: The search options a client may send, with ``POST /query``'s file.
+OPTION_NAMES = ("k", "preset", "fusion", "modalities")
+DEFAULT_K = 10
+
+
+@dataclass(frozen=True)
+class SearchOptions:
+    """Validated search options: ``k`` matches, ranked under ``preset`` with ``fusion``
+    (None: the preset's rule) over ``modalities``."""
+
+    k: int
+    preset: Preset
+    fusion: str | None
+    modalities: tuple[str, ...]
+
+
+@dataclass
+class RankedMatch:
+    mesh: Mesh
+    rank: int
+    score: float
+    scores: dict[str, float]
+
+
+@dataclass
+class SearchResult:
+    """The answer to a search: the options used, the matches best first, timings."""
+
+    options: SearchOptions
+    gallery_size: int
+    matches: list[RankedMatch]
+    timings: dict[str, float]
+    query: dict[str, int] = field(default_factory=dict)
+
+    @property
+    def fusion(self) -> str:
+        return self.options.fusion or self.options.preset.fusion
+
+
+def _blank_to_none(value: str | None) -> str | None:
+    return (value or "").strip() or None
 
 
 def resolve_preset(state: AppState, name: str | None) -> Preset:
@@ -37,7 +84,7 @@ def resolve_preset(state: AppState, name: str | None) -> Preset:
 
 
 def parse_modalities(text: str | None, preset: Preset) -> tuple[str, ...]:
-    if text is None or not text.strip():
+    if text is None:
         return tuple(preset.fused_modalities)
     names = tuple(dict.fromkeys(p.strip() for p in text.split(",") if p.strip()))
     unknown = [n for n in names if n not in MODALITIES]
@@ -49,6 +96,15 @@ def parse_modalities(text: str | None, preset: Preset) -> tuple[str, ...]:
     return names
 
 
+def parse_k(text: str | None) -> int:
+    if text is None:
+        return DEFAULT_K
+    try:
+        return int(text)
+    except ValueError:
+        raise InvalidInputError("k must be a whole number.", code="invalid_k") from None
+
+
 def check_k(state: AppState, k: int) -> int:
     if not 1 <= k <= state.settings.max_k:
         raise InvalidInputError(
@@ -57,95 +113,80 @@ def check_k(state: AppState, k: int) -> int:
     return k
 
 
-def ready_index(state: AppState) -> GalleryIndex:
-    if state.index is None:
-        raise UnavailableError(
-            "The index is still loading; try again in a moment.", code="index_loading"
-        )
-    return state.index
+def parse_options(
+    state: AppState,
+    *,
+    k: str | None,
+    preset: str | None,
+    fusion: str | None,
+    modalities: str | None,
+) -> SearchOptions:
+    """Validate the options as sent (blank means the default).
 
-
-def describe_query(state: AppState, upload: UploadedFile, preset: Preset) -> ShapeDescriptor:
-    """The query's descriptor, computed by a worker (blocking; call from a thread)."""
-    return state.queue.describe_now(uuid.uuid4().hex, upload.path, upload.filename, preset.name)
+    Raises
+    ------
+    InvalidInputError
+        ``unknown_preset``, ``preset_not_enrolled``, ``unknown_modality``,
+        ``invalid_k`` or ``invalid_fusion``, each with a sentence.
+    """
+    rule = _blank_to_none(fusion)
+    if rule not in (None, "sum", "product"):
+        raise InvalidInputError("fusion must be 'sum' or 'product'.", code="invalid_fusion")
+    count = parse_k(_blank_to_none(k))
+    chosen = resolve_preset(state, _blank_to_none(preset))
+    mods = parse_modalities(_blank_to_none(modalities), chosen)
+    return SearchOptions(k=check_k(state, count), preset=chosen, fusion=rule, modalities=mods)
 
 
 def rank(
     session: Session,
     state: AppState,
-    vectors: dict,
+    descriptor: ShapeDescriptor,
+    options: SearchOptions,
     *,
-    k: int,
-    preset: Preset,
-    fusion: str | None,
-    modalities: tuple[str, ...],
     exclude: tuple[int, ...] = (),
     timings: dict[str, float],
     query_info: dict[str, int],
-) -> QueryOut:
-    index = ready_index(state)
-    stats = SearchStats()
-    matches = index.search(
-        vectors, k, fusion=fusion, modalities=modalities, exclude=exclude, stats=stats
+) -> SearchResult:
+    matches, stats = state.gallery.search(
+        descriptor,
+        options.k,
+        fusion=options.fusion,
+        modalities=options.modalities,
+        exclude=exclude,
     )
-    state.metrics.search_seconds.observe(stats.seconds)
-    timings = {**timings, "search": stats.seconds}
     rows = meshes.by_ids(session, [m.id for m in matches])
-    out: list[MatchOut] = []
+    ranked: list[RankedMatch] = []
     for match in matches:
         mesh = rows.get(match.id)
         if mesh is None:  # deleted a moment ago
             continue
-        out.append(
-            MatchOut(
-                mesh_id=mesh.id,
-                name=mesh.name,
-                label=mesh.label,
-                rank=len(out) + 1,
-                score=match.score,
-                scores=match.scores,
-            )
-        )
-    return QueryOut(
-        preset=preset.name,
-        preset_version=preset.version,
-        dissimilarity=preset.dissimilarity,
-        fusion=fusion or preset.fusion,
-        modalities=list(modalities),
-        k=k,
-        gallery_size=len(index),
-        matches=out,
-        timings=timings,
+        ranked.append(RankedMatch(mesh, len(ranked) + 1, match.score, match.scores))
+    return SearchResult(
+        options=options,
+        gallery_size=len(state.gallery),
+        matches=ranked,
+        timings={**timings, "search": stats.seconds},
         query=query_info,
     )
 
 
 def query_by_upload(
-    session: Session,
-    state: AppState,
-    upload: UploadedFile,
-    *,
-    k: int,
-    preset_name: str | None,
-    fusion: str | None,
-    modalities: str | None,
-) -> QueryOut:
-    preset = resolve_preset(state, preset_name)
-    mods = parse_modalities(modalities, preset)
-    check_k(state, k)
-    ready_index(state)
+    session: Session, state: AppState, upload: ReceivedFile, options: SearchOptions
+) -> SearchResult:
+    """Rank the gallery against an uploaded mesh, described by a worker (blocking)."""
+    state.gallery.check_ready()  # before the worker spends seconds on the query
     started = time.perf_counter()
-    descriptor = describe_query(state, upload, preset)
+    descriptor = state.queue.describe_now(
+        uuid.uuid4().hex, upload.path, upload.filename, options.preset.name
+    )
     timings = dict(descriptor.timings)
     timings["describe_wall"] = time.perf_counter() - started
     return rank(
         session,
         state,
-        vectors_of(descriptor),
-        k=k,
-        preset=preset,
-        fusion=fusion,
-        modalities=mods,
+        descriptor,
+        options,
         timings=timings,
         query_info={
             "input_vertices": descriptor.input_vertices,
@@ -156,21 +197,11 @@ def query_by_upload(
 
 
 def similar_to(
-    session: Session,
-    state: AppState,
-    mesh_id: int,
-    *,
-    k: int,
-    preset_name: str | None,
-    fusion: str | None,
-    modalities: str | None,
-) -> QueryOut:
-    preset = resolve_preset(state, preset_name)
-    mods = parse_modalities(modalities, preset)
-    check_k(state, k)
-    mesh = meshes.get(session, mesh_id)
-    if mesh is None:
-        raise NotFoundError(f"There is no mesh with id {mesh_id}.")
+    session: Session, state: AppState, mesh_id: int, options: SearchOptions
+) -> SearchResult:
+    """Rank the gallery against an enrolled mesh's stored descriptor (itself left out)."""
+    mesh = mesh_service.get(session, mesh_id)
+    preset = options.preset
     stored = meshes.get_descriptor(session, mesh_id, preset.name, preset.version)
     if stored is None or mesh.status != MeshStatus.ready.value:
         raise ConflictError(
@@ -181,11 +212,8 @@ def similar_to(
     return rank(
         session,
         state,
-        vectors_of(descriptor),
-        k=k,
-        preset=preset,
-        fusion=fusion,
-        modalities=mods,
+        descriptor,
+        options,
         exclude=(mesh_id,),
         timings={},
         query_info={"input_vertices": descriptor.input_vertices, "vertices": descriptor.vertices},

@@ -31,11 +31,12 @@ def ready(state: StateDep) -> JSONResponse:
         checks["database"] = "ok"
     except Exception as exc:  # any failure means not ready, with the reason shown
         checks["database"] = f"error: {exc.__class__.__name__}"
-    if state.index is not None:
-        checks["index"] = f"ok ({len(state.index)} shapes)"
+    gallery = state.gallery
+    if gallery.loaded:
+        checks["index"] = f"ok ({len(gallery)} shapes)"
     else:
-        checks["index"] = state.index_error or "loading"
-    ok = checks["database"] == "ok" and state.index is not None
+        checks["index"] = gallery.error or "loading"
+    ok = checks["database"] == "ok" and gallery.loaded
     body = {"status": "ready" if ok else "not_ready", "checks": checks}
     if not ok:
         body.update(error="not_ready", detail="The service is starting or its database is down.")
@@ -44,6 +45,4 @@ def ready(state: StateDep) -> JSONResponse:
 
 @router.get("/metrics", summary="Prometheus metrics", response_class=Response)
 def metrics(state: StateDep) -> Response:
-    if state.index is not None:
-        state.metrics.index_size.labels(state.preset.name).set(len(state.index))
     return Response(state.metrics.render(), media_type=CONTENT_TYPE)

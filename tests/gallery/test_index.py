@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.index import GalleryIndex, SearchStats, descriptor_dims
+from app.gallery.index import GalleryIndex, SearchStats
+from app.gallery.persistence import load_index, save_index
+from app.gallery.vectors import descriptor_dims
 from worker.engine.compare import dissimilarity, fuse, gallery_sigma
 from worker.engine.presets import MODALITIES, get_preset
 
@@ -92,20 +94,20 @@ def test_adds_and_deletes_keep_sigma_and_results_current():
 def test_save_load_roundtrip_and_corrupt_files_are_refused(tmp_path):
     gallery = _gallery(200)
     index = _index(SHREC, gallery)
-    index.save(tmp_path / "idx")
-    loaded = GalleryIndex.load(tmp_path / "idx", SHREC)
+    save_index(index, tmp_path / "idx")
+    loaded = load_index(tmp_path / "idx", SHREC)
     assert loaded.fingerprint() == index.fingerprint() and len(loaded) == 200
     query = {m: gallery[m][3] for m in MODALITIES}
     assert [m.id for m in loaded.search(query, 10)] == [m.id for m in index.search(query, 10)]
 
     (tmp_path / "idx" / "ddt.faiss").write_bytes(b"garbage")
     with pytest.raises(ValueError):
-        GalleryIndex.load(tmp_path / "idx", SHREC)
+        load_index(tmp_path / "idx", SHREC)
     with pytest.raises(ValueError):
-        GalleryIndex.load(tmp_path / "missing", SHREC)
-    index.save(tmp_path / "idx")
+        load_index(tmp_path / "missing", SHREC)
+    save_index(index, tmp_path / "idx")
     with pytest.raises(ValueError):  # made for another preset
-        GalleryIndex.load(tmp_path / "idx", TOSCA)
+        load_index(tmp_path / "idx", TOSCA)
 
 
 def test_empty_and_tiny_galleries():

@@ -173,6 +173,39 @@ def test_bad_fields_are_422(service: Service, gallery):
     _error(service.client.post(f"/meshes/{gallery['wolf0']}/similar", params={"k": "many"}), 422)
 
 
+def test_query_and_similar_validate_their_options_alike(service: Service, gallery):
+    """Form fields of /query and query parameters of /similar: same codes, same sentences."""
+    wolf = (TOSCA / "wolf0.off.gz").read_bytes()
+    cases = [
+        ({"k": "0"}, "invalid_k"),
+        ({"k": "many"}, "invalid_k"),
+        ({"k": "101"}, "invalid_k"),  # over SHAPES_MAX_K
+        ({"fusion": "max"}, "invalid_fusion"),
+        ({"preset": "nope"}, "unknown_preset"),
+        ({"preset": "smeets2010-tosca"}, "preset_not_enrolled"),
+        ({"modalities": "gdm,colour"}, "unknown_modality"),
+    ]
+    for fields, code in cases:
+        by_form = service.client.post("/query", files={"file": ("w.off.gz", wolf)}, data=fields)
+        by_params = service.client.post(f"/meshes/{gallery['wolf0']}/similar", params=fields)
+        assert _error(by_form, 422, code) == _error(by_params, 422, code), fields
+
+
+def test_405_allows_every_method_of_the_path(service: Service, gallery):
+    """One path's methods live on several routes; Allow must list them all."""
+    mesh = gallery["wolf0"]
+    for method, path, allow in [
+        ("OPTIONS", "/meshes", "GET, POST"),
+        ("PUT", f"/meshes/{mesh}", "DELETE, GET"),
+        ("OPTIONS", f"/meshes/{mesh}/file", "GET"),
+        ("GET", f"/meshes/{mesh}/similar", "POST"),
+        ("DELETE", "/query", "POST"),
+    ]:
+        response = service.client.request(method, path)
+        _error(response, 405, "method_not_allowed")
+        assert response.headers["allow"] == allow, (method, path)
+
+
 def test_health_ready_metrics_and_docs(service: Service, gallery):
     assert service.client.get("/health").json() == {"status": "ok"}
     ready = service.client.get("/ready").json()

@@ -1,0 +1,409 @@
+"""The gallery index: faiss candidates per modality, exact fused ranking.
+
+How a search works
+------------------
+Each modality ``m`` of the gallery is kept twice: the exact vectors (float64,
+for scoring) and a faiss ``IndexFlatL2`` over a transformed vector ``t_m(x)``
+that gives candidates. The final ranking is always the exact fused score of
+the preset: eq. (8) D1 or eq. (9) D2 per modality, then the sum or product
+rule (``worker.engine.compare``).
+
+* D2 (the default preset): ``t_m(x) = P_m^T (x / sigma_fit_m - mu_m)`` with
+  ``P_m`` orthonormal (PCA of the whitened gallery, at most ``MAX_DIMS``
+  columns; the identity for the GDM's 19 and the spectrum's 50 elements).
+  faiss returns ``CANDIDATES`` shapes per modality; their union is ranked by a
+  fused *estimate* (exact D2 for the short modalities, the projected distance
+  for the DDT's 2,000 elements), and the DDT is scored exactly in that order
+  for at most ``MAX_SCORED`` shapes. An orthonormal projection never
+  lengthens a vector, so the projected distance times
+  ``rho_m = min_i sigma_fit_i / sigma_now_i`` is a *lower bound* of D2 under
+  the current sigma. Two certificates follow: (1) inside the union, scoring
+  stops once the k-th exact score is below every remaining lower bound;
+  (2) a shape outside the union scores at least ``fuse({m: rho_m * t_m})``
+  with ``t_m`` the last candidate distance of modality m (Fagin's threshold
+  algorithm). When both hold the top-k *is* the exhaustive one
+  (``SearchStats.certified``); when the union certificate holds but not the
+  outside one, the candidate count grows x4 up to ``MAX_CANDIDATES``.
+  Otherwise the answer is best effort: on descriptors shaped like TOSCA's the
+  whitened DDT has too much independent per-element variation for the 64-D
+  bound to be tight, so certification is rare there, and recall@10 is
+  *measured* instead (``bench/index_bench.py``, ``docs/benchmarks.md``).
+* D1 has no cheap bound. Its candidates come from the L2 distance of
+  log-descriptors (eq. 8's terms are ``2 tanh(|log a - log b| / 2)``, close
+  to ``|log a - log b|`` for similar shapes) projected the same way, with
+  ``CANDIDATES`` per modality, all scored exactly.
+
+D2's sigma
+----------
+``sigma`` of eq. (9) is the per-element standard deviation over the *current*
+gallery, kept exactly up to date from running sums (shifted by the fitted mean
+to avoid cancellation) on every add and delete, so scores always use the
+current gallery's sigma. The transforms (``mu``, ``sigma_fit``, ``P``) are
+refitted, and the faiss indexes rebuilt, when the gallery has changed by more
+than ``refit_fraction`` of its size since the last fit; in between, ``rho_m``
+keeps the certificate valid.
+
+Thread safety: all public methods take one lock (searches take milliseconds).
+
+The vectors and running sigma are :mod:`.vectors`, the candidate transforms and
+faiss :mod:`.candidates`, files :mod:`.persistence`; :class:`~.service.Gallery`
+is what the rest of the service uses.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+import faiss
+import numpy as np
+
+from worker.engine.compare import dissimilarity, fuse, normalized_euclidean
+from worker.engine.presets import Preset
+
+from .candidates import FIT_SAMPLE, MAX_DIMS, CandidateTransform
+from .vectors import GalleryVectors, ids_fingerprint
+
+CANDIDATES = 2048  # faiss candidates per modality (D2), first round
+MAX_CANDIDATES = 16_384  # per modality, when more rounds can still certify the top-k
+MAX_SCORED = 256  # long-modality exact scores per round, in fused-estimate order
+BOUND_SAFETY = 1.0 - 1e-5  # float32 candidate distances: keep the bound a true lower bound
+
+
+def _single_threaded_faiss() -> None:
+    """One query at a time: faiss's OpenMP team costs more than it saves (2-15 ms
+    per search on a busy 2-core machine, even for 83 shapes), and the API's
+    threads and the workers already use the cores. OpenMP's setting is per
+    calling thread, so this runs in every thread that searches."""
+    faiss.omp_set_num_threads(1)
+
+
+@dataclass
+class Match:
+    """One ranked gallery shape: its id, fused score and per-modality dissimilarities."""
+
+    id: int
+    score: float
+    scores: dict[str, float]
+
+
+@dataclass
+class SearchStats:
+    candidates: int = 0  # shapes returned by faiss (union over modalities)
+    scored: int = 0  # shapes whose exact long-modality score was computed
+    rounds: int = 0
+    certified: bool = False
+    seconds: float = 0.0
+
+
+class GalleryIndex:
+    """Descriptors of enrolled shapes under one preset; see the module docstring."""
+
+    def __init__(
+        self,
+        preset: Preset,
+        dims: Mapping[str, int],
+        *,
+        refit_fraction: float = 0.05,
+        max_dims: int = MAX_DIMS,
+        candidates: int = CANDIDATES,
+        max_candidates: int = MAX_CANDIDATES,
+        max_scored: int = MAX_SCORED,
+    ) -> None:
+        self.preset = preset
+        self.store = GalleryVectors(dims)
+        self.dims = self.store.dims
+        self.modalities = self.store.modalities
+        self.refit_fraction = refit_fraction
+        self.max_dims = max_dims
+        self.candidates = candidates
+        self.max_candidates = max_candidates
+        self.max_scored = max_scored
+        self._lock = threading.RLock()
+        # Transformed vectors t_m(x) by position (what faiss holds), for cheap bounds.
+        self.reduced: dict[str, np.ndarray] = {}
+        self.fits: dict[str, CandidateTransform] | None = None
+        self.n_at_fit = 0
+        self.changes_since_fit = 0
+        self.dirty = False
+        self.refits = 0
+
+    # ------------------------------------------------------------------ size
+    def __len__(self) -> int:
+        return self.store.n
+
+    def __contains__(self, item: int) -> bool:
+        return item in self.store.pos
+
+    def ids(self) -> np.ndarray:
+        with self._lock:
+            return self.store.current_ids()
+
+    def fingerprint(self) -> str:
+        """A digest of the set of ids (to compare with the database)."""
+        return ids_fingerprint(self.ids())
+
+    # --------------------------------------------------------------- updates
+    def add(self, item: int, vectors: Mapping[str, np.ndarray]) -> None:
+        """Add (or replace) shape ``item``; searchable on return."""
+        if item < 0:
+            raise ValueError("ids must be non-negative")
+        with self._lock:
+            if item in self.store.pos:
+                self._remove(item)
+            i = self.store.append(item, vectors)
+            if self.fits is not None:
+                self._grow_reduced()
+                for m in self.modalities:
+                    fit = self.fits[m]
+                    t = fit.transform(self.store.vectors[m][i][None, :])
+                    self.reduced[m][i] = t[0]
+                    fit.index.add_with_ids(t, np.array([item], dtype=np.int64))
+            self._changed()
+
+    def add_many(self, items: Iterable[tuple[int, Mapping[str, np.ndarray]]]) -> None:
+        """Add many shapes, then refit once (building from a database)."""
+        with self._lock:
+            fits, self.fits = self.fits, None
+            for item, vectors in items:
+                self.add(item, vectors)
+            self.fits = fits
+            self.refit()
+
+    def remove(self, item: int) -> bool:
+        """Remove shape ``item``; gone from results on return. False if absent."""
+        with self._lock:
+            if item not in self.store.pos:
+                return False
+            self._remove(item)
+            self._changed()
+            return True
+
+    def _remove(self, item: int) -> None:
+        i, last = self.store.pop(item)
+        if self.fits is not None:
+            for m in self.modalities:
+                self.reduced[m][i] = self.reduced[m][last]
+                # faiss's Python wrapper accepts an id array in place of an IDSelector.
+                self.fits[m].index.remove_ids(np.array([item], dtype=np.int64))
+
+    def _grow_reduced(self) -> None:
+        """Keep the transformed rows' capacity that of the vectors."""
+        capacity, n = self.store.capacity, self.store.n
+        for m, reduced in self.reduced.items():
+            if len(reduced) < capacity:
+                grown = np.empty((capacity, reduced.shape[1]), dtype=np.float32)
+                grown[: n - 1] = reduced[: n - 1]
+                self.reduced[m] = grown
+
+    def _changed(self) -> None:
+        self.changes_since_fit += 1
+        self.dirty = True
+        if self.fits is not None and self.changes_since_fit > self.refit_fraction * max(
+            self.n_at_fit, 1
+        ):
+            self.refit()
+
+    def sigma(self) -> dict[str, np.ndarray]:
+        """sigma_i of eq. (9) over the current gallery, per modality (as ``gallery_sigma``)."""
+        with self._lock:
+            return self.store.sigma()
+
+    # ----------------------------------------------------------------- fit
+    def refit(self) -> None:
+        """Refit the candidate transforms on the current gallery and rebuild faiss."""
+        with self._lock:
+            n = self.store.n
+            rng = np.random.default_rng(0)
+            sample = np.sort(rng.choice(n, FIT_SAMPLE, replace=False)) if n > FIT_SAMPLE else None
+            self.store.recentre()
+            fits: dict[str, CandidateTransform] = {}
+            for m in self.modalities:
+                x = self.store.vectors[m][:n]
+                fit = CandidateTransform.fit(
+                    x if sample is None else x[sample],
+                    log=self.preset.dissimilarity != "D2",
+                    max_dims=self.max_dims,
+                )
+                reduced = np.empty((self.store.capacity, fit.projection.shape[1]), np.float32)
+                fit.transform_into(reduced, x, self.store.ids)
+                self.reduced[m] = reduced
+                fits[m] = fit
+            self.fits = fits
+            self.n_at_fit = n
+            self.changes_since_fit = 0
+            self.refits += 1
+            self.dirty = True
+
+    # ---------------------------------------------------------------- search
+    def exact_scores(
+        self,
+        query: Mapping[str, np.ndarray],
+        positions: np.ndarray,
+        modalities: tuple[str, ...],
+        rule: str,
+    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Fused and per-modality dissimilarities of ``query`` to gallery rows ``positions``."""
+        kind = self.preset.dissimilarity
+        # The current gallery's sigma: the rows scored here may be a few candidates.
+        sigma = self.sigma() if kind == "D2" else None
+        per: dict[str, np.ndarray] = {}
+        for m in modalities:
+            g = self.store.vectors[m][positions]
+            q = np.asarray(query[m], dtype=np.float64).ravel()[None, :]
+            per[m] = dissimilarity(q, g, kind, None if sigma is None else sigma[m])[0]
+        weights = {m: self.preset.weight(m) for m in modalities}
+        return np.asarray(fuse(per, rule, weights), dtype=np.float64), per
+
+    def search(
+        self,
+        query: Mapping[str, np.ndarray],
+        k: int,
+        *,
+        fusion: str | None = None,
+        modalities: tuple[str, ...] | None = None,
+        exclude: Iterable[int] = (),
+        exhaustive: bool = False,
+        stats: SearchStats | None = None,
+    ) -> list[Match]:
+        """The ``k`` gallery shapes with the lowest fused dissimilarity to ``query``.
+
+        Parameters
+        ----------
+        query : modality -> (M_m,) float, the query's descriptor vectors.
+        k : number of matches.
+        fusion : "sum" or "product"; default the preset's rule.
+        modalities : fused modalities; default the preset's.
+        exclude : ids left out (e.g. the query shape itself).
+        exhaustive : score every gallery shape (the reference ranking).
+
+        Returns
+        -------
+        Matches sorted by score (ties by id).
+        """
+        start = time.perf_counter()
+        _single_threaded_faiss()
+        rule = fusion or self.preset.fusion
+        mods = tuple(modalities or self.preset.fused_modalities)
+        excluded = set(int(e) for e in exclude)
+        stats = stats if stats is not None else SearchStats()
+        with self._lock:
+            n = self.store.n
+            if n == 0 or k <= 0:
+                return []
+            if self.fits is None and not exhaustive:
+                self.refit()
+            want = min(n, k + len(excluded & self.store.pos.keys()))
+            if exhaustive:
+                positions = np.arange(n)
+                fused, per = self.exact_scores(query, positions, mods, rule)
+                stats.candidates, stats.certified = n, True
+            else:
+                positions, fused, per = self._candidate_search(query, want, mods, rule, stats)
+            ids = self.store.ids[positions]
+            keep = np.array([int(i) not in excluded for i in ids], dtype=bool)
+            ids, fused = ids[keep], fused[keep]
+            per = {m: v[keep] for m, v in per.items()}
+            order = np.lexsort((ids, fused))[:k]
+            matches = [
+                Match(
+                    id=int(ids[j]),
+                    score=float(fused[j]),
+                    scores={m: float(per[m][j]) for m in mods},
+                )
+                for j in order
+            ]
+        stats.seconds = time.perf_counter() - start
+        return matches
+
+    def _candidate_search(
+        self,
+        query: Mapping[str, np.ndarray],
+        want: int,
+        mods: tuple[str, ...],
+        rule: str,
+        stats: SearchStats,
+    ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        """Candidates from faiss, exact scores for as few of them as certifies the top-k.
+
+        Returns the positions whose exact scores were computed, their fused and
+        per-modality scores; every shape not among them scores above the k-th.
+        """
+        assert self.fits is not None
+        n = self.store.n
+        d2 = self.preset.dissimilarity == "D2"
+        weights = {m: self.preset.weight(m) for m in mods}
+        q = {m: np.asarray(query[m], dtype=np.float64).ravel() for m in mods}
+        transformed = {m: self.fits[m].transform(q[m][None, :]) for m in mods}
+        if not d2:
+            count = min(n, max(self.candidates, 4 * want))
+            labels = [self.fits[m].index.search(transformed[m], count)[1][0] for m in mods]
+            union = np.unique(np.concatenate(labels))
+            positions = self.store.positions(union[union >= 0])
+            fused, exact = self.exact_scores(query, positions, mods, rule)
+            stats.rounds, stats.candidates, stats.certified = 1, len(positions), count >= n
+            return positions, fused, exact
+
+        sigma = self.sigma()
+        rho = {m: float(np.min(self.fits[m].scale / sigma[m])) * BOUND_SAFETY for m in mods}
+        # Short modalities (GDM, spectrum) are scored exactly for every candidate; the
+        # long one (DDT, 2,000 elements) is estimated by its projected distance, and
+        # scored exactly in the order of the fused estimate.
+        cheap = tuple(m for m in mods if self.dims[m] <= self.max_dims)
+        costly = tuple(m for m in mods if m not in cheap)
+        count = max(self.candidates, 4 * want)
+        batch = max(2 * want, 32)
+        while True:
+            stats.rounds += 1
+            count = min(count, n)
+            found, threshold = [], {}
+            for m in mods:
+                dist, labels = self.fits[m].index.search(transformed[m], count)
+                found.append(labels[0][labels[0] >= 0])
+                threshold[m] = rho[m] * float(np.sqrt(max(dist[0][-1], 0.0)))
+            positions = self.store.positions(np.unique(np.concatenate(found)))
+            per: dict[str, np.ndarray] = {}
+            for m in cheap:
+                g = self.store.vectors[m][positions]
+                per[m] = normalized_euclidean(q[m][None, :], g, sigma[m])[0]
+            estimate, bound = dict(per), dict(per)
+            for m in costly:
+                diff = self.reduced[m][positions].astype(np.float64) - transformed[m][0]
+                estimate[m] = np.sqrt((diff * diff).sum(axis=1))
+                bound[m] = rho[m] * estimate[m]
+            order = np.argsort(np.asarray(fuse(estimate, rule, weights)), kind="stable")
+            lower = np.asarray(fuse(bound, rule, weights), dtype=np.float64)[order]
+            # Smallest lower bound among the not yet scored: when the k-th exact score
+            # is below it, no remaining candidate can enter the top-k.
+            rest_min = np.append(np.minimum.accumulate(lower[::-1])[::-1], np.inf)
+            fused = np.full(len(positions), np.inf)
+            for m in costly:
+                per[m] = np.full(len(positions), np.inf)
+            done, kth, exact_in_union = 0, np.inf, False
+            while done < len(order):
+                chunk = order[done : done + batch]
+                for m in costly:
+                    g = self.store.vectors[m][positions[chunk]]
+                    per[m][chunk] = normalized_euclidean(q[m][None, :], g, sigma[m])[0]
+                fused[chunk] = fuse({m: per[m][chunk] for m in mods}, rule, weights)
+                done += len(chunk)
+                if done >= want:
+                    kth = np.partition(fused[order[:done]], want - 1)[want - 1]
+                    if kth <= rest_min[done]:
+                        exact_in_union = True
+                        break
+                    if done >= self.max_scored:
+                        break
+            exact_in_union = exact_in_union or done == len(order)
+            refined = order[:done]
+            stats.candidates, stats.scored = len(positions), done
+            out = positions[refined], fused[refined], {m: v[refined] for m, v in per.items()}
+            outside = float(fuse({m: np.asarray(t) for m, t in threshold.items()}, rule, weights))
+            if exact_in_union and (count >= n or kth <= outside):
+                stats.certified = True
+                return out
+            if not exact_in_union or count >= self.max_candidates or count >= n:
+                return out  # best effort: recall measured in bench/index_bench.py
+            count *= 4

@@ -1,0 +1,139 @@
+"""An index on disk: ``manifest.json``, ``arrays.npz`` and one faiss file per modality.
+
+Written to a sibling temporary directory and renamed into place, so a crash
+leaves either the old index or the new one. The database stays the source of
+truth: an index that cannot be read is rebuilt from it (:mod:`.service`).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from pathlib import Path
+from typing import Any
+
+import faiss
+import numpy as np
+
+from worker.engine.presets import Preset
+
+from .candidates import CandidateTransform
+from .index import GalleryIndex
+from .vectors import ids_fingerprint
+
+FORMAT_VERSION = 1
+
+
+def save_index(index: GalleryIndex, directory: Path) -> None:
+    """Write ``index`` atomically to ``directory`` (replacing it); the index is clean after."""
+    with index._lock:
+        if index.fits is None:
+            index.refit()
+        fits = index.fits
+        assert fits is not None
+        store = index.store
+        n = store.n
+        tmp = directory.with_name(directory.name + ".tmp")
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir(parents=True)
+        # Any: np.savez also takes a keyword allow_pickle, which the typed dict must not hide.
+        arrays: dict[str, Any] = {"ids": store.ids[:n]}
+        for m in index.modalities:
+            fit = fits[m]
+            arrays.update(
+                {
+                    f"{m}.vectors": store.vectors[m][:n],
+                    f"{m}.shift": store.shift[m],
+                    f"{m}.sum": store.sum[m],
+                    f"{m}.sumsq": store.sumsq[m],
+                    f"{m}.mu": fit.mu,
+                    f"{m}.scale": fit.scale,
+                    f"{m}.floor": fit.floor,
+                    f"{m}.projection": fit.projection,
+                    f"{m}.reduced": index.reduced[m][:n],
+                }
+            )
+            faiss.write_index(fit.index, str(tmp / f"{m}.faiss"))
+        np.savez(tmp / "arrays.npz", **arrays)
+        manifest = {
+            "format": FORMAT_VERSION,
+            "preset": index.preset.name,
+            "preset_version": index.preset.version,
+            "dims": index.dims,
+            "size": n,
+            "n_at_fit": index.n_at_fit,
+            "changes_since_fit": index.changes_since_fit,
+            "fingerprint": ids_fingerprint(store.ids[:n]),
+            "saved_at": time.time(),
+        }
+        (tmp / "manifest.json").write_text(json.dumps(manifest, indent=1))
+        old = directory.with_name(directory.name + ".old")
+        shutil.rmtree(old, ignore_errors=True)
+        if directory.exists():
+            directory.rename(old)
+        tmp.rename(directory)
+        shutil.rmtree(old, ignore_errors=True)
+        index.dirty = False
+
+
+def load_index(directory: Path, preset: Preset, **options: Any) -> GalleryIndex:
+    """Read an index written by :func:`save_index` (``options`` as for ``GalleryIndex``).
+
+    Raises
+    ------
+    ValueError
+        Missing, corrupt or made for another preset version; rebuild it then.
+    """
+    try:
+        return _read(directory, preset, **options)
+    except ValueError:
+        raise
+    except Exception as exc:  # corrupt files surface as many types
+        raise ValueError(f"unreadable index: {exc}") from exc
+
+
+def _read(directory: Path, preset: Preset, **options: Any) -> GalleryIndex:
+    manifest = json.loads((directory / "manifest.json").read_text())
+    if manifest.get("format") != FORMAT_VERSION or (
+        manifest["preset"],
+        manifest["preset_version"],
+    ) != (preset.name, preset.version):
+        raise ValueError("index made by another format or preset version")
+    index = GalleryIndex(preset, manifest["dims"], **options)
+    with np.load(directory / "arrays.npz") as npz:
+        arrays = {k: np.array(npz[k]) for k in npz.files}
+    n = int(manifest["size"])
+    ids = arrays["ids"].astype(np.int64)
+    if len(ids) != n or ids_fingerprint(ids) != manifest["fingerprint"]:
+        raise ValueError("index ids do not match its manifest")
+    store = index.store
+    store.ensure_capacity(n)
+    store.ids[:n] = ids
+    store.pos = {int(i): p for p, i in enumerate(ids)}
+    store.n = n
+    fits = {}
+    for m in index.modalities:
+        store.vectors[m][:n] = arrays[f"{m}.vectors"]
+        store.shift[m] = arrays[f"{m}.shift"]
+        store.sum[m] = arrays[f"{m}.sum"]
+        store.sumsq[m] = arrays[f"{m}.sumsq"]
+        reduced = arrays[f"{m}.reduced"].astype(np.float32)
+        index.reduced[m] = np.empty((store.capacity, reduced.shape[1]), np.float32)
+        index.reduced[m][:n] = reduced
+        faiss_index = faiss.read_index(str(directory / f"{m}.faiss"))
+        if faiss_index.ntotal != n:
+            raise ValueError(f"faiss index of {m} has {faiss_index.ntotal} rows, not {n}")
+        fits[m] = CandidateTransform(
+            log=preset.dissimilarity != "D2",
+            mu=arrays[f"{m}.mu"],
+            scale=arrays[f"{m}.scale"],
+            floor=arrays[f"{m}.floor"],
+            projection=arrays[f"{m}.projection"],
+            index=faiss_index,
+        )
+    index.fits = fits
+    index.n_at_fit = int(manifest["n_at_fit"])
+    index.changes_since_fit = int(manifest["changes_since_fit"])
+    index.dirty = False
+    return index

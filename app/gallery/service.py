@@ -1,0 +1,207 @@
+"""The gallery: the one owner of the index, and everything the service asks of it.
+
+The collector adds described shapes, the mesh service removes deleted ones, the
+search service searches; all of them through :class:`Gallery`, which also loads
+the index and reconciles it with the database (the source of truth) at start,
+saves it, and publishes its size.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+from sqlalchemy.orm import Session, sessionmaker
+
+from worker.engine.pipeline import ShapeDescriptor
+from worker.engine.presets import MODALITIES, Preset
+
+from ..errors import UnavailableError
+from ..meshes import repository as meshes
+from ..metrics import Metrics
+from .index import GalleryIndex, Match, SearchStats
+from .persistence import load_index, save_index
+from .vectors import descriptor_dims
+
+log = logging.getLogger("shapes.gallery")
+
+
+def descriptor_vectors(descriptor: ShapeDescriptor) -> dict[str, np.ndarray]:
+    """modality -> (M_m,) float, the flat vectors the index compares."""
+    return {m: descriptor.vector(m) for m in MODALITIES}
+
+
+def _decoded(rows: Iterable[tuple[int, bytes]]) -> Iterator[tuple[int, dict[str, np.ndarray]]]:
+    for mesh_id, blob in rows:
+        yield mesh_id, descriptor_vectors(ShapeDescriptor.from_npz_bytes(blob))
+
+
+class Gallery:
+    """The enrolled shapes' index under the service's preset.
+
+    Parameters
+    ----------
+    preset : the preset every enrolled descriptor is made with.
+    directory : where the index is saved (``<index dir>/<preset>-v<version>``).
+    refit_fraction : see :class:`~.index.GalleryIndex`.
+    metrics : ``index_size`` and ``search_seconds`` are published here.
+    """
+
+    def __init__(
+        self, preset: Preset, directory: Path, *, refit_fraction: float, metrics: Metrics
+    ) -> None:
+        self.preset = preset
+        self.directory = directory
+        self.refit_fraction = refit_fraction
+        self.metrics = metrics
+        self.error: str | None = None  # why loading failed, shown by /ready
+        self._index: GalleryIndex | None = None
+        # Held while the database and the index change together (collector, delete),
+        # so a shape deleted while its descriptor is being stored never reaches the index.
+        self._lock = threading.RLock()
+
+    # ------------------------------------------------------------- state
+    @property
+    def loaded(self) -> bool:
+        return self._index is not None
+
+    def __len__(self) -> int:
+        return 0 if self._index is None else len(self._index)
+
+    def _ready(self) -> GalleryIndex:
+        if self._index is None:
+            raise UnavailableError(
+                "The index is still loading; try again in a moment.", code="index_loading"
+            )
+        return self._index
+
+    def _publish_size(self) -> None:
+        self.metrics.index_size.labels(self.preset.name).set(len(self))
+
+    # ----------------------------------------------------------- changes
+    @contextmanager
+    def changing(self) -> Iterator[None]:
+        """Hold the gallery while a database transaction and its index changes happen."""
+        with self._lock:
+            yield
+
+    def add(self, mesh_id: int, descriptor: ShapeDescriptor) -> None:
+        """Make a described shape searchable (no-op while the index is not loaded yet:
+        loading reconciles with the database)."""
+        with self._lock:
+            if self._index is not None:
+                self._index.add(mesh_id, descriptor_vectors(descriptor))
+                self._publish_size()
+
+    def remove(self, mesh_id: int) -> None:
+        """Take a shape out of every search from now on."""
+        with self._lock:
+            if self._index is not None:
+                self._index.remove(mesh_id)
+                self._publish_size()
+
+    # ------------------------------------------------------------ search
+    def search(
+        self,
+        descriptor: ShapeDescriptor,
+        k: int,
+        *,
+        fusion: str | None,
+        modalities: tuple[str, ...],
+        exclude: tuple[int, ...] = (),
+    ) -> tuple[list[Match], SearchStats]:
+        """The ``k`` enrolled shapes most similar to ``descriptor``, and how the search went.
+
+        Raises
+        ------
+        UnavailableError
+            The index is still loading (``index_loading``).
+        """
+        index = self._ready()
+        stats = SearchStats()
+        matches = index.search(
+            descriptor_vectors(descriptor),
+            k,
+            fusion=fusion,
+            modalities=modalities,
+            exclude=exclude,
+            stats=stats,
+        )
+        self.metrics.search_seconds.observe(stats.seconds)
+        return matches, stats
+
+    def check_ready(self) -> None:
+        """Raise ``index_loading`` now rather than after a query's descriptor is computed."""
+        self._ready()
+
+    # ------------------------------------------------------- load / save
+    def load(self, read_sessions: sessionmaker[Session]) -> None:
+        """The saved index brought up to date with the database, or one rebuilt from it.
+
+        A missing, corrupt or other-version index is rebuilt from the stored
+        descriptors; a stale one gets the missing shapes added and the deleted
+        ones removed.
+        """
+        preset, directory = self.preset, self.directory
+        started = time.perf_counter()
+        with read_sessions() as session:
+            db_ids = meshes.descriptor_mesh_ids(session, preset.name, preset.version)
+            try:
+                index = load_index(directory, preset, refit_fraction=self.refit_fraction)
+                how = "loaded"
+            except ValueError as exc:
+                if directory.exists():
+                    log.warning(
+                        "index at %s unusable (%s); rebuilding from the database", directory, exc
+                    )
+                index = GalleryIndex(
+                    preset, descriptor_dims(preset), refit_fraction=self.refit_fraction
+                )
+                rows = meshes.iter_descriptors(session, preset.name, preset.version)
+                index.add_many(_decoded(rows))
+                how = "rebuilt"
+            else:
+                self._reconcile(index, db_ids, session)
+        log.info(
+            "index %s: %d shapes (%s) in %.2fs",
+            preset.name,
+            len(index),
+            how,
+            time.perf_counter() - started,
+        )
+        with self._lock:
+            self._index = index
+            self._publish_size()
+        self.save()
+
+    def _reconcile(self, index: GalleryIndex, db_ids: set[int], session: Session) -> None:
+        have = {int(i) for i in index.ids()}
+        for stale in have - db_ids:
+            index.remove(stale)
+        missing = db_ids - have
+        if missing:
+            p = self.preset
+            for mesh_id, vectors in _decoded(
+                meshes.iter_descriptors(session, p.name, p.version, missing)
+            ):
+                index.add(mesh_id, vectors)
+
+    @property
+    def dirty(self) -> bool:
+        """The index changed since it was last saved."""
+        return self._index is not None and self._index.dirty
+
+    def save(self) -> None:
+        """Save the index if it changed since it was last saved."""
+        index = self._index
+        if index is None or not index.dirty:
+            return
+        try:
+            save_index(index, self.directory)
+        except OSError as exc:  # the database still has everything; the index is a cache
+            log.error("could not save the index: %s", exc)

@@ -1,0 +1,155 @@
+"""The gallery's exact descriptor vectors by position, and eq. (9)'s sigma kept current.
+
+Rows are packed: shape ``item`` is at position ``pos[item]``; removing a row moves
+the last one into its place. ``sigma`` comes from running sums of ``x - shift``
+and its square, updated on every add and remove and re-centred on the current
+mean at each refit (``shift``) to avoid cancellation, so it always equals
+``gallery_sigma`` over the enrolled vectors.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Mapping
+
+import numpy as np
+
+from worker.engine.presets import MODALITIES, Preset
+
+INITIAL_CAPACITY = 64
+
+
+def descriptor_dims(preset: Preset) -> dict[str, int]:
+    """Length of each modality's flat vector under ``preset``."""
+    return {
+        "gdm": preset.gdm_singular_values,
+        "ddt": int(np.prod(preset.ddt_core_shape)),
+        "spectrum": preset.spectrum_size,
+    }
+
+
+def ids_fingerprint(ids: np.ndarray) -> str:
+    """A digest of a set of ids (order-free), to compare an index with the database."""
+    return hashlib.sha256(np.sort(np.asarray(ids, dtype=np.int64)).tobytes()).hexdigest()
+
+
+class GalleryVectors:
+    """Exact vectors of every modality, by position, with running sums for sigma.
+
+    Parameters
+    ----------
+    dims : modality -> M_m, the length of its flat vector.
+    """
+
+    def __init__(self, dims: Mapping[str, int]) -> None:
+        self.dims = dict(dims)
+        self.modalities = tuple(m for m in MODALITIES if m in self.dims)
+        self.ids = np.empty(INITIAL_CAPACITY, dtype=np.int64)  # (capacity,) id by position
+        self.pos: dict[int, int] = {}
+        self.n = 0
+        self.vectors = {m: np.empty((INITIAL_CAPACITY, d)) for m, d in self.dims.items()}
+        self.shift = {m: np.zeros(d) for m, d in self.dims.items()}
+        self.sum = {m: np.zeros(d) for m, d in self.dims.items()}
+        self.sumsq = {m: np.zeros(d) for m, d in self.dims.items()}
+        self._sigma: dict[str, np.ndarray] | None = None
+        self._pos_table: np.ndarray | None = None
+
+    @property
+    def capacity(self) -> int:
+        return len(self.ids)
+
+    def current_ids(self) -> np.ndarray:
+        """(n,) int64, the enrolled ids by position (a copy)."""
+        return self.ids[: self.n].copy()
+
+    def append(self, item: int, vectors: Mapping[str, np.ndarray]) -> int:
+        """Store ``item``'s vectors (modality -> (M_m,) float) at the end; its position."""
+        self.ensure_capacity(self.n + 1)
+        i = self.n
+        rows = {}
+        for m in self.modalities:
+            x = np.asarray(vectors[m], dtype=np.float64).ravel()
+            if x.shape != (self.dims[m],):
+                raise ValueError(f"{m}: expected {self.dims[m]} values, got {x.size}")
+            rows[m] = x
+        for m, x in rows.items():
+            self.vectors[m][i] = x
+            d = x - self.shift[m]
+            self.sum[m] += d
+            self.sumsq[m] += d * d
+        self.ids[i] = item
+        self.pos[item] = i
+        self.n += 1
+        self._changed()
+        return i
+
+    def pop(self, item: int) -> tuple[int, int]:
+        """Remove ``item``; ``(its position, the position of the row moved into it)``.
+
+        The two are equal when ``item`` was the last row (nothing moved).
+        """
+        i = self.pos.pop(item)
+        last = self.n - 1
+        for m in self.modalities:
+            d = self.vectors[m][i] - self.shift[m]
+            self.sum[m] -= d
+            self.sumsq[m] -= d * d
+            self.vectors[m][i] = self.vectors[m][last]
+        if i != last:
+            moved = int(self.ids[last])
+            self.ids[i] = moved
+            self.pos[moved] = i
+        self.n -= 1
+        self._changed()
+        return i, last
+
+    def ensure_capacity(self, n: int) -> None:
+        if n <= self.capacity:
+            return
+        capacity = max(n, 2 * self.capacity)
+        ids = np.empty(capacity, dtype=np.int64)
+        ids[: self.n] = self.ids[: self.n]
+        self.ids = ids
+        for m in self.modalities:
+            grown = np.empty((capacity, self.dims[m]), dtype=np.float64)
+            grown[: self.n] = self.vectors[m][: self.n]
+            self.vectors[m] = grown
+
+    def _changed(self) -> None:
+        self._sigma = None
+        self._pos_table = None
+
+    def sigma(self) -> dict[str, np.ndarray]:
+        """sigma_i of eq. (9) over the current gallery, per modality (as ``gallery_sigma``)."""
+        if self._sigma is None:
+            n = max(self.n, 1)
+            out = {}
+            for m in self.modalities:
+                mean = self.sum[m] / n
+                var = np.maximum(self.sumsq[m] / n - mean * mean, 0.0)
+                sigma = np.sqrt(var)
+                # Exact zeros are constant elements (gallery_sigma gives them 1);
+                # rounding residue of the running sums is treated the same way.
+                scale = np.sqrt(self.sumsq[m] / n) + np.abs(self.shift[m])
+                out[m] = np.where(sigma > 1e-7 * np.maximum(scale, 1e-300), sigma, 1.0)
+            self._sigma = out
+        return self._sigma
+
+    def recentre(self) -> None:
+        """Shift the running sums to the current mean (keeps them accurate)."""
+        for m in self.modalities:
+            x = self.vectors[m][: self.n]
+            mean = x.mean(axis=0) if self.n else np.zeros(self.dims[m])
+            dev = x - mean
+            self.shift[m] = mean
+            self.sum[m] = dev.sum(axis=0)
+            self.sumsq[m] = (dev * dev).sum(axis=0)
+        self._sigma = None
+
+    def positions(self, ids: np.ndarray) -> np.ndarray:
+        """Positions of enrolled ``ids`` (a dense id -> position table, rebuilt after changes)."""
+        if self._pos_table is None:
+            table = np.full(int(self.ids[: self.n].max(initial=-1)) + 1, -1, dtype=np.int64)
+            table[self.ids[: self.n]] = np.arange(self.n)
+            self._pos_table = table
+        return self._pos_table[ids]
