@@ -29,7 +29,7 @@ class DescriptorQueue:
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
         self.huey = make_huey(settings)
-        self._task = self.huey.describe_upload  # type: ignore[attr-defined]
+        self._task = self.huey.describe_upload
 
     def task_path(self, path: Path) -> str:
         """The path handed to workers: relative to the data directory when inside it,

@@ -1,5 +1,7 @@
 #!/usr/bin/env bash
-# Set up the project in .venv (if needed) and run the whole test suite.
+# Set up the project in .venv (if needed), check the code (ruff lint and format, mypy),
+# then run the test suite. Arguments go to pytest: `./scripts/test.sh -m "not slow"`
+# is the fast loop; no arguments run everything (what CI runs).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ ! -x .venv/bin/python ]; then
@@ -7,4 +9,7 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install --quiet --upgrade pip
 .venv/bin/python -m pip install --quiet -e ".[test]"
+.venv/bin/python -m ruff check .
+.venv/bin/python -m ruff format --check .
+.venv/bin/python -m mypy
 exec .venv/bin/python -m pytest "$@"

@@ -13,6 +13,26 @@ from worker.evaluation.datasets import shared_dataset
 
 TOSCA_DIR = shared_dataset("tosca")
 
+#: Fixtures that start real service processes. A test using one is marked ``service``
+#: and ``slow`` here, so ``-m "not slow"`` never waits for an API or a worker.
+SERVICE_FIXTURES = {
+    "service",
+    "gallery",
+    "hardened",
+    "enrolled",
+    "fuzzed",
+    "guarded",
+    "crashy",
+    "limited",
+}
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        if SERVICE_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.service)
+            item.add_marker(pytest.mark.slow)
+
 
 @pytest.fixture(scope="session")
 def tosca_dir() -> Path:

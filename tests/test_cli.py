@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 import trimesh
 
 from worker.cli import main
@@ -12,6 +13,7 @@ from worker.engine import presets
 from worker.engine.pipeline import ShapeDescriptor
 
 
+@pytest.mark.slow  # describes a mesh
 def test_describe_saves_npz_and_json(tmp_path, capsys, monkeypatch, small_preset):
     monkeypatch.setitem(presets.PRESETS, small_preset.name, small_preset)
     mesh_path = tmp_path / "blob.ply"

@@ -186,8 +186,9 @@ class GalleryIndex:
         if self.fits is not None:
             for m in self.modalities:
                 self.reduced[m][i] = self.reduced[m][last]
-                # faiss's Python wrapper accepts an id array in place of an IDSelector.
-                self.fits[m].index.remove_ids(np.array([item], dtype=np.int64))
+                ids = np.array([item], dtype=np.int64)
+                # arg-type: faiss's stubs want an IDSelector; its Python wrapper takes ids too.
+                self.fits[m].index.remove_ids(ids)  # type: ignore[arg-type]
 
     def _grow_reduced(self) -> None:
         """Keep the transformed rows' capacity that of the vectors."""

@@ -59,6 +59,7 @@ def test_eigenpairs_match_dense_generalized_solve():
         assert overlap == pytest.approx(1.0, abs=1e-6)
 
 
+@pytest.mark.slow  # 400 eigenpairs of a TOSCA mesh
 def test_enough_eigenpairs_for_the_shortest_diffusion_time(tosca_dir):
     """Truncating eq. (4) at the preset's k changes the DDT by < 1e-3 at t_D = 100."""
     preset = get_preset("smeets2010-shrec")

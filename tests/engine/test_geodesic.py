@@ -28,6 +28,7 @@ def _relative_errors(estimate, exact):
     return np.abs(estimate[mask] - exact[mask]) / exact[mask]
 
 
+@pytest.mark.slow  # all-source geodesics
 def test_sphere_great_circle_distances():
     sphere = trimesh.creation.icosphere(subdivisions=4)  # 2,562 vertices
     _, _, gdm = _gdm(sphere.vertices, sphere.faces)
@@ -40,6 +41,7 @@ def test_sphere_great_circle_distances():
     assert np.all(np.diag(gdm) == 0)
 
 
+@pytest.mark.slow  # all-source geodesics
 def test_tosca_mesh_against_exact_mmp(tosca_dir):
     pygeodesic = pytest.importorskip("pygeodesic.geodesic")
     mesh = resample_mesh(load_mesh(tosca_dir / "centaur0.off.gz"), 2500)
@@ -54,6 +56,7 @@ def test_tosca_mesh_against_exact_mmp(tosca_dir):
     assert np.median(errors) <= MEDIAN_RELATIVE_ERROR
 
 
+@pytest.mark.slow  # all-source geodesics
 def test_fast_path_equals_per_source_reference():
     sphere = trimesh.creation.icosphere(subdivisions=3)
     noisy = sphere.vertices * (1 + 0.05 * np.random.default_rng(1).random((642, 1)))

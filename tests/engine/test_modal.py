@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import tensorly as tl
 import trimesh
 from tensorly.decomposition import tucker
@@ -33,6 +34,7 @@ def _eigenpairs(k=80):
     return laplace_beltrami_eigenpairs(LaplaceBeltrami.from_fem(fem_operators(mesh)), k)
 
 
+@pytest.mark.slow  # dense DDTs
 def test_low_rank_ddt_core_equals_tensorly_tucker_on_the_full_tensor():
     values, vectors = _eigenpairs()
     full = normalize_slices(diffusion_distance_tensor(values, vectors, TIMES))
@@ -44,6 +46,7 @@ def test_low_rank_ddt_core_equals_tensorly_tucker_on_the_full_tensor():
     np.testing.assert_allclose(fast, np.abs(tl.to_numpy(core)), atol=1e-9 * scale)
 
 
+@pytest.mark.slow  # dense DDTs
 def test_core_is_invariant_to_vertex_order_and_singular_vector_signs():
     values, vectors = _eigenpairs()
     perm = np.random.default_rng(0).permutation(len(vectors))

@@ -17,6 +17,8 @@ from conftest import bent_cylinder, random_rotation
 from worker.engine.mesh_io import Mesh, clean_mesh, load_mesh
 from worker.engine.pipeline import ShapeDescriptor, describe_file, describe_mesh
 
+pytestmark = pytest.mark.slow  # whole pipelines on TOSCA and generated meshes
+
 MODALITIES = ("gdm", "ddt", "spectrum")
 EXACT = 1e-6  # vertex permutation
 RIGID = 0.01  # rotation + translation

@@ -18,6 +18,8 @@ from worker.evaluation.datasets import read_labels, shared_dataset
 from worker.evaluation.run import run_evaluation
 from worker.evaluation.scoring import BASELINE, COLUMNS, ROWS
 
+pytestmark = pytest.mark.slow  # shapes evaluate end to end
+
 TOSCA = shared_dataset("tosca")
 # The 8 smallest files of three classes (4.3k to 19k vertices).
 SUBSET = {

@@ -60,6 +60,7 @@ def test_top_k_equals_the_exhaustive_ranking(preset):
         np.testing.assert_allclose([m.score for m in found], fused[expected], rtol=1e-9)
 
 
+@pytest.mark.slow  # many refits and exhaustive rankings
 def test_certified_searches_are_exact_and_sigma_is_the_current_gallerys():
     gallery = _gallery(300)
     index = _index(SHREC, gallery)
@@ -72,6 +73,7 @@ def test_certified_searches_are_exact_and_sigma_is_the_current_gallerys():
     assert stats.certified and [m.id for m in found] == expected
 
 
+@pytest.mark.slow  # many refits and exhaustive rankings
 def test_adds_and_deletes_keep_sigma_and_results_current():
     gallery = _gallery(400)
     index = _index(SHREC, {m: v[:300] for m, v in gallery.items()})

@@ -1,4 +1,5 @@
-"""Descriptor jobs run under a time and a memory limit and fail with a sentence, not a crash."""
+"""A job over its limit fails with a sentence and the worker lives on (the limits themselves:
+tests/jobs/test_limits.py)."""
 
 from __future__ import annotations
 
@@ -6,55 +7,9 @@ from collections.abc import Iterator
 
 import pytest
 
-from tests.service.conftest import TOSCA, Service
-from worker.engine.pipeline import ShapeDescriptor
-from worker.jobs.limits import describe_limited
+from tests.service.conftest import Service
 
 from .conftest import make_service
-
-WOLF = TOSCA / "wolf0.off.gz"
-GB = 1024**3
-
-
-def test_within_the_limits_the_descriptor_comes_back():
-    npz, code, _ = describe_limited(
-        WOLF,
-        WOLF.name,
-        "smeets2010-shrec",
-        max_faces=10**6,
-        time_limit=120,
-        memory_limit_bytes=4 * GB,
-    )
-    assert code is None and ShapeDescriptor.from_npz_bytes(npz).vertices > 2000
-
-
-def test_over_the_time_limit_the_job_fails_with_a_sentence():
-    npz, code, sentence = describe_limited(
-        WOLF, WOLF.name, "smeets2010-shrec", max_faces=10**6, time_limit=0.5, memory_limit_bytes=0
-    )
-    assert npz is None and code == "describe_timeout"
-    assert "longer than this service's limit of 0.5 seconds" in sentence
-
-
-def test_over_the_memory_limit_the_job_fails_with_a_sentence():
-    npz, code, sentence = describe_limited(
-        WOLF, WOLF.name, "smeets2010-shrec", max_faces=10**6, time_limit=120,
-        memory_limit_bytes=300 * 1024**2,
-    )  # fmt: skip
-    assert npz is None and code == "describe_out_of_memory", (code, sentence)
-    assert "300 MB" in sentence
-
-
-def test_a_mesh_error_keeps_its_code_and_a_crash_is_raised_for_a_retry():
-    npz, code, sentence = describe_limited(
-        WOLF, WOLF.name, "smeets2010-shrec", max_faces=10, time_limit=30, memory_limit_bytes=0
-    )
-    assert code == "too_many_faces" and "the limit is 10" in sentence
-    with pytest.raises(RuntimeError, match="FileNotFoundError"):
-        describe_limited(
-            TOSCA / "missing.off.gz", "m.off.gz", "smeets2010-shrec", max_faces=10,
-            time_limit=30, memory_limit_bytes=0,
-        )  # fmt: skip
 
 
 @pytest.fixture(scope="module")

@@ -94,7 +94,7 @@ def test_stateful_sequences_follow_the_links_without_errors(fuzzed: Service):
 
     answered: Counter[tuple[str, int]] = Counter()  # (operation, status) -> responses
 
-    class Machine(schema.as_state_machine()):  # type: ignore[misc]
+    class Machine(schema.as_state_machine()):
         def after_call(self, response: Response, case: Case) -> None:
             super().after_call(response, case)
             answered[(case.operation.label, response.status_code)] += 1

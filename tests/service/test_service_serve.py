@@ -8,8 +8,11 @@ import sys
 import time
 
 import httpx
+import pytest
 
 from .conftest import REPO, _free_port
+
+pytestmark = [pytest.mark.service, pytest.mark.slow]  # runs python -m app itself
 
 
 def test_serve_starts_api_and_worker_and_stops_cleanly(tmp_path):

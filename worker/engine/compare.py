@@ -8,6 +8,7 @@ against a whole gallery.
 from __future__ import annotations
 
 from collections.abc import Mapping
+from typing import cast
 
 import numpy as np
 
@@ -72,7 +73,8 @@ def normalized_euclidean(queries: np.ndarray, gallery: np.ndarray, sigma: np.nda
     q = np.atleast_2d(np.asarray(queries, dtype=np.float64)) / sigma
     g = np.atleast_2d(np.asarray(gallery, dtype=np.float64)) / sigma
     sq = (q**2).sum(1)[:, None] + (g**2).sum(1)[None, :] - 2.0 * q @ g.T
-    return np.sqrt(np.maximum(sq, 0.0))
+    distances: np.ndarray = np.sqrt(np.maximum(sq, 0.0))
+    return distances
 
 
 def dissimilarity(
@@ -114,7 +116,8 @@ def sum_fusion(
 ) -> np.ndarray:
     """Sum rule: ``sum_m w_m D_m`` (weights default to 1)."""
     weights = weights or {}
-    return sum(weights.get(name, 1.0) * d for name, d in dissimilarities.items())
+    # sum() starts from 0, which the first array absorbs: the result is an array.
+    return cast(np.ndarray, sum(weights.get(name, 1.0) * d for name, d in dissimilarities.items()))
 
 
 def product_fusion(
@@ -122,10 +125,12 @@ def product_fusion(
 ) -> np.ndarray:
     """Product rule: ``prod_m D_m ** w_m`` (weights default to 1)."""
     weights = weights or {}
-    out = None
+    out: np.ndarray | None = None
     for name, d in dissimilarities.items():
         term = np.power(d, weights.get(name, 1.0))
         out = term if out is None else out * term
+    if out is None:
+        raise ValueError("the product rule needs at least one dissimilarity")
     return out
 
 

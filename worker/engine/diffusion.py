@@ -93,7 +93,8 @@ def normalized_spectrum(op: LaplaceBeltrami, eigenvalues: np.ndarray, size: int)
     -------
     (size,) float
     """
-    return eigenvalues[1 : size + 1] * (op.mass.sum() / 2.0)
+    spectrum: np.ndarray = eigenvalues[1 : size + 1] * (op.mass.sum() / 2.0)
+    return spectrum
 
 
 def diffusion_distance_tensor(

@@ -59,6 +59,9 @@ class HeatMethod:
         eps = TOL.poisson_regularization * ops.stiffness.diagonal().mean() / ops.vertex_areas.mean()
         poisson = (ops.stiffness + eps * mass).tocsc()
         self._gradient = ops.gradient
+        # Either solver answers solve(b) for a block of right-hand sides.
+        self._heat: sla.SuperLU | BandedCholesky
+        self._poisson: sla.SuperLU | BandedCholesky
         if reference:
             self._heat, self._poisson = sla.splu(heat), sla.splu(poisson)
             self._divergence = ops.divergence
@@ -95,7 +98,8 @@ class HeatMethod:
         phi = self._poisson.solve(self._divergence @ g.astype(self._divergence.dtype))
         phi = phi.astype(np.float64)
         phi -= phi[sources, np.arange(len(sources))]
-        return np.maximum(phi, 0.0)
+        distances: np.ndarray = np.maximum(phi, 0.0)
+        return distances
 
 
 def geodesic_distance_matrix(
@@ -130,7 +134,9 @@ def geodesic_distances_reference(
     """The same GDM, one source at a time with SuperLU: the plain reference."""
     solver = HeatMethod(mesh, ops, time_factor, reference=True)
     n = mesh.n_vertices
-    gdm = np.column_stack([solver.distances_from(np.array([s]))[:, 0] for s in range(n)])
+    gdm: np.ndarray = np.column_stack(
+        [solver.distances_from(np.array([s]))[:, 0] for s in range(n)]
+    )
     gdm = 0.5 * (gdm + gdm.T)
     np.fill_diagonal(gdm, 0.0)
     return gdm

@@ -52,14 +52,16 @@ class IntrinsicMesh:
         """(m,) float, Heron's formula in its numerically stable form."""
         a, b, c = np.sort(self.lengths, axis=1)[:, ::-1].T  # a >= b >= c
         s = (a + (b + c)) * (c - (a - b)) * (c + (a - b)) * (a + (b - c))
-        return 0.25 * np.sqrt(np.maximum(s, 0.0))
+        areas: np.ndarray = 0.25 * np.sqrt(np.maximum(s, 0.0))
+        return areas
 
     def corner_cotangents(self) -> np.ndarray:
         """(m, 3) float, cotangent of the angle at each corner."""
         l2 = self.lengths**2
         opposite, left, right = l2, l2[:, [1, 2, 0]], l2[:, [2, 0, 1]]
         area = np.maximum(self.face_areas, np.finfo(float).tiny)
-        return (left + right - opposite) / (4.0 * area[:, None])
+        cotangents: np.ndarray = (left + right - opposite) / (4.0 * area[:, None])
+        return cotangents
 
     @property
     def mean_edge_length(self) -> float:
@@ -126,7 +128,14 @@ def intrinsic_delaunay(mesh: IntrinsicMesh) -> IntrinsicMesh:
     return IntrinsicMesh(faces, lengths, n)
 
 
-def _flip(faces, lengths, f1, c1, f2, c2):
+def _flip(
+    faces: np.ndarray,
+    lengths: np.ndarray,
+    f1: np.ndarray,
+    c1: np.ndarray,
+    f2: np.ndarray,
+    c2: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
     """Flip the edge shared by faces f1 (corner c1 opposite it) and f2 (corner c2).
 
     f1 = (i, j, k) with k at c1, f2 = (j, i, l) with l at c2; the new faces are
@@ -182,7 +191,8 @@ class FEMOperators:
     def divergence(self) -> sp.csr_matrix:
         """(n, 2m) sparse, integrated divergence: the transpose of the weighted gradient."""
         weights = np.tile(self.face_areas, 2)
-        return (self.gradient.T @ sp.diags(weights)).tocsr()
+        divergence: sp.csr_matrix = (self.gradient.T @ sp.diags(weights)).tocsr()
+        return divergence
 
 
 def fem_operators(mesh: IntrinsicMesh) -> FEMOperators:

@@ -32,7 +32,7 @@ class BandedCholesky:
         solution needs only single precision.
     """
 
-    def __init__(self, matrix: sp.spmatrix, dtype: type = np.float64) -> None:
+    def __init__(self, matrix: sp.csc_matrix | sp.csr_matrix, dtype: type = np.float64) -> None:
         self.dtype = np.dtype(dtype)
         a = sp.csr_matrix(matrix)
         n = a.shape[0]
@@ -50,13 +50,14 @@ class BandedCholesky:
         self._starts = np.arange(0, n, size)
         self._inverse: list[np.ndarray] = []  # inverses of the diagonal blocks of L
         self._below: list[np.ndarray] = []  # block (i, i-1) of L, for i >= 1
-        for i, r0 in enumerate(self._starts):
+        for i, start in enumerate(self._starts):
+            r0 = int(start)
             r1 = min(r0 + size, n)
             diagonal = self._dense_block(factor, r0, r1, r0, r1)
             inverse = solve_triangular(diagonal, np.eye(r1 - r0), lower=True, check_finite=False)
             self._inverse.append(inverse.astype(self.dtype))
             if i:
-                c0 = self._starts[i - 1]
+                c0 = int(self._starts[i - 1])
                 self._below.append(self._dense_block(factor, r0, r1, c0, r0).astype(self.dtype))
 
     def _dense_block(self, factor: np.ndarray, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:

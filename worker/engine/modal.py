@@ -36,7 +36,8 @@ def normalize_slices(tensor: np.ndarray) -> np.ndarray:
     """
     n = tensor.shape[0]
     sums = tensor.sum(axis=(0, 1))
-    return tensor * (n / sums)
+    normalized: np.ndarray = tensor * (n / sums)
+    return normalized
 
 
 def modal_gdm(gdm: np.ndarray, k: int) -> np.ndarray:
@@ -91,7 +92,8 @@ def hosvd_core(tensor: np.ndarray, core_shape: tuple[int, int, int]) -> np.ndarr
     # A plain SVD of each unfolding, not the Gram matrix: small core elements weigh
     # as much as large ones in D1, and squaring the unfolding would drown them.
     core, _ = tucker(tl.tensor(tensor), rank=list(core_shape), n_iter_max=0, init="svd")
-    return np.abs(tl.to_numpy(core))
+    magnitudes: np.ndarray = np.abs(tl.to_numpy(core))
+    return magnitudes
 
 
 def orthonormal_basis(columns: np.ndarray) -> np.ndarray:
@@ -103,7 +105,8 @@ def orthonormal_basis(columns: np.ndarray) -> np.ndarray:
     """
     q, r, _ = la.qr(columns, mode="economic", pivoting=True)
     pivots = np.abs(np.diag(r))
-    return q[:, pivots > TOL.basis_rank * pivots[0]]
+    basis: np.ndarray = q[:, pivots > TOL.basis_rank * pivots[0]]
+    return basis
 
 
 def ddt_core(

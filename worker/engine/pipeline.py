@@ -5,8 +5,10 @@ from __future__ import annotations
 import io
 import json
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -50,7 +52,7 @@ class ShapeDescriptor:
             raise KeyError(f"unknown modality {modality!r}")
         return np.ravel(getattr(self, modality))
 
-    def to_json(self) -> dict:
+    def to_json(self) -> dict[str, Any]:
         out = {
             "preset": self.preset,
             "preset_version": self.preset_version,
@@ -65,16 +67,29 @@ class ShapeDescriptor:
         return out
 
     @classmethod
-    def from_json(cls, data: dict) -> ShapeDescriptor:
+    def from_json(cls, data: Mapping[str, Any]) -> ShapeDescriptor:
         arrays = {
             name: np.asarray(data[name]["values"], dtype=np.float64).reshape(data[name]["shape"])
             for name in MODALITIES
         }
-        meta = {
-            k: data[k]
-            for k in ("preset", "preset_version", "input_vertices", "input_faces", "vertices")
-        }
-        return cls(**meta, **arrays, timings=dict(data.get("timings", {})))
+        return cls._from_parts(data, arrays, dict(data.get("timings", {})))
+
+    @classmethod
+    def _from_parts(
+        cls, meta: Mapping[str, Any], arrays: Mapping[str, np.ndarray], timings: dict[str, float]
+    ) -> ShapeDescriptor:
+        """From the metadata fields, modality -> array, and the stage timings."""
+        return cls(
+            preset=meta["preset"],
+            preset_version=meta["preset_version"],
+            gdm=arrays["gdm"],
+            ddt=arrays["ddt"],
+            spectrum=arrays["spectrum"],
+            input_vertices=meta["input_vertices"],
+            input_faces=meta["input_faces"],
+            vertices=meta["vertices"],
+            timings=timings,
+        )
 
     def to_npz_bytes(self) -> bytes:
         buffer = io.BytesIO()
@@ -91,8 +106,7 @@ class ShapeDescriptor:
         with np.load(io.BytesIO(data)) as npz:
             meta = json.loads(str(npz["meta"]))
             arrays = {name: np.array(npz[name]) for name in MODALITIES}
-        timings = meta.pop("timings", {})
-        return cls(**meta, **arrays, timings=timings)
+        return cls._from_parts(meta, arrays, meta.get("timings", {}))
 
 
 def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:

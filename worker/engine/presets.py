@@ -8,7 +8,7 @@ descriptors must bump ``version``.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
-from typing import Literal
+from typing import Any, Literal
 
 Dissimilarity = Literal["D1", "D2"]
 Fusion = Literal["sum", "product"]
@@ -62,7 +62,7 @@ class Preset:
     def weight(self, modality: str) -> float:
         return self.fusion_weights.get(modality, 1.0)
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     def __hash__(self) -> int:

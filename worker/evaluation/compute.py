@@ -7,6 +7,7 @@ from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from worker.engine.errors import MeshError
 from worker.engine.mesh_io import load_mesh
@@ -68,7 +69,7 @@ class ComputedSet:
     descriptors: list[ShapeDescriptor]
     baselines: list[ShapeDNA]
     failures: dict[str, str] = field(default_factory=dict)
-    stats: dict[str, float] = field(default_factory=dict)
+    stats: dict[str, Any] = field(default_factory=dict)  # counts, seconds, cache directory
 
 
 def compute_descriptors(
@@ -140,11 +141,18 @@ def compute_descriptors(
     bar.close()
     compute_seconds = time.perf_counter() - start
 
+    def described(i: int) -> tuple[ShapeDescriptor, ShapeDNA]:
+        descriptor, baseline = descriptors[i], baselines[i]
+        # A mesh that did not fail came from the cache or was just computed.
+        assert descriptor is not None and baseline is not None, meshes[i].name
+        return descriptor, baseline
+
     keep = [i for i in range(len(meshes)) if meshes[i].name not in failures]
+    pairs = [described(i) for i in keep]
     return ComputedSet(
         meshes=[meshes[i] for i in keep],
-        descriptors=[descriptors[i] for i in keep],  # type: ignore[misc]
-        baselines=[baselines[i] for i in keep],  # type: ignore[misc]
+        descriptors=[d for d, _ in pairs],
+        baselines=[b for _, b in pairs],
         failures=failures,
         stats={
             "meshes": len(meshes),

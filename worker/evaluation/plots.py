@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -15,7 +16,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 # Distinct styles: per-modality rows solid, fusions dashed, the baseline black.
-_STYLE = {
+_STYLE: dict[str, dict[str, Any]] = {
     "gdm": dict(color="tab:blue", linestyle="-"),
     "ddt": dict(color="tab:orange", linestyle="-"),
     "spectrum": dict(color="tab:green", linestyle="-"),

@@ -49,7 +49,9 @@ def run_evaluation(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if plot is None:
-        from .plots import plot_report as plot
+        from .plots import plot_report  # matplotlib, only when plots are made
+
+        plot = plot_report
     start = time.perf_counter()
     plot(report, out)
     report["timings"]["plot_seconds"] = time.perf_counter() - start

@@ -161,10 +161,10 @@ def score_dissimilarity(
     ``nn_errors`` and ``rank1_errors`` (which object was mistaken for which).
     """
     d = np.asarray(dissimilarity, dtype=np.float64)
-    labels = np.asarray([str(x) for x in labels])
-    retrieval = metrics.retrieval_scores(d, labels)
-    far, frr, _ = metrics.roc_curve(d, labels)
-    cmc = metrics.cmc_curve(d, labels, gallery_idx, probe_idx)
+    classes = np.asarray([str(x) for x in labels])
+    retrieval = metrics.retrieval_scores(d, classes)
+    far, frr, _ = metrics.roc_curve(d, classes)
+    cmc = metrics.cmc_curve(d, classes, gallery_idx, probe_idx)
     roc_far, roc_frr = _thin(far, frr, ROC_POINTS_STORED)
     # FRR at a FAR operating point: the lowest FRR among thresholds with FAR <= target.
     frr_at_far = {str(t): float(frr[far <= t].min()) for t in FAR_OPERATING_POINTS}
@@ -172,26 +172,26 @@ def score_dissimilarity(
     masked = d + np.diag(np.full(len(d), np.inf))
     nearest = np.argmin(masked, axis=1)  # ties -> lower index, as metrics' retrieval
     nn_errors = [
-        {"query": names[i], "class": labels[i], "nearest": names[j], "nearest_class": labels[j]}
+        {"query": names[i], "class": classes[i], "nearest": names[j], "nearest_class": classes[j]}
         for i, j in enumerate(nearest)
-        if labels[i] != labels[j]
+        if classes[i] != classes[j]
     ]
     scores = d[np.ix_(probe_idx, gallery_idx)]
     best = np.argmin(scores, axis=1)
     rank1_errors = [
         {
             "probe": names[p],
-            "class": labels[p],
+            "class": classes[p],
             "matched": names[gallery_idx[b]],
-            "matched_class": labels[gallery_idx[b]],
+            "matched_class": classes[gallery_idx[b]],
         }
         for p, b in zip(probe_idx, best, strict=True)
-        if labels[gallery_idx[b]] != labels[p]
+        if classes[gallery_idx[b]] != classes[p]
     ]
     return {
         **retrieval,
         "r1rr": float(cmc[0]),
-        "eer": metrics.equal_error_rate(d, labels),
+        "eer": metrics.equal_error_rate(d, classes),
         "cmc": cmc.tolist(),
         "roc": {"far": roc_far, "frr": roc_frr},
         "frr_at_far": frr_at_far,

@@ -126,7 +126,7 @@ def make_huey(settings: QueueSettings) -> Huey:
             return {"ok": False, "code": code, "message": message}
         return {"ok": True, "descriptor": base64.b64encode(npz).decode("ascii")}
 
-    huey.describe_upload = describe_upload  # type: ignore[attr-defined]
+    huey.describe_upload = describe_upload  # the service enqueues it by this attribute
     return huey
 
 

@@ -1,0 +1,56 @@
+"""The named parameter sets: validation, lookup, serialization, the shipped ones."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from worker.engine.presets import DEFAULT_PRESET, MODALITIES, PRESETS, Preset, get_preset
+
+
+def test_inconsistent_presets_are_refused():
+    with pytest.raises(ValueError, match="more slices than diffusion times"):
+        Preset(name="x", version=1, ddt_core_shape=(20, 20, 6))
+    with pytest.raises(ValueError, match="spectrum_size must be below n_eigenpairs"):
+        Preset(name="x", version=1, spectrum_size=150, n_eigenpairs=150)
+    with pytest.raises(ValueError, match=r"unknown modalities \['colour'\]"):
+        Preset(name="x", version=1, fused_modalities=("gdm", "colour"))
+
+
+def test_unknown_preset_names_the_known_ones():
+    with pytest.raises(KeyError) as error:
+        get_preset("smeets2011")
+    message = error.value.args[0]
+    assert message.startswith("unknown preset 'smeets2011'; known presets: ")
+    assert message.endswith(", ".join(sorted(PRESETS)))
+
+
+def test_to_dict_round_trips():
+    preset = Preset(
+        name="x", version=3, n_vertices=1000, fusion_weights={"gdm": 0.5}, dissimilarity="D1"
+    )
+    data = preset.to_dict()
+    assert data["fusion_weights"] == {"gdm": 0.5} and data["ddt_core_shape"] == (20, 20, 5)
+    assert Preset(**data) == preset
+    assert {f.name for f in dataclasses.fields(Preset)} == set(data)
+
+
+@pytest.mark.parametrize("name", sorted(PRESETS))
+def test_every_shipped_preset_is_valid(name):
+    preset = get_preset(name)
+    assert preset.name == name and preset.version >= 1
+    assert preset.dissimilarity in ("D1", "D2") and preset.fusion in ("sum", "product")
+    assert set(preset.fused_modalities) <= set(MODALITIES)
+    assert Preset(**preset.to_dict()) == preset  # passes __post_init__'s checks again
+    assert preset.weight("gdm") == preset.fusion_weights.get("gdm", 1.0)
+
+
+def test_the_default_is_the_papers_shrec_setting():
+    preset = get_preset(DEFAULT_PRESET)
+    assert (preset.n_vertices, preset.gdm_singular_values, preset.ddt_core_shape) == (
+        2500,
+        19,
+        (20, 20, 5),
+    )
+    assert (preset.dissimilarity, preset.fusion) == ("D2", "product")

@@ -1,0 +1,64 @@
+"""Index-array helpers: unique rows, edge keys, Euler characteristic, boundary edges."""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+from worker.engine.topology import (
+    boundary_edge_count,
+    edge_keys,
+    euler_characteristic,
+    unique_rows,
+)
+
+
+def open_tube(sections: int = 24, rings: int = 5) -> np.ndarray:
+    """Faces of a cylinder without caps: ``rings`` circles of ``sections`` vertices."""
+    faces = []
+    for r in range(rings - 1):
+        for s in range(sections):
+            a, b = r * sections + s, r * sections + (s + 1) % sections
+            c, d = a + sections, b + sections
+            faces += [(a, b, d), (a, d, c)]
+    return np.array(faces)
+
+
+def test_unique_rows_agrees_with_numpy_unique():
+    rows = np.random.default_rng(0).integers(0, 4, size=(500, 3))  # many repeats
+    first, inverse = unique_rows(rows)
+    expected, expected_first, expected_inverse = np.unique(
+        rows, axis=0, return_index=True, return_inverse=True
+    )
+    np.testing.assert_array_equal(rows[first], expected)
+    np.testing.assert_array_equal(first, expected_first)  # first occurrence of each
+    np.testing.assert_array_equal(inverse, expected_inverse.ravel())
+    np.testing.assert_array_equal(rows[first][inverse], rows)
+
+
+def test_edge_keys_name_the_edge_opposite_each_corner():
+    faces = np.array([[0, 1, 2], [2, 1, 3]])
+    n = 4
+    # corner 0 of face 0 faces edge 1-2, corner 1 faces 2-0, corner 2 faces 0-1
+    np.testing.assert_array_equal(
+        edge_keys(faces, n),
+        [[1 * n + 2, 0 * n + 2, 0 * n + 1], [1 * n + 3, 2 * n + 3, 1 * n + 2]],
+    )
+    # the shared edge 1-2 has one key, whichever face and direction it comes from
+    assert edge_keys(faces, n)[0, 0] == edge_keys(faces, n)[1, 2]
+
+
+def test_euler_characteristic_of_a_sphere_and_a_torus():
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    torus = trimesh.creation.torus(major_radius=2.0, minor_radius=0.5)
+    assert euler_characteristic(sphere.faces, len(sphere.vertices)) == 2
+    assert euler_characteristic(torus.faces, len(torus.vertices)) == 0
+    tube = open_tube()
+    assert euler_characteristic(tube, tube.max() + 1) == 0  # an annulus
+
+
+def test_boundary_edges_of_an_open_cylinder_are_its_two_rims():
+    tube = open_tube(sections=24)
+    assert boundary_edge_count(tube, tube.max() + 1) == 2 * 24
+    sphere = trimesh.creation.icosphere(subdivisions=1)
+    assert boundary_edge_count(sphere.faces, len(sphere.vertices)) == 0

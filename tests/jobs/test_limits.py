@@ -1,0 +1,64 @@
+"""A descriptor job runs in a child process under a time and a memory limit: over
+either it fails with a code and a sentence, a refused mesh keeps its code, and a
+crash is raised so that the queue retries it."""
+
+from __future__ import annotations
+
+import pytest
+
+from worker.engine.pipeline import ShapeDescriptor
+from worker.evaluation.datasets import shared_dataset
+from worker.jobs.limits import describe_limited
+
+pytestmark = pytest.mark.slow  # each describes a TOSCA mesh in a fresh child process
+
+TOSCA = shared_dataset("tosca")
+WOLF = TOSCA / "wolf0.off.gz"
+GB = 1024**3
+
+
+@pytest.fixture(autouse=True)
+def _needs_tosca() -> None:
+    if not WOLF.is_file():
+        pytest.skip(f"TOSCA set not found at {TOSCA}")
+
+
+def test_within_the_limits_the_descriptor_comes_back():
+    npz, code, _ = describe_limited(
+        WOLF,
+        WOLF.name,
+        "smeets2010-shrec",
+        max_faces=10**6,
+        time_limit=120,
+        memory_limit_bytes=4 * GB,
+    )
+    assert code is None and ShapeDescriptor.from_npz_bytes(npz).vertices > 2000
+
+
+def test_over_the_time_limit_the_job_fails_with_a_sentence():
+    npz, code, sentence = describe_limited(
+        WOLF, WOLF.name, "smeets2010-shrec", max_faces=10**6, time_limit=0.5, memory_limit_bytes=0
+    )
+    assert npz is None and code == "describe_timeout"
+    assert "longer than this service's limit of 0.5 seconds" in sentence
+
+
+def test_over_the_memory_limit_the_job_fails_with_a_sentence():
+    npz, code, sentence = describe_limited(
+        WOLF, WOLF.name, "smeets2010-shrec", max_faces=10**6, time_limit=120,
+        memory_limit_bytes=300 * 1024**2,
+    )  # fmt: skip
+    assert npz is None and code == "describe_out_of_memory", (code, sentence)
+    assert "300 MB" in sentence
+
+
+def test_a_mesh_error_keeps_its_code_and_a_crash_is_raised_for_a_retry():
+    npz, code, sentence = describe_limited(
+        WOLF, WOLF.name, "smeets2010-shrec", max_faces=10, time_limit=30, memory_limit_bytes=0
+    )
+    assert code == "too_many_faces" and "the limit is 10" in sentence
+    with pytest.raises(RuntimeError, match="FileNotFoundError"):
+        describe_limited(
+            TOSCA / "missing.off.gz", "m.off.gz", "smeets2010-shrec", max_faces=10,
+            time_limit=30, memory_limit_bytes=0,
+        )  # fmt: skip

@@ -1,0 +1,74 @@
+"""What each room may import (docs/architecture.md), checked in a fresh interpreter."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import worker
+
+#: What the engine's source may import besides the standard library and itself.
+ENGINE_DEPENDENCIES = {"numpy", "scipy", "trimesh", "tensorly", "fast_simplification"}
+#: Libraries of the service, the queue and the evaluation harness: never loaded with the
+#: engine. (threadpoolctl is not listed: scipy.io loads it, not the engine.)
+NOT_IN_ENGINE = {
+    "huey",
+    "pydantic",
+    "pydantic_settings",
+    "fastapi",
+    "starlette",
+    "sqlalchemy",
+    "lapy",
+    "matplotlib",
+    "tqdm",
+    "faiss",
+}
+ENGINE_DIR = Path(worker.__file__).parent / "engine"
+ENGINE_MODULES = sorted(
+    f"worker.engine.{p.stem}" for p in ENGINE_DIR.glob("*.py") if p.stem != "__init__"
+)
+
+
+def modules_loaded_by(statement: str) -> set[str]:
+    """Every module in ``sys.modules`` after running ``statement`` in a new interpreter."""
+    code = f"import sys\n{statement}\nprint('\\n'.join(sorted(sys.modules)))"
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120
+    )
+    return set(result.stdout.split())
+
+
+def test_the_engines_source_imports_only_its_numeric_libraries():
+    imported: dict[str, set[str]] = {}
+    for path in sorted(ENGINE_DIR.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names = [node.module]
+            else:
+                continue  # relative imports stay inside the engine
+            for name in names:
+                imported.setdefault(name.split(".")[0], set()).add(path.name)
+    allowed = ENGINE_DEPENDENCIES | set(sys.stdlib_module_names)
+    assert {name: files for name, files in imported.items() if name not in allowed} == {}
+
+
+def test_importing_the_engine_loads_no_service_queue_or_harness_library():
+    loaded = modules_loaded_by("\n".join(f"import {m}" for m in ENGINE_MODULES))
+    assert set(ENGINE_MODULES) <= loaded  # the statement did import the engine
+    assert {m.split(".")[0] for m in loaded} & NOT_IN_ENGINE == set()
+    rooms = {m for m in loaded if m.startswith(("app", "worker.jobs", "worker.evaluation"))}
+    assert rooms == set()
+
+
+@pytest.mark.parametrize("settings", ["app.config", "worker.jobs.settings"])
+def test_settings_load_neither_the_queue_nor_the_engines_pipeline(settings):
+    loaded = modules_loaded_by(f"import {settings}")
+    assert "pydantic_settings" in loaded
+    assert "huey" not in loaded and "worker.engine.pipeline" not in loaded
+    assert "worker.jobs.queue" not in loaded and "faiss" not in loaded
