@@ -6,6 +6,7 @@ import logging
 import threading
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from typing import Any
 
 import anyio
 from fastapi import FastAPI
@@ -23,6 +24,7 @@ from .meshes.router import router as meshes_router
 from .metrics import Metrics, RequestMetricsMiddleware
 from .migrations import upgrade_head
 from .queue import DescriptorQueue
+from .search.router import document_limits
 from .search.router import router as search_router
 from .state import AppState
 from .storage import UploadStore
@@ -113,6 +115,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         )
     for router in (meshes_router, search_router, jobs_router, system_router):
         app.include_router(router)
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is not None:
+            return app.openapi_schema
+        schema = FastAPI.openapi(app)  # builds and caches app.openapi_schema
+        document_limits(schema, max_k=settings.max_k, preset=settings.preset)
+        return schema
+
+    # method-assign: replacing app.openapi is FastAPI's documented way to extend the schema.
+    app.openapi = openapi  # type: ignore[method-assign]
     return app
 
 

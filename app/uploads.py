@@ -145,6 +145,11 @@ class _Receiver:
                 self._path, self._filename, self._size, self._digest.hexdigest()
             )
         elif self._name:
+            if self._name in self.fields:  # keeping one of the values silently would be a guess
+                raise InvalidInputError(
+                    f"The form field '{self._name}' was sent more than once; send each field once.",
+                    code="repeated_field",
+                )
             self.fields[self._name] = self._buffer.decode("utf-8", "replace")
 
     # ---------------------------------------------------------------------

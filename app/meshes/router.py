@@ -28,23 +28,18 @@ UPLOAD_ERRORS: Responses = {
 }
 
 
-def mesh_links(pointer: str) -> dict[str, Any]:
-    """OpenAPI links from a response whose body holds a mesh id at JSON pointer ``pointer``
-    to every operation that takes one (clients and stateful fuzzers follow them)."""
-    mesh_id = {"mesh_id": f"$response.body#{pointer}"}
-    return {
-        "GetMesh": {"operationId": "get_mesh", "parameters": mesh_id},
-        "GetMeshFile": {"operationId": "get_mesh_file", "parameters": mesh_id},
-        "DeleteMesh": {"operationId": "delete_mesh", "parameters": mesh_id},
-        "SimilarMeshes": {"operationId": "similar_meshes", "parameters": mesh_id},
-    }
-
-
-#: A mesh's descriptor job, from a response that is one mesh.
+# OpenAPI links from a response that is one mesh to every operation taking its id, and
+# to its job (clients and stateful fuzzers follow them).
+_MESH_ID = {"mesh_id": "$response.body#/id"}
 JOB_LINK = {
     "GetJob": {"operationId": "get_job", "parameters": {"job_id": "$response.body#/job_id"}}
 }
-MESH_LINKS = mesh_links("/id") | JOB_LINK
+MESH_LINKS = {
+    "GetMesh": {"operationId": "get_mesh", "parameters": _MESH_ID},
+    "GetMeshFile": {"operationId": "get_mesh_file", "parameters": _MESH_ID},
+    "DeleteMesh": {"operationId": "delete_mesh", "parameters": _MESH_ID},
+    "SimilarMeshes": {"operationId": "similar_meshes", "parameters": _MESH_ID},
+} | JOB_LINK
 
 UPLOAD_BODY = {
     "requestBody": {
@@ -176,13 +171,7 @@ def enroll(
     return mesh_out(mesh, service.descriptor_of(session, state, mesh))
 
 
-@router.get(
-    "",
-    response_model=MeshPage,
-    operation_id="list_meshes",
-    summary="List meshes",
-    responses={200: {"description": "One page of meshes", "links": mesh_links("/items/0/id")}},
-)
+@router.get("", response_model=MeshPage, operation_id="list_meshes", summary="List meshes")
 def list_meshes(
     session: SessionDep,
     state: StateDep,

@@ -35,6 +35,7 @@ OPTION_SCHEMAS: dict[str, dict[str, Any]] = {
     },
     "modalities": {
         "type": "string",
+        "pattern": service.MODALITIES_PATTERN,
         "example": "gdm,ddt",
         "description": "comma-separated, among gdm, ddt, spectrum (default: the preset's)",
     },
@@ -61,6 +62,7 @@ SIMILAR_PARAMETERS = {
             "name": name,
             "in": "query",
             "required": False,
+            "allowEmptyValue": True,  # blank means the default, as for /query's fields
             "description": schema["description"],
             "schema": {k: v for k, v in schema.items() if k != "description"},
         }
@@ -80,6 +82,21 @@ SIMILAR_ERRORS: dict[int | str, dict[str, Any]] = {
     422: {"description": "Bad k/preset/fusion/modalities"},
     503: {"description": "Index loading"},
 }
+
+
+def document_limits(openapi: dict[str, Any], *, max_k: int, preset: str) -> None:
+    """Write the deployment's own limits into the options' schemas (in place): ``k`` at
+    most ``SHAPES_MAX_K``, ``preset`` only the enrolled one, so that documented and
+    accepted values agree."""
+    for path, where in (("/query", "form"), ("/meshes/{mesh_id}/similar", "query")):
+        operation = openapi["paths"][path]["post"]
+        if where == "form":
+            content = operation["requestBody"]["content"]["multipart/form-data"]
+            options = content["schema"]["properties"]
+        else:
+            options = {p["name"]: p["schema"] for p in operation["parameters"]}
+        options["k"]["maximum"] = max_k
+        options["preset"]["enum"] = [preset]
 
 
 def query_out(result: service.SearchResult) -> QueryOut:

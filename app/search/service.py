@@ -27,6 +27,9 @@ from ..storage import ReceivedFile
 #: The search options a client may send, with ``POST /query``'s file.
 OPTION_NAMES = ("k", "preset", "fusion", "modalities")
 DEFAULT_K = 10
+#: What :func:`parse_modalities` accepts (documented in the schema): blank, or names
+#: separated by commas, spaces and empty items allowed.
+MODALITIES_PATTERN = "^ *$|^[ ,]*(gdm|ddt|spectrum)( *,[ ,]*(gdm|ddt|spectrum))*[ ,]*$"
 
 
 @dataclass(frozen=True)
@@ -64,7 +67,8 @@ class SearchResult:
 
 
 def _blank_to_none(value: str | None) -> str | None:
-    return (value or "").strip() or None
+    """An option sent empty or as spaces is the default; any other text is validated."""
+    return (value or "").strip(" ") or None
 
 
 def resolve_preset(state: AppState, name: str | None) -> Preset:
@@ -86,7 +90,7 @@ def resolve_preset(state: AppState, name: str | None) -> Preset:
 def parse_modalities(text: str | None, preset: Preset) -> tuple[str, ...]:
     if text is None:
         return tuple(preset.fused_modalities)
-    names = tuple(dict.fromkeys(p.strip() for p in text.split(",") if p.strip()))
+    names = tuple(dict.fromkeys(p.strip(" ") for p in text.split(",") if p.strip(" ")))
     unknown = [n for n in names if n not in MODALITIES]
     if unknown or not names:
         raise InvalidInputError(

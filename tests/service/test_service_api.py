@@ -159,6 +159,11 @@ def test_bad_fields_are_422(service: Service, gallery):
         "/meshes", files={"file": ("w.off.gz", wolf)}, data={"metadata": "[1, 2]"}
     )
     _error(bad_meta, 422, "invalid_metadata")
+    twice = service.client.post(
+        "/meshes",
+        files=[("file", ("w.off.gz", wolf)), ("label", (None, "a")), ("label", (None, "b"))],
+    )
+    _error(twice, 422, "repeated_field")
     _error(service.client.post("/query", files={"file": ("w.off.gz", wolf)}, data={"k": "0"}), 422)
     _error(
         service.client.post("/query", files={"file": ("w.off.gz", wolf)}, data={"fusion": "max"}),
@@ -219,4 +224,16 @@ def test_health_ready_metrics_and_docs(service: Service, gallery):
     schema = service.client.get("/openapi.json").json()
     assert "multipart/form-data" in schema["paths"]["/meshes"]["post"]["requestBody"]["content"]
     assert schema["paths"]["/query"]["post"]["responses"]["200"]
+    # the deployment's limits are documented, and an enrolled mesh links to what takes its id
+    similar = schema["paths"]["/meshes/{mesh_id}/similar"]["post"]
+    options = {p["name"]: p["schema"] for p in similar["parameters"]}
+    assert options["k"]["maximum"] == 100 and options["preset"]["enum"] == ["smeets2010-shrec"]
+    links = schema["paths"]["/meshes"]["post"]["responses"]["202"]["links"]
+    assert {link["operationId"] for link in links.values()} == {
+        "get_mesh",
+        "get_mesh_file",
+        "delete_mesh",
+        "similar_meshes",
+        "get_job",
+    }
     assert service.client.get("/docs").status_code == 200
