@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from fastapi import APIRouter, Response
 from fastapi.responses import JSONResponse
-from sqlalchemy import text
 
 from ..deps import StateDep
 from ..metrics import CONTENT_TYPE
 from ..schemas import ERROR_RESPONSES
+from . import service
 
 router = APIRouter(tags=["system"], responses=ERROR_RESPONSES)
 
@@ -24,20 +24,8 @@ def health() -> dict[str, str]:
     responses={503: {"description": "Not ready yet (index loading) or database unreachable"}},
 )
 def ready(state: StateDep) -> JSONResponse:
-    checks: dict[str, str] = {}
-    try:
-        with state.read_sessions() as session:
-            session.execute(text("SELECT 1"))
-        checks["database"] = "ok"
-    except Exception as exc:  # any failure means not ready, with the reason shown
-        checks["database"] = f"error: {exc.__class__.__name__}"
-    gallery = state.gallery
-    if gallery.loaded:
-        checks["index"] = f"ok ({len(gallery)} shapes)"
-    else:
-        checks["index"] = gallery.error or "loading"
-    ok = checks["database"] == "ok" and gallery.loaded
-    body = {"status": "ready" if ok else "not_ready", "checks": checks}
+    ok, checks = service.readiness(state)
+    body: dict[str, object] = {"status": "ready" if ok else "not_ready", "checks": checks}
     if not ok:
         body.update(error="not_ready", detail="The service is starting or its database is down.")
     return JSONResponse(body, status_code=200 if ok else 503)

@@ -1,0 +1,24 @@
+"""Readiness: is the database reachable and the gallery loaded?"""
+
+from __future__ import annotations
+
+from sqlalchemy import text
+
+from ..state import AppState
+
+
+def readiness(state: AppState) -> tuple[bool, dict[str, str]]:
+    """``(ready, checks)``: each check is ``"ok"`` or why it is not (shown by ``/ready``)."""
+    checks: dict[str, str] = {}
+    try:
+        with state.read_sessions() as session:
+            session.execute(text("SELECT 1"))
+        checks["database"] = "ok"
+    except Exception as exc:  # any failure means not ready, with the reason shown
+        checks["database"] = f"error: {exc.__class__.__name__}"
+    gallery = state.gallery
+    if gallery.loaded:
+        checks["index"] = f"ok ({len(gallery)} shapes)"
+    else:
+        checks["index"] = gallery.error or "loading"
+    return checks["database"] == "ok" and gallery.loaded, checks
