@@ -121,7 +121,8 @@ class GalleryIndex:
         self.candidates = candidates
         self.max_candidates = max_candidates
         self.max_scored = max_scored
-        self._lock = threading.RLock()
+        # Taken by every public method, and by persistence while it reads or writes.
+        self.lock = threading.RLock()
         # Transformed vectors t_m(x) by position (what faiss holds), for cheap bounds.
         self.reduced: dict[str, np.ndarray] = {}
         self.fits: dict[str, CandidateTransform] | None = None
@@ -138,7 +139,7 @@ class GalleryIndex:
         return item in self.store.pos
 
     def ids(self) -> np.ndarray:
-        with self._lock:
+        with self.lock:
             return self.store.current_ids()
 
     def fingerprint(self) -> str:
@@ -150,7 +151,7 @@ class GalleryIndex:
         """Add (or replace) shape ``item``; searchable on return."""
         if item < 0:
             raise ValueError("ids must be non-negative")
-        with self._lock:
+        with self.lock:
             if item in self.store.pos:
                 self._remove(item)
             i = self.store.append(item, vectors)
@@ -165,7 +166,7 @@ class GalleryIndex:
 
     def add_many(self, items: Iterable[tuple[int, Mapping[str, np.ndarray]]]) -> None:
         """Add many shapes, then refit once (building from a database)."""
-        with self._lock:
+        with self.lock:
             fits, self.fits = self.fits, None
             for item, vectors in items:
                 self.add(item, vectors)
@@ -174,7 +175,7 @@ class GalleryIndex:
 
     def remove(self, item: int) -> bool:
         """Remove shape ``item``; gone from results on return. False if absent."""
-        with self._lock:
+        with self.lock:
             if item not in self.store.pos:
                 return False
             self._remove(item)
@@ -209,13 +210,13 @@ class GalleryIndex:
 
     def sigma(self) -> dict[str, np.ndarray]:
         """sigma_i of eq. (9) over the current gallery, per modality (as ``gallery_sigma``)."""
-        with self._lock:
+        with self.lock:
             return self.store.sigma()
 
     # ----------------------------------------------------------------- fit
     def refit(self) -> None:
         """Refit the candidate transforms on the current gallery and rebuild faiss."""
-        with self._lock:
+        with self.lock:
             n = self.store.n
             rng = np.random.default_rng(0)
             sample = np.sort(rng.choice(n, FIT_SAMPLE, replace=False)) if n > FIT_SAMPLE else None
@@ -290,7 +291,7 @@ class GalleryIndex:
         mods = tuple(modalities or self.preset.fused_modalities)
         excluded = set(int(e) for e in exclude)
         stats = stats if stats is not None else SearchStats()
-        with self._lock:
+        with self.lock:
             n = self.store.n
             if n == 0 or k <= 0:
                 return []

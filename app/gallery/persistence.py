@@ -27,7 +27,7 @@ FORMAT_VERSION = 1
 
 def save_index(index: GalleryIndex, directory: Path) -> None:
     """Write ``index`` atomically to ``directory`` (replacing it); the index is clean after."""
-    with index._lock:
+    with index.lock:
         if index.fits is None:
             index.refit()
         fits = index.fits
