@@ -35,7 +35,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from app.gallery.index import GalleryIndex, SearchStats  # noqa: E402
-from app.gallery.vectors import descriptor_dims  # noqa: E402
 from bench._tosca import tosca_descriptors, tosca_labels  # noqa: E402
 from worker.engine.compare import dissimilarity, fuse, gallery_sigma  # noqa: E402
 from worker.engine.presets import MODALITIES, get_preset  # noqa: E402
@@ -57,7 +56,7 @@ def exhaustive_topk(preset, gallery: dict, sigma: dict | None, queries: list[dic
 
 
 def build(preset, gallery: dict, ids: np.ndarray) -> GalleryIndex:
-    index = GalleryIndex(preset, descriptor_dims(preset))
+    index = GalleryIndex(preset, preset.modality_sizes())
     index.add_many((int(i), {m: gallery[m][j] for m in MODALITIES}) for j, i in enumerate(ids))
     return index
 

@@ -26,7 +26,6 @@ from ..meshes import repository as meshes
 from ..metrics import Metrics
 from .index import GalleryIndex, Match, SearchStats
 from .persistence import load_index, save_index
-from .vectors import descriptor_dims
 
 log = logging.getLogger("shapes.gallery")
 
@@ -160,7 +159,7 @@ class Gallery:
                         "index at %s unusable (%s); rebuilding from the database", directory, exc
                     )
                 index = GalleryIndex(
-                    preset, descriptor_dims(preset), refit_fraction=self.refit_fraction
+                    preset, preset.modality_sizes(), refit_fraction=self.refit_fraction
                 )
                 rows = meshes.iter_descriptors(session, preset.name, preset.version)
                 index.add_many(_decoded(rows))

@@ -14,18 +14,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from worker.engine.presets import MODALITIES, Preset
+from worker.engine.presets import MODALITIES
 
 INITIAL_CAPACITY = 64
-
-
-def descriptor_dims(preset: Preset) -> dict[str, int]:
-    """Length of each modality's flat vector under ``preset``."""
-    return {
-        "gdm": preset.gdm_singular_values,
-        "ddt": int(np.prod(preset.ddt_core_shape)),
-        "spectrum": preset.spectrum_size,
-    }
 
 
 def ids_fingerprint(ids: np.ndarray) -> str:

@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.linalg as la
+import scipy.sparse.linalg as sla
 import trimesh
 
+from worker.engine import diffusion
 from worker.engine.diffusion import (
     LaplaceBeltrami,
     diffusion_distance_tensor,
@@ -94,3 +96,29 @@ def test_diffusion_distances_are_symmetric_and_shrink_with_time():
     assert ddt.shape == (162, 162, 3)
     np.testing.assert_allclose(ddt, ddt.transpose(1, 0, 2), atol=1e-15)
     assert np.all(ddt[:, :, 0].sum() > ddt[:, :, 1].sum() > ddt[:, :, 2].sum())
+
+
+def test_dense_solver_answers_when_arpack_gives_up(monkeypatch):
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    op = _operator(sphere.vertices, sphere.faces)
+    expected, _ = laplace_beltrami_eigenpairs(op, 30)
+
+    def give_up(*args, **kwargs):
+        raise sla.ArpackError(-9999)
+
+    monkeypatch.setattr(diffusion.sla, "eigsh", give_up)
+    values, vectors = laplace_beltrami_eigenpairs(op, 30)
+    assert abs(values[0]) < 1e-9 * values[1]
+    np.testing.assert_allclose(values[1:], expected[1:], rtol=1e-8)
+    gram = vectors.T @ (op.mass[:, None] * vectors)
+    np.testing.assert_allclose(gram, np.eye(30), atol=1e-8)
+
+
+def test_shift_sits_below_the_spectrum_at_any_scale():
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    small = _operator(1e-3 * sphere.vertices, sphere.faces)
+    large = _operator(1e3 * sphere.vertices, sphere.faces)
+    values, _ = laplace_beltrami_eigenpairs(large, 5)
+    # The paper's (L, A) is scale-free (A's constant is 5 / mean triangle area).
+    assert small.shift() == pytest.approx(large.shift())
+    assert -1e-2 * values[1] < large.shift() < 0.0

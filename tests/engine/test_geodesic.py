@@ -8,9 +8,20 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from conftest import swept_tube
 
-from worker.engine.geodesic import geodesic_distance_matrix, geodesic_distances_reference
-from worker.engine.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
+from worker.engine.geodesic import (
+    HeatMethod,
+    geodesic_distance_matrix,
+    geodesic_distances_reference,
+    heat_time,
+)
+from worker.engine.intrinsic import (
+    IntrinsicMesh,
+    fem_operators,
+    intrinsic_delaunay,
+    surface_operators,
+)
 from worker.engine.mesh_io import load_mesh
 from worker.engine.resample import resample_mesh
 
@@ -64,3 +75,29 @@ def test_fast_path_equals_per_source_reference():
     reference = geodesic_distances_reference(mesh, ops)
     # The fast path's Poisson step runs in single precision (float32 eps 6e-8).
     np.testing.assert_allclose(fast, reference, rtol=1e-5, atol=1e-6 * reference.max())
+
+
+def test_distances_stay_finite_along_a_long_thin_tube():
+    """Issue 9: along a tube about 950 edge lengths long, the heat step with t = h^2
+    underflowed to zero halfway, and the distances became NaN and 1e145."""
+    length = 12.0
+    axis = np.linspace(0.0, length, 956)[:, None] * np.array([[0.0, 0.0, 1.0]])
+    vertices, faces = swept_tube(axis, radius=0.01, sides=5)
+    mesh, ops = surface_operators(vertices, faces)
+    near_cap, far_cap = len(vertices) - 2, len(vertices) - 1
+    distances = HeatMethod(mesh, ops).distances_from(np.array([near_cap]))[:, 0]
+    assert np.all(np.isfinite(distances))
+    assert distances[far_cap] == pytest.approx(length, rel=0.01)
+    assert np.all(np.diff(distances[: len(axis) * 5 : 5]) > 0)  # down the axis, ring by ring
+
+
+def test_heat_time_in_surface_units_ignores_the_triangulation():
+    uniform = trimesh.creation.icosphere(subdivisions=4)
+    polar = trimesh.creation.uv_sphere(count=[48, 48])  # dense at the poles
+    times, mesh_times = [], []
+    for sphere in (uniform, polar):
+        mesh, ops = surface_operators(sphere.vertices, sphere.faces)
+        times.append(heat_time(mesh, ops, 12.0, n_reference=2500))
+        mesh_times.append(heat_time(mesh, ops, 12.0))
+    assert times[0] == pytest.approx(times[1], rel=0.01)
+    assert abs(mesh_times[0] / mesh_times[1] - 1) > 0.1

@@ -7,7 +7,7 @@ import pytest
 import robust_laplacian
 import trimesh
 
-from worker.engine.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
+from worker.engine.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay, mollify
 from worker.engine.mesh_io import load_mesh
 from worker.engine.resample import resample_mesh
 from worker.engine.topology import edge_keys
@@ -90,3 +90,19 @@ def test_gradient_of_linear_function_is_exact():
     normals = mesh.face_normals
     tangential = a - (normals @ a)[:, None] * normals
     np.testing.assert_allclose(norms, np.linalg.norm(tangential, axis=1), rtol=1e-9)
+
+
+def test_mollification_bounds_needles_and_leaves_good_triangles_alone():
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    good = IntrinsicMesh.from_mesh(sphere.vertices, sphere.faces)
+    assert mollify(good) is good
+    # A strip of two triangles whose shared vertex sits 1e-10 off the long edge: a
+    # needle whose cotangent (1e10) no flip can remove (the flip's diagonal exists).
+    vertices = np.array([[0.0, 0, 0], [1, 0, 0], [0.5, 1e-10, 0], [0.5, -1, 0], [0.5, 1, 0]])
+    faces = np.array([[0, 1, 2], [1, 0, 3], [0, 2, 4], [2, 1, 4]])
+    needle = IntrinsicMesh.from_mesh(vertices, faces)
+    assert needle.corner_cotangents().max() > 1e9
+    fixed = mollify(needle)
+    shift = fixed.lengths - needle.lengths
+    assert np.allclose(shift, shift.flat[0]) and 0 < shift.flat[0] <= 1e-4
+    assert fixed.corner_cotangents().max() < 1e6

@@ -7,9 +7,10 @@ import gzip
 import numpy as np
 import pytest
 import trimesh
+from conftest import random_rotation
 
 from worker.engine import errors
-from worker.engine.mesh_io import clean_mesh, load_mesh, mesh_format
+from worker.engine.mesh_io import Mesh, canonical_frame, clean_mesh, load_mesh, mesh_format
 
 
 @pytest.fixture(scope="module")
@@ -176,3 +177,20 @@ def _tetra():
     vertices = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
     faces = [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]
     return vertices, faces
+
+
+def test_canonical_frame_undoes_rotation_translation_and_scale(sphere):
+    rng = np.random.default_rng(5)
+    # An ellipsoid with bumps: distinct principal axes, no symmetry to tie the signs.
+    x, y, z = sphere.vertices.T
+    bumps = 1.0 + 0.15 * np.sin(3 * x + 2 * y + 1.5 * z)
+    shape = Mesh(sphere.vertices * bumps[:, None] * [3.0, 2.0, 1.0], sphere.faces)
+    canonical = canonical_frame(shape)
+    tri = canonical.vertices[canonical.faces]
+    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    assert areas.sum() == pytest.approx(1.0)
+    assert np.linalg.norm(areas @ tri.mean(axis=1)) < 1e-12
+    for scale in (1e-30, 0.01, 100.0, 1e30):
+        rotated = shape.vertices @ random_rotation(rng).T
+        moved = Mesh((rotated + [5.0, -3.0, 2.0]) * scale, shape.faces)
+        np.testing.assert_allclose(canonical_frame(moved).vertices, canonical.vertices, atol=1e-9)

@@ -12,9 +12,16 @@ from worker.engine.diffusion import (
     LaplaceBeltrami,
     diffusion_distance_tensor,
     laplace_beltrami_eigenpairs,
+    surface_eigenpairs,
 )
-from worker.engine.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
+from worker.engine.intrinsic import (
+    IntrinsicMesh,
+    fem_operators,
+    intrinsic_delaunay,
+    surface_operators,
+)
 from worker.engine.modal import (
+    core_diagonal,
     ddt_core,
     hosvd_core,
     modal_gdm,
@@ -91,3 +98,63 @@ def test_orthonormal_basis_drops_dependent_columns():
     assert q.shape == (100, 5)
     np.testing.assert_allclose(q.T @ q, np.eye(5), atol=1e-12)
     np.testing.assert_allclose(q @ (q.T @ columns), columns, atol=1e-10)
+
+
+def _weighted_eigenpairs(k=80):
+    """Eigenpairs orthonormal in the lumped-area inner product, and the areas."""
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    rng = np.random.default_rng(7)
+    v = sphere.vertices * (1 + 0.2 * rng.random((len(sphere.vertices), 1)))
+    mesh, ops = surface_operators(v, sphere.faces)
+    op = LaplaceBeltrami.from_fem(ops)
+    values, vectors = laplace_beltrami_eigenpairs(op, k)
+    values, functions = surface_eigenpairs(op, values, vectors, 2500)
+    return values, functions, ops.vertex_areas
+
+
+@pytest.mark.slow  # dense DDTs
+def test_area_weighted_core_equals_the_hosvd_of_the_dense_weighted_tensor():
+    values, functions, mass = _weighted_eigenpairs()
+    np.testing.assert_allclose(functions.T @ (mass[:, None] * functions), np.eye(80), atol=1e-8)
+    dense = diffusion_distance_tensor(values, functions, TIMES)
+    root = np.sqrt(mass)
+    weighted = dense * (root[:, None] * root[None, :])[:, :, None]
+    # Each slice divided by its area-weighted mean times the area.
+    weighted *= mass.sum() / np.einsum("i,ijs,j->s", mass, dense, mass)
+    expected = hosvd_core(weighted, (20, 20, 5))
+    fast = ddt_core(values, functions, TIMES, (20, 20, 5), mass)
+    np.testing.assert_allclose(fast, expected, atol=1e-9 * expected.max())
+
+
+def test_unit_weights_give_the_papers_core():
+    values, vectors = _eigenpairs(40)
+    paper = ddt_core(values, vectors, TIMES, (10, 10, 5))
+    ones = ddt_core(values, vectors, TIMES, (10, 10, 5), np.ones(len(vectors)))
+    np.testing.assert_allclose(ones, paper, atol=1e-10 * paper.max())
+
+
+def test_area_weighted_gdm_is_the_integral_operator_and_scale_free():
+    rng = np.random.default_rng(4)
+    points = rng.random((300, 3))
+    gdm = np.linalg.norm(points[:, None] - points[None], axis=2)
+    mass = rng.uniform(0.5, 2.0, 300)
+    fast = modal_gdm(gdm, 19, mass)
+    np.testing.assert_allclose(fast, modal_gdm_reference(gdm, 19, mass), rtol=1e-9)
+    # Lengths x s and areas x s^2: the same descriptor.
+    np.testing.assert_allclose(modal_gdm(3.0 * gdm, 19, 9.0 * mass), fast, rtol=1e-9)
+    # Sampling one half of the points twice as densely (each of them split into two
+    # half-weight copies) leaves the operator's non-zero eigenvalues unchanged...
+    split = np.r_[np.arange(300), np.arange(150)]
+    denser = gdm[np.ix_(split, split)]
+    weights = np.r_[mass[:150] / 2, mass[150:], mass[:150] / 2]
+    np.testing.assert_allclose(modal_gdm(denser, 19, weights), fast, rtol=1e-8)
+    # ... while the paper's vertex matrix follows the sampling.
+    paper, resampled = modal_gdm(gdm, 19), modal_gdm(denser, 19)
+    assert np.abs(resampled / paper - 1).max() > 0.02
+
+
+def test_core_diagonal_takes_the_elements_on_the_first_two_modes_diagonal():
+    core = np.arange(4 * 4 * 3, dtype=float).reshape(4, 4, 3)
+    diagonal = core_diagonal(core)
+    assert diagonal.shape == (4, 3)
+    np.testing.assert_array_equal(diagonal[2], core[2, 2])

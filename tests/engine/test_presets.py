@@ -46,11 +46,37 @@ def test_every_shipped_preset_is_valid(name):
     assert preset.weight("gdm") == preset.fusion_weights.get("gdm", 1.0)
 
 
-def test_the_default_is_the_papers_shrec_setting():
+def test_the_paper_presets_keep_the_papers_parameters():
+    shrec, tosca = get_preset("smeets2010-shrec"), get_preset("smeets2010-tosca")
+    for preset in (shrec, tosca):
+        assert (preset.gdm_singular_values, preset.ddt_core_shape) == (19, (20, 20, 5))
+        assert preset.diffusion_times == (100.0, 200.0, 400.0, 800.0, 1500.0)
+        assert (preset.measure, preset.ddt_elements, preset.heat_time_factor) == (
+            "vertices",
+            "core",
+            1.0,
+        )
+    assert (shrec.n_vertices, shrec.dissimilarity, shrec.fusion) == (2500, "D2", "product")
+    assert (tosca.n_vertices, tosca.dissimilarity, tosca.fusion) == (3000, "D1", "sum")
+
+
+def test_the_default_fuses_all_three_modalities_by_a_weighted_product():
     preset = get_preset(DEFAULT_PRESET)
-    assert (preset.n_vertices, preset.gdm_singular_values, preset.ddt_core_shape) == (
-        2500,
-        19,
-        (20, 20, 5),
-    )
-    assert (preset.dissimilarity, preset.fusion) == ("D2", "product")
+    assert preset.measure == "surface" and preset.fusion == "product"
+    assert preset.fused_modalities == ("gdm", "ddt", "spectrum")
+    assert set(preset.fusion_weights) == set(MODALITIES)
+
+
+def test_modality_sizes_follow_the_ddt_elements():
+    core = Preset(name="x", version=1)
+    diagonal = Preset(name="x", version=1, ddt_elements="diagonal")
+    assert core.modality_sizes() == {"gdm": 19, "ddt": 2000, "spectrum": 50}
+    assert diagonal.modality_sizes()["ddt"] == 100
+
+
+def test_descriptor_fields_leave_out_how_descriptors_are_compared():
+    preset = get_preset(DEFAULT_PRESET)
+    reweighted = dataclasses.replace(preset, fusion_weights={"ddt": 1.0}, dissimilarity="D2")
+    assert reweighted.descriptor_fields() == preset.descriptor_fields()
+    assert "heat_time_factor" in preset.descriptor_fields()
+    assert "fusion_weights" not in preset.descriptor_fields()

@@ -7,7 +7,6 @@ import pytest
 
 from app.gallery.index import GalleryIndex, SearchStats
 from app.gallery.persistence import load_index, save_index
-from app.gallery.vectors import descriptor_dims
 from worker.engine.compare import dissimilarity, fuse, gallery_sigma
 from worker.engine.presets import MODALITIES, get_preset
 
@@ -18,7 +17,7 @@ TOSCA = get_preset("smeets2010-tosca")  # D1, sum rule
 def _gallery(n: int, seed: int = 0) -> dict[str, np.ndarray]:
     """Positive descriptors with class structure, shaped like the real ones."""
     rng = np.random.default_rng(seed)
-    dims = descriptor_dims(SHREC)
+    dims = SHREC.modality_sizes()
     classes = rng.integers(0, max(n // 8, 1), size=n)
     out = {}
     for m, d in dims.items():
@@ -37,7 +36,7 @@ def _exhaustive(preset, gallery, query, k, exclude=()):
 
 
 def _index(preset, gallery, **options) -> GalleryIndex:
-    index = GalleryIndex(preset, descriptor_dims(preset), **options)
+    index = GalleryIndex(preset, preset.modality_sizes(), **options)
     n = len(gallery["gdm"])
     index.add_many((i, {m: gallery[m][i] for m in MODALITIES}) for i in range(n))
     return index
@@ -113,8 +112,8 @@ def test_save_load_roundtrip_and_corrupt_files_are_refused(tmp_path):
 
 
 def test_empty_and_tiny_galleries():
-    index = GalleryIndex(SHREC, descriptor_dims(SHREC))
-    query = {m: np.ones(d) for m, d in descriptor_dims(SHREC).items()}
+    index = GalleryIndex(SHREC, SHREC.modality_sizes())
+    query = {m: np.ones(d) for m, d in SHREC.modality_sizes().items()}
     assert index.search(query, 5) == []
     index.add(42, query)
     (only,) = index.search(query, 5)

@@ -4,7 +4,8 @@ The paper solves the Eikonal equation (eq. 1) by fast marching. We use the heat
 method (Crane, Weischedel & Wardetzky 2013) on the intrinsic Delaunay
 triangulation, which solves the same problem with two sparse linear systems:
 
-1. heat flow ``(M + t L) u = delta_s`` for a short time ``t = h^2``,
+1. heat flow ``(M + t L) u = delta_s`` for a short time ``t = h^2`` (longer on
+   very long, thin surfaces, see :func:`shortest_safe_time`),
 2. the unit field ``X = -grad u / |grad u|`` points along geodesics,
 3. ``L phi = div X`` recovers the distance ``phi`` up to a constant.
 
@@ -16,15 +17,71 @@ per-source version with SuperLU that the fast path is tested against.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
+from scipy.sparse.csgraph import dijkstra
 
 from .intrinsic import FEMOperators, IntrinsicMesh
 from .linalg import BandedCholesky
 from .tol import TOL
+from .topology import edge_keys
 
 SOURCE_BLOCK = 1024
+
+
+def heat_time(
+    mesh: IntrinsicMesh, ops: FEMOperators, factor: float, n_reference: int | None = None
+) -> float:
+    """The heat step's time: ``factor`` squared edge lengths.
+
+    Crane et al. take ``t = h^2`` with ``h`` the mesh's mean edge length, which
+    gives the most accurate distances on that mesh; a larger ``t`` gives smoother
+    ones (their sec. 3.2). With ``n_reference``, ``h`` is instead the edge of the
+    equilateral triangulation of the same area with ``n_reference`` vertices
+    (``2 n`` triangles: ``h^2 = 2 area / (sqrt(3) n)``), a length of the surface
+    that no tessellation changes.
+
+    Returns
+    -------
+    float, in squared length units.
+    """
+    if n_reference is None:
+        return factor * mesh.mean_edge_length**2
+    return factor * 2.0 * float(ops.face_areas.sum()) / (math.sqrt(3.0) * n_reference)
+
+
+def shortest_safe_time(mesh: IntrinsicMesh) -> float:
+    """The shortest heat time at which ``u`` stays a normal float across the mesh.
+
+    One backward-Euler heat step decays like ``exp(-d / sqrt(t))`` with the
+    distance ``d`` from the source. On a long thin surface (a helical spring of
+    wire at 2,500 vertices is 700 edge lengths long) ``u`` underflows to zero far
+    from the source with ``t = h^2``, the unit field loses its direction there and
+    the distances become meaningless. Keeping ``diameter / sqrt(t)`` below
+    ``TOL.heat_max_decay`` prevents that; on ordinary shapes the bound is far below
+    ``h^2`` and changes nothing.
+
+    The diameter is bounded from above by twice the eccentricity of vertex 0 on
+    the edge graph (graph paths are never shorter than geodesics).
+
+    Returns
+    -------
+    float, a heat time in squared length units.
+    """
+    # Each interior edge is listed by both its faces: keep one copy (a sparse matrix
+    # would add the two lengths).
+    _, first = np.unique(edge_keys(mesh.faces, mesh.n_vertices).ravel(), return_index=True)
+    edges = mesh.faces[:, [1, 2, 2, 0, 0, 1]].reshape(-1, 2)[first]
+    graph = sp.csr_matrix(
+        (mesh.lengths.ravel()[first], (edges[:, 0], edges[:, 1])),
+        shape=(mesh.n_vertices, mesh.n_vertices),
+    )
+    reach = dijkstra(graph, directed=False, indices=np.array([0]))[0]
+    diameter = 2.0 * float(np.max(reach[np.isfinite(reach)]))
+    return (diameter / TOL.heat_max_decay) ** 2
 
 
 class HeatMethod:
@@ -34,7 +91,9 @@ class HeatMethod:
     ----------
     mesh : intrinsic triangulation (its Delaunay one gives the best accuracy).
     ops : the mesh's finite-element operators.
-    time_factor : heat time in units of the squared mean edge length.
+    time_factor : heat time in squared edge lengths (see :func:`heat_time`).
+    n_reference : count edge lengths on the surface rather than on this mesh
+        (see :func:`heat_time`).
     reference : solve with SuperLU in double precision throughout (the plain
         version the fast path is tested against). The fast path factors both
         systems with :class:`BandedCholesky` and runs the Poisson step in single
@@ -48,10 +107,11 @@ class HeatMethod:
         mesh: IntrinsicMesh,
         ops: FEMOperators,
         time_factor: float = 1.0,
+        n_reference: int | None = None,
         reference: bool = False,
     ):
         self.n = mesh.n_vertices
-        t = time_factor * mesh.mean_edge_length**2
+        t = max(heat_time(mesh, ops, time_factor, n_reference), shortest_safe_time(mesh))
         mass = sp.diags(ops.vertex_areas)
         heat = (mass + t * ops.stiffness).tocsc()
         # L is singular (constants); a tiny mass term makes it definite and only
@@ -88,13 +148,14 @@ class HeatMethod:
         g = self._gradient @ u  # (2m, s): x components of all faces, then y
         m = len(g) // 2
         gx, gy = g[:m], g[m:]
-        scale = gx * gx
-        scale += gy * gy
-        np.sqrt(scale, out=scale)
-        np.maximum(scale, np.finfo(float).tiny, out=scale)
-        np.divide(-1.0, scale, out=scale)
-        gx *= scale
-        gy *= scale
+        # hypot, not sqrt(x^2 + y^2): far from a source the gradient can be below
+        # 1e-154, whose square underflows and would turn the unit field into 1e150s.
+        # A face where u is flat to the last bit has no direction; it stays zero.
+        length = np.hypot(gx, gy)
+        inverse = np.zeros_like(length)
+        np.divide(-1.0, length, out=inverse, where=length > 0)
+        gx *= inverse
+        gy *= inverse
         phi = self._poisson.solve(self._divergence @ g.astype(self._divergence.dtype))
         phi = phi.astype(np.float64)
         phi -= phi[sources, np.arange(len(sources))]
@@ -103,20 +164,23 @@ class HeatMethod:
 
 
 def geodesic_distance_matrix(
-    mesh: IntrinsicMesh, ops: FEMOperators, time_factor: float = 1.0
+    mesh: IntrinsicMesh,
+    ops: FEMOperators,
+    time_factor: float = 1.0,
+    n_reference: int | None = None,
 ) -> np.ndarray:
     """All-pairs geodesic distances (the GDM of sec. 2.1).
 
     Parameters
     ----------
     mesh, ops : intrinsic triangulation and its operators.
-    time_factor : heat time in units of the squared mean edge length.
+    time_factor, n_reference : the heat step's time (:func:`heat_time`).
 
     Returns
     -------
     (n, n) float, symmetric with zero diagonal, in the mesh's length unit.
     """
-    solver = HeatMethod(mesh, ops, time_factor)
+    solver = HeatMethod(mesh, ops, time_factor, n_reference)
     n = mesh.n_vertices
     gdm = np.empty((n, n))
     for start in range(0, n, SOURCE_BLOCK):

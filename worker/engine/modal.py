@@ -3,6 +3,18 @@
 A simultaneous permutation of the first two modes (eq. 5) leaves the singular
 values of the GDM and the HOSVD core of the DDT unchanged (eqs. 6-7), so these are
 the descriptors. Both tensors are first normalized per slice (sec. 4.2).
+
+Two discretizations of the same idea:
+
+* as in the paper (``mass=None``): the matrices over the vertex set, each slice
+  divided by its sum. Their singular values are those of the vertex sampling, so
+  they change with the triangulation (a mesh decimated where the surface bends
+  gets more weight there), more than between two different bodies (measured on
+  TOSCA, ``docs/evaluation.md``);
+* on the surface (``mass`` = lumped vertex areas ``m``): the matrices weighted
+  ``M^1/2 D M^1/2``, whose eigenvalues approximate those of the integral operator
+  ``f -> integral d(x, y) f(y) dA(y)`` of the surface itself, whatever the
+  sampling, normalized by area so scale cancels.
 """
 
 from __future__ import annotations
@@ -40,7 +52,7 @@ def normalize_slices(tensor: np.ndarray) -> np.ndarray:
     return normalized
 
 
-def modal_gdm(gdm: np.ndarray, k: int) -> np.ndarray:
+def modal_gdm(gdm: np.ndarray, k: int, mass: np.ndarray | None = None) -> np.ndarray:
     """The ``k`` largest singular values of the normalized GDM, descending.
 
     The GDM is symmetric, so its singular values are the absolute values of its
@@ -51,21 +63,39 @@ def modal_gdm(gdm: np.ndarray, k: int) -> np.ndarray:
     ----------
     gdm : (n, n) float, symmetric.
     k : number of singular values.
+    mass : (n,) float, lumped vertex areas; when given, the singular values are
+        those of ``M^1/2 G M^1/2 / A^(3/2)`` (``A`` the total area): the geodesic
+        distance operator of the surface, in units that make it scale-free
+        (distances scale like ``s``, areas like ``s^2``). Without it, the paper's
+        :func:`normalize_slices`.
 
     Returns
     -------
     (k,) float
     """
-    normalized = normalize_slices(gdm)
     values = sla.eigsh(
-        normalized, k=k, which="LM", return_eigenvectors=False, v0=seeded_start(len(gdm))
+        _normalized_gdm(gdm, mass),
+        k=k,
+        which="LM",
+        return_eigenvectors=False,
+        v0=seeded_start(len(gdm)),
     )
-    return np.sort(np.abs(values))[::-1]
+    singular_values: np.ndarray = np.sort(np.abs(values))[::-1]
+    return singular_values
 
 
-def modal_gdm_reference(gdm: np.ndarray, k: int) -> np.ndarray:
+def _normalized_gdm(gdm: np.ndarray, mass: np.ndarray | None) -> np.ndarray:
+    if mass is None:
+        return normalize_slices(gdm)
+    root = np.sqrt(mass)
+    weighted: np.ndarray = gdm * np.outer(root, root) / float(mass.sum()) ** 1.5
+    return weighted
+
+
+def modal_gdm_reference(gdm: np.ndarray, k: int, mass: np.ndarray | None = None) -> np.ndarray:
     """The same descriptor by a full SVD."""
-    return np.linalg.svd(normalize_slices(gdm), compute_uv=False)[:k]
+    singular_values: np.ndarray = np.linalg.svd(_normalized_gdm(gdm, mass), compute_uv=False)
+    return singular_values[:k]
 
 
 def hosvd_core(tensor: np.ndarray, core_shape: tuple[int, int, int]) -> np.ndarray:
@@ -96,6 +126,21 @@ def hosvd_core(tensor: np.ndarray, core_shape: tuple[int, int, int]) -> np.ndarr
     return magnitudes
 
 
+def core_diagonal(core: np.ndarray) -> np.ndarray:
+    """The elements ``S[i, i, k]`` of a core whose first two modes are symmetric.
+
+    Parameters
+    ----------
+    core : (r1, r2, r3) float
+
+    Returns
+    -------
+    (min(r1, r2), r3) float
+    """
+    diagonal: np.ndarray = np.diagonal(core, axis1=0, axis2=1).T
+    return diagonal
+
+
 def orthonormal_basis(columns: np.ndarray) -> np.ndarray:
     """Orthonormal basis of the span of ``columns`` (n, m), n >> m, rank-revealing.
 
@@ -114,38 +159,48 @@ def ddt_core(
     eigenvectors: np.ndarray,
     times: tuple[float, ...],
     core_shape: tuple[int, int, int],
+    mass: np.ndarray | None = None,
 ) -> np.ndarray:
     """HOSVD core of the normalized DDT without forming the ``n x n x s`` tensor.
 
     Every slice of eq. (4) is low rank:
     ``D_t = r_t 1^T + 1 r_t^T - 2 Psi_t Psi_t^T`` with ``Psi_t = Phi exp(-Lambda t)``
-    and ``r_t`` the row norms of ``Psi_t``. All slices therefore live in the span of
-    ``[1, r_1 .. r_s, Phi]``; with ``Q`` an orthonormal basis of it, the small
-    tensor ``S_t = Q^T D_t Q`` has exactly the same HOSVD core (its factors are
-    ``Q^T`` times the big ones).
+    and ``r_t`` the row norms of ``Psi_t``. With weights ``w`` (the vertex areas,
+    or ones for the paper's vertex matrices) every weighted slice
+    ``W^1/2 D_t W^1/2`` lives in the span of ``W^1/2 [1, r_1 .. r_s, Phi]``; with
+    ``Q`` an orthonormal basis of it, the small tensor ``Q^T W^1/2 D_t W^1/2 Q`` has
+    exactly the same HOSVD core (its factors are ``Q^T`` times the big ones).
+    Each slice is divided by its weighted mean ``sum_ij w_i w_j d_ij / (sum w)^2``
+    times ``sum w``: for ``w = 1`` that is the paper's division by the sum, times
+    ``n`` (:func:`normalize_slices`).
 
     Parameters
     ----------
-    eigenvalues : (k,) float
-    eigenvectors : (n, k) float, A-orthonormal.
+    eigenvalues : (k,) float, in the unit of ``times``.
+    eigenvectors : (n, k) float, orthonormal in the inner product of ``mass``
+        (without ``mass``: the paper's ``A``).
     times : diffusion times.
     core_shape : (r1, r2, r3)
+    mass : (n,) float, lumped vertex areas, or None for the paper's vertex matrices.
 
     Returns
     -------
-    core_shape float, as :func:`hosvd_core` of the normalized dense DDT.
+    core_shape float, as :func:`hosvd_core` of the normalized dense (weighted) DDT.
     """
     n = eigenvectors.shape[0]
-    ones = np.ones(n)
+    weights = np.ones(n) if mass is None else np.asarray(mass, dtype=np.float64)
+    root = np.sqrt(weights)
+    total = float(weights.sum())
     psis = [eigenvectors * np.exp(-eigenvalues * t) for t in times]
     rows = [np.einsum("ik,ik->i", psi, psi) for psi in psis]
-    q = orthonormal_basis(np.column_stack([ones, *rows, eigenvectors]))
-    q_one = q.T @ ones
+    q = orthonormal_basis(root[:, None] * np.column_stack([np.ones(n), *rows, eigenvectors]))
+    q_one = q.T @ root
     slices = []
     for psi, r in zip(psis, rows, strict=True):
-        q_r = q.T @ r
-        q_psi = q.T @ psi
-        total = 2.0 * n * r.sum() - 2.0 * np.sum(psi.sum(axis=0) ** 2)
+        q_r = q.T @ (root * r)
+        q_psi = q.T @ (root[:, None] * psi)
+        # sum_ij w_i w_j d_ij of eq. (4), from the same low-rank form.
+        integral = 2.0 * total * (weights @ r) - 2.0 * np.sum((weights @ psi) ** 2)
         small = np.outer(q_r, q_one) + np.outer(q_one, q_r) - 2.0 * q_psi @ q_psi.T
-        slices.append(small * (n / total))
+        slices.append(small * (total / integral))
     return hosvd_core(np.stack(slices, axis=2), core_shape)

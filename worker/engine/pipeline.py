@@ -12,11 +12,16 @@ from typing import Any
 
 import numpy as np
 
-from .diffusion import LaplaceBeltrami, laplace_beltrami_eigenpairs, normalized_spectrum
+from .diffusion import (
+    LaplaceBeltrami,
+    laplace_beltrami_eigenpairs,
+    normalized_spectrum,
+    surface_eigenpairs,
+)
 from .geodesic import geodesic_distance_matrix
-from .intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
-from .mesh_io import DEFAULT_MAX_FACES, Mesh, load_mesh
-from .modal import ddt_core, modal_gdm
+from .intrinsic import surface_operators
+from .mesh_io import DEFAULT_MAX_FACES, Mesh, canonical_frame, load_mesh
+from .modal import core_diagonal, ddt_core, modal_gdm
 from .presets import MODALITIES, Preset
 from .resample import resample_mesh
 
@@ -109,6 +114,13 @@ class ShapeDescriptor:
         return cls._from_parts(meta, arrays, meta.get("timings", {}))
 
 
+def resampled_surface(mesh: Mesh, preset: Preset) -> Mesh:
+    """The mesh every descriptor of ``mesh`` is computed on: in its canonical frame
+    (:func:`~worker.engine.mesh_io.canonical_frame`), resampled to the preset's
+    vertex count."""
+    return resample_mesh(canonical_frame(mesh), preset.n_vertices)
+
+
 def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
     """Compute all modalities of a cleaned mesh.
 
@@ -125,24 +137,32 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
         timings[stage] = now - clock
         clock = now
 
-    resampled = resample_mesh(mesh, preset.n_vertices)
+    resampled = resampled_surface(mesh, preset)
     lap("resample")
-    intrinsic = intrinsic_delaunay(IntrinsicMesh.from_mesh(resampled.vertices, resampled.faces))
-    ops = fem_operators(intrinsic)
-    gdm = geodesic_distance_matrix(intrinsic, ops, preset.heat_time_factor)
+    intrinsic, ops = surface_operators(resampled.vertices, resampled.faces)
+    on_surface = preset.measure == "surface"
+    gdm = geodesic_distance_matrix(
+        intrinsic, ops, preset.heat_time_factor, preset.n_vertices if on_surface else None
+    )
     lap("gdm")
+    mass = ops.vertex_areas if on_surface else None
     op = LaplaceBeltrami.from_fem(ops)
     eigenvalues, eigenvectors = laplace_beltrami_eigenpairs(op, preset.n_eigenpairs)
-    core = ddt_core(eigenvalues, eigenvectors, preset.diffusion_times, preset.ddt_core_shape)
+    if mass is None:  # eq. (4) with the paper's A and time unit
+        core = ddt_core(eigenvalues, eigenvectors, preset.diffusion_times, preset.ddt_core_shape)
+    else:
+        values, functions = surface_eigenpairs(op, eigenvalues, eigenvectors, preset.n_vertices)
+        core = ddt_core(values, functions, preset.diffusion_times, preset.ddt_core_shape, mass)
+    ddt = core_diagonal(core) if preset.ddt_elements == "diagonal" else core
     spectrum = normalized_spectrum(op, eigenvalues, preset.spectrum_size)
     lap("eigen_ddt")
-    singular_values = modal_gdm(gdm, preset.gdm_singular_values)
+    singular_values = modal_gdm(gdm, preset.gdm_singular_values, mass)
     lap("modal")
     return ShapeDescriptor(
         preset=preset.name,
         preset_version=preset.version,
         gdm=singular_values,
-        ddt=core,
+        ddt=ddt,
         spectrum=spectrum,
         input_vertices=mesh.n_vertices,
         input_faces=mesh.n_faces,

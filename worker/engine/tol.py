@@ -16,14 +16,20 @@ class Tolerances:
     # A surface is refused when more than this fraction of its faces touch an edge
     # shared by three or more faces (a stray one or two in a scan are tolerated).
     max_non_manifold_face_fraction: float = 0.01
+    # Every triangle keeps its triangle inequality by this fraction of the mean edge
+    # length (intrinsic mollification; robust-laplacian's default).
+    mollify_fraction: float = 1e-5
     # An interior edge is flipped when cot(alpha) + cot(beta) < -delaunay_slack.
     delaunay_slack: float = 1e-9
-    # Shift of the shift-invert eigensolver, relative to the mean of diag(L)/diag(A).
-    eigen_shift: float = 1e-6
+    # Shift of the shift-invert eigensolver, relative to Weyl's estimate of lambda_1.
+    eigen_shift: float = 1e-3
     # Relative eigenvalue of a Gram matrix below which a direction is numerically absent.
     basis_rank: float = 1e-12
     # Regularization of the singular Poisson system of the heat method, relative.
     poisson_regularization: float = 1e-9
+    # Largest diameter / sqrt(heat time): the heat step decays like exp(-d / sqrt(t)),
+    # and exp(-400) = 1e-174 leaves room above float64's smallest normal number.
+    heat_max_decay: float = 400.0
 
 
 TOL = Tolerances()
