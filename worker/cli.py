@@ -13,6 +13,7 @@ from pathlib import Path
 from .engine.errors import MeshError
 from .engine.pipeline import describe_file
 from .engine.presets import DEFAULT_PRESET, PRESETS, get_preset
+from .evaluation.datasets import DEFAULT_CACHE
 
 
 def _describe(args: argparse.Namespace) -> int:
@@ -39,10 +40,6 @@ def _describe(args: argparse.Namespace) -> int:
             summary["descriptor"] = descriptor.to_json()
         print(json.dumps(summary))
     return 1 if failures else 0
-
-
-#: Default descriptor cache, outside any checkout.
-DEFAULT_CACHE = Path.home() / ".cache" / "modalshape" / "evaluate"
 
 
 def _git_revision() -> str:
@@ -97,6 +94,52 @@ def _evaluate(args: argparse.Namespace) -> int:
     return 1 if report["failures"] else 0
 
 
+def _robustness(args: argparse.Namespace) -> int:
+    from .evaluation.datasets import EvaluationError
+    from .evaluation.run import run_robustness
+
+    preset = get_preset(args.preset)
+    dataset = Path(args.dataset_dir)
+    labels = Path(args.labels) if args.labels else dataset / "labels.csv"
+    out = Path(args.out) if args.out else Path("evaluation-out") / "robustness" / preset.name
+    variants = args.variants.split(",") if args.variants else None
+    try:
+        report = run_robustness(
+            dataset,
+            labels,
+            preset,
+            out_dir=out,
+            cache_root=Path(args.cache),
+            jobs=args.jobs,
+            per_class_limit=args.limit,
+            poses_dir=args.poses,
+            command=shlex.join(["shapes", *args.argv]),
+            environment={"git": _git_revision()},
+            **({"variants": variants} if variants else {}),
+        )
+    except (EvaluationError, OSError, RuntimeError) as exc:
+        print(f"shapes robustness: {exc}", file=sys.stderr)
+        return 2
+    titles = report["rows"]
+    width = max(len(t) for t in titles.values())
+    print(f"{'':{width}}   class    self    gap")
+    for key, title in titles.items():
+        row = report["tessellation"][key]
+        print(
+            f"{title:{width}}  {100 * row['class_retrieval']:5.1f}%  "
+            f"{100 * row['self_retrieval']:5.1f}%  {row['gap']:.3f}"
+        )
+    if "poses" in report:
+        print(f"\nposes of {report['poses']['dataset']}: ratio, foreign nearest neighbours")
+        for key, title in titles.items():
+            row = report["poses"]["scores"][key]
+            print(f"{title:{width}}  {row['ratio']:.3f}  {row['foreign_nearest']}/{row['poses']}")
+    for name, why in report["failures"].items():
+        print(f"could not describe {name}: {why}", file=sys.stderr)
+    print(f"report written to {out}/robustness.md", file=sys.stderr)
+    return 1 if report["failures"] else 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="shapes", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -136,6 +179,43 @@ def build_parser() -> argparse.ArgumentParser:
         help="use only the first N meshes (natural file-name order) of each class, N >= 2",
     )
     evaluate.set_defaults(run=_evaluate)
+
+    robustness = sub.add_parser(
+        "robustness",
+        help="how much the descriptors move with a file's tessellation (and with pose)",
+        description="Describe every mesh of labels.csv and variants of it that keep the "
+        "shape but change the triangles (decimated, remeshed, subdivided, rotated and "
+        "rescaled, noisy); report per modality, for the preset's score and for ShapeDNA "
+        "the class and self retrieval of the variants and the tessellation gap, and with "
+        "--poses the pose invariance of a set of poses of one object. Writes "
+        "robustness.json and robustness.md.",
+    )
+    robustness.add_argument("dataset_dir", help="directory holding the mesh files")
+    robustness.add_argument(
+        "--labels", help="CSV with columns file,class (default: DATASET_DIR/labels.csv)"
+    )
+    robustness.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
+    robustness.add_argument(
+        "--poses", help="directory of poses of one object (e.g. SCAPE) to measure pose invariance"
+    )
+    robustness.add_argument(
+        "--variants", help="comma-separated subset of the variants (default: all seven)"
+    )
+    robustness.add_argument(
+        "--jobs", type=int, default=os.cpu_count() or 1, help="worker processes (default: CPUs)"
+    )
+    robustness.add_argument(
+        "--cache", default=str(DEFAULT_CACHE), help=f"descriptor cache (default: {DEFAULT_CACHE})"
+    )
+    robustness.add_argument(
+        "--out", help="report directory (default: evaluation-out/robustness/PRESET)"
+    )
+    robustness.add_argument(
+        "--limit",
+        type=int,
+        help="use only the first N meshes (natural file-name order) of each class, N >= 2",
+    )
+    robustness.set_defaults(run=_robustness)
     return parser
 
 

@@ -20,17 +20,19 @@ def test_cache_namespace_follows_preset_and_version():
     # an edited preset that forgot its version bump must not reuse stale entries
     assert cache_namespace(dataclasses.replace(EVAL_PRESET, n_vertices=600)) != base
     assert cache_namespace(EVAL_PRESET) == base
+    # how descriptors are compared does not change them
+    reweighted = dataclasses.replace(EVAL_PRESET, fusion_weights={"ddt": 0.5}, dissimilarity="D1")
+    assert cache_namespace(reweighted) == base
 
 
-def test_fingerprint_covers_every_engine_module_and_the_baseline_only():
+def test_fingerprint_covers_every_engine_module_the_baseline_and_the_variants_only():
     modules = engine_modules()
     engine = {f"worker.engine.{p.stem}" for p in (WORKER / "engine").glob("*.py")}
     engine -= {"worker.engine.__init__", "worker.engine.compare"}  # not used to describe
     # linalg and tol are reached only through other engine modules' imports
     assert engine <= set(modules), engine - set(modules)
-    assert "worker.evaluation.shapedna" in modules
     outside = {m for m in modules if not m.startswith("worker.engine.")}
-    assert outside == {"worker.evaluation.shapedna"}
+    assert outside == {"worker.evaluation.shapedna", "worker.evaluation.variants"}
     assert all(path.is_file() for path in modules.values())
 
 

@@ -165,14 +165,14 @@ def test_only_missing_entries_are_computed(first_run, tmp_path, monkeypatch):
     calls = []
     real = compute._describe_job
 
-    def counting(path, preset, need_descriptor, need_baseline):
-        calls.append((Path(path).name, need_descriptor, need_baseline))
-        return real(path, preset, need_descriptor, need_baseline)
+    def counting(path, preset, variant, need_descriptor, need_baseline):
+        calls.append((Path(path).name, variant, need_descriptor, need_baseline))
+        return real(path, preset, variant, need_descriptor, need_baseline)
 
     monkeypatch.setattr(compute, "_describe_job", counting)
     meshes = read_labels(first_run["tmp"] / "labels.csv", TOSCA)
     computed = compute.compute_descriptors(meshes, EVAL_PRESET, cache, jobs=1, progress=False)
-    assert calls == [("wolf1.off.gz", True, False)]
+    assert calls == [("wolf1.off.gz", None, True, False)]
     assert computed.stats["from_cache"] == 7 and computed.stats["computed"] == 1
 
 

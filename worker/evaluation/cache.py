@@ -15,7 +15,11 @@ from worker.engine.presets import Preset
 from .shapedna import BASELINE, SHAPEDNA_K, ShapeDNA
 
 #: The modules a cache entry is made by; everything they import from ``worker`` counts too.
-FINGERPRINT_ROOTS = ("worker.engine.pipeline", "worker.evaluation.shapedna")
+FINGERPRINT_ROOTS = (
+    "worker.engine.pipeline",
+    "worker.evaluation.shapedna",
+    "worker.evaluation.variants",
+)
 _WORKER_DIR = Path(__file__).resolve().parents[1]
 
 
@@ -87,12 +91,15 @@ def engine_fingerprint() -> str:
 def cache_namespace(preset: Preset) -> str:
     """Directory name of a preset's cache entries.
 
-    ``<name>-v<version>-<digest>``: the digest covers every preset field and the
-    engine source (:func:`engine_fingerprint`), so a preset edited without a
-    version bump, or an edited pipeline, gets a fresh namespace.
+    ``<name>-v<version>-<digest>``: the digest covers every preset field a
+    descriptor depends on and the engine source (:func:`engine_fingerprint`), so a
+    preset edited without a version bump, or an edited pipeline, gets a fresh
+    namespace, while a change of how descriptors are compared (dissimilarity,
+    fusion, weights) reuses them.
     """
     digest = hashlib.sha256()
-    digest.update(json.dumps(preset.to_dict(), sort_keys=True, default=list).encode())
+    fields = preset.descriptor_fields()
+    digest.update(json.dumps(fields, sort_keys=True, default=list).encode())
     digest.update(engine_fingerprint().encode())
     return f"{preset.name}-v{preset.version}-{digest.hexdigest()[:12]}"
 
@@ -103,11 +110,13 @@ class DescriptorCache:
 
     Layout: ``<root>/<cache_namespace(preset)>/<sha256>.descriptor.npz`` and
     ``<sha256>.shapedna-k<k>.npz`` for the baseline (same resampled mesh, so the
-    same namespace).
+    same namespace); a variant of the file (:mod:`.variants`) puts its name after
+    the digest, ``<sha256>.<variant>.descriptor.npz``.
     """
 
     root: Path
     preset: Preset
+    variant: str | None = None
 
     @property
     def directory(self) -> Path:
@@ -115,7 +124,8 @@ class DescriptorCache:
 
     def _path(self, sha256: str, kind: str) -> Path:
         suffix = "descriptor" if kind == "descriptor" else f"{BASELINE}-k{SHAPEDNA_K}"
-        return self.directory / f"{sha256}.{suffix}.npz"
+        key = sha256 if self.variant is None else f"{sha256}.{self.variant}"
+        return self.directory / f"{key}.{suffix}.npz"
 
     def load_descriptor(self, sha256: str) -> ShapeDescriptor | None:
         path = self._path(sha256, "descriptor")

@@ -9,15 +9,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from worker.engine.errors import MeshError
 from worker.engine.mesh_io import load_mesh
-from worker.engine.pipeline import ShapeDescriptor, describe_file
-from worker.engine.presets import Preset
-from worker.engine.resample import resample_mesh
+from worker.engine.pipeline import (
+    ShapeDescriptor,
+    describe_file,
+    describe_mesh,
+    resampled_surface,
+)
+from worker.engine.presets import MODALITIES, Preset
 
 from .cache import DescriptorCache, file_sha256
 from .datasets import LabeledMesh
 from .shapedna import BASELINE, ShapeDNA, shapedna
+from .variants import make_variant
 
 
 @dataclass
@@ -41,19 +48,27 @@ def _single_threaded_blas() -> None:
     threadpool_limits(limits=1)
 
 
-def _describe_job(path: str, preset: Preset, need_descriptor: bool, need_baseline: bool) -> _Job:
-    """Describe one mesh file; runs in a worker process, so it only takes picklable data."""
+def _describe_job(
+    path: str, preset: Preset, variant: str | None, need_descriptor: bool, need_baseline: bool
+) -> _Job:
+    """Describe one mesh file, or its ``variant``; runs in a worker process, so it
+    only takes picklable data."""
     data = Path(path).read_bytes()
     name = Path(path).name
     job = _Job()
     try:
-        if need_descriptor:
-            job.descriptor = describe_file(data, preset, filename=name).to_npz_bytes()
+        if variant is None:  # the file as the service describes an upload
+            if need_descriptor:
+                job.descriptor = describe_file(data, preset, filename=name).to_npz_bytes()
+            mesh = load_mesh(data, name)
+        else:
+            mesh = make_variant(load_mesh(data, name), variant, name)
+            if need_descriptor:
+                job.descriptor = describe_mesh(mesh, preset).to_npz_bytes()
         if need_baseline:
-            # The same load and resampling describe_file does (both deterministic),
-            # so the baseline sees exactly the mesh the descriptors were made from.
-            mesh = resample_mesh(load_mesh(data, name), preset.n_vertices)
-            job.baseline = shapedna(mesh.vertices, mesh.faces).to_npz_bytes()
+            # The mesh the descriptors were made from (the same deterministic steps).
+            surface = resampled_surface(mesh, preset)
+            job.baseline = shapedna(surface.vertices, surface.faces).to_npz_bytes()
     except MeshError as exc:
         job.error = exc.message
     except Exception as exc:  # one mesh's crash must not lose the others' work
@@ -78,6 +93,7 @@ def compute_descriptors(
     cache_root: str | Path,
     jobs: int = 1,
     progress: bool = True,
+    variant: str | None = None,
 ) -> ComputedSet:
     """Descriptors and ShapeDNA of every mesh, from the cache or computed in parallel.
 
@@ -88,6 +104,8 @@ def compute_descriptors(
     cache_root : cache directory (created if missing).
     jobs : worker processes, each with one BLAS thread; 1 computes in this process.
     progress : show a tqdm progress bar (on a terminal).
+    variant : describe this variant of every mesh (:mod:`.variants`) instead of the
+        file itself.
 
     Returns
     -------
@@ -95,7 +113,7 @@ def compute_descriptors(
     """
     from tqdm import tqdm
 
-    cache = DescriptorCache(Path(cache_root), preset)
+    cache = DescriptorCache(Path(cache_root), preset, variant)
     start = time.perf_counter()
     hashes = [file_sha256(m.path) for m in meshes]
     descriptors: list[ShapeDescriptor | None] = [cache.load_descriptor(h) for h in hashes]
@@ -116,9 +134,11 @@ def compute_descriptors(
             baselines[i] = ShapeDNA.from_npz_bytes(job.baseline)
 
     start = time.perf_counter()
-    bar = tqdm(total=len(todo), desc=f"describe ({preset.name})", unit="mesh", disable=not progress)
+    what = preset.name if variant is None else f"{preset.name}, {variant}"
+    bar = tqdm(total=len(todo), desc=f"describe ({what})", unit="mesh", disable=not progress)
     args = [
-        (str(meshes[i].path), preset, descriptors[i] is None, baselines[i] is None) for i in todo
+        (str(meshes[i].path), preset, variant, descriptors[i] is None, baselines[i] is None)
+        for i in todo
     ]
     if jobs <= 1 or len(todo) <= 1:
         from threadpoolctl import threadpool_limits
@@ -165,3 +185,11 @@ def compute_descriptors(
             "cache_directory": str(cache.directory),
         },
     )
+
+
+def descriptor_vectors(computed: ComputedSet) -> dict[str, np.ndarray]:
+    """modality -> (n, M) float, and ``BASELINE`` -> (n, k): the flat vectors eqs. (8)
+    and (9) compare, one row per described mesh."""
+    vectors = {m: np.stack([d.vector(m) for d in computed.descriptors]) for m in MODALITIES}
+    vectors[BASELINE] = np.stack([b.descriptor for b in computed.baselines])
+    return vectors

@@ -8,12 +8,17 @@ from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
+from worker.engine.errors import MeshError
+from worker.engine.mesh_io import mesh_format
+
 from .metrics import natural_sort_key
 
 #: Environment variable naming the directory that holds the shared data sets.
 DATASETS_ENV = "SHAPES_DATASETS_DIR"
 #: Where the shared data sets are when the variable is unset: beside the checkout.
 DEFAULT_DATASETS_DIR = Path(__file__).resolve().parents[2].parent / "shared" / "datasets"
+#: Default descriptor cache of ``shapes evaluate`` and the benchmarks, outside any checkout.
+DEFAULT_CACHE = Path.home() / ".cache" / "modalshape" / "evaluate"
 
 
 def shared_dataset(name: str) -> Path:
@@ -95,3 +100,34 @@ def read_labels(
     if len({m.label for m in meshes}) < 2:
         raise EvaluationError("the evaluation needs at least two classes")
     return meshes
+
+
+def pose_set(directory: str | Path) -> list[LabeledMesh]:
+    """Every mesh file in ``directory``, as poses of one object (labelled by the
+    directory's name), in natural file-name order; e.g. SCAPE's 71 poses of one body.
+
+    Raises
+    ------
+    EvaluationError
+        When the directory holds fewer than two mesh files.
+    """
+    directory = Path(directory)
+    files = (
+        sorted(
+            (p for p in directory.iterdir() if p.is_file() and _is_mesh_file(p.name)),
+            key=lambda p: natural_sort_key(p.name),
+        )
+        if directory.is_dir()
+        else []
+    )
+    if len(files) < 2:
+        raise EvaluationError(f"{directory} needs at least two mesh files (poses of one object)")
+    return [LabeledMesh(name=p.name, label=directory.name, path=p) for p in files]
+
+
+def _is_mesh_file(name: str) -> bool:
+    try:
+        mesh_format(name)
+    except MeshError:
+        return False
+    return True

@@ -46,6 +46,8 @@ __all__ = [
     "mean_average_precision",
     "natural_sort_key",
     "nearest_neighbor_rate",
+    "pair_equal_error_rate",
+    "pair_roc",
     "rank1_rate",
     "retrieval_scores",
     "roc_curve",
@@ -141,12 +143,33 @@ def roc_curve(
     iu, ju = np.triu_indices(d.shape[0], k=1)
     values = d[iu, ju]
     genuine_mask = codes[iu] == codes[ju]
-    genuine = np.sort(values[genuine_mask])
-    impostor = np.sort(values[~genuine_mask])
-    if genuine.size == 0:
+    if not genuine_mask.any():
         raise ValueError("no genuine pairs: every class has a single object")
+    return pair_roc(values[genuine_mask], values[~genuine_mask])
 
-    thresholds = np.unique(values)
+
+def pair_roc(
+    genuine: ArrayLike, impostor: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Verification ROC from the dissimilarities of genuine and impostor pairs.
+
+    The curve of :func:`roc_curve` for any set of pairs (e.g. only the pairs that
+    involve a held-out object, or the scores a service has collected).
+
+    Parameters
+    ----------
+    genuine : (g,) array_like of float, g >= 1
+    impostor : (i,) array_like of float, i >= 1
+
+    Returns
+    -------
+    far, frr, thresholds : as :func:`roc_curve`.
+    """
+    genuine = np.sort(np.asarray(genuine, dtype=np.float64).ravel())
+    impostor = np.sort(np.asarray(impostor, dtype=np.float64).ravel())
+    if genuine.size == 0 or impostor.size == 0:
+        raise ValueError("a ROC needs at least one genuine and one impostor pair")
+    thresholds = np.unique(np.concatenate([genuine, impostor]))
     # side="right" counts values <= t, so tied pairs are accepted together.
     accepted_impostors = np.searchsorted(impostor, thresholds, side="right")
     accepted_genuines = np.searchsorted(genuine, thresholds, side="right")
@@ -178,6 +201,16 @@ def equal_error_rate(dissimilarity: ArrayLike, labels: ArrayLike) -> float:
         EER in ``[0, 1]``; 0 for perfect separation.
     """
     far, frr, _ = roc_curve(dissimilarity, labels)
+    return _crossing(far, frr)
+
+
+def pair_equal_error_rate(genuine: ArrayLike, impostor: ArrayLike) -> float:
+    """The EER of :func:`pair_roc` (the same crossing as :func:`equal_error_rate`)."""
+    far, frr, _ = pair_roc(genuine, impostor)
+    return _crossing(far, frr)
+
+
+def _crossing(far: NDArray[np.float64], frr: NDArray[np.float64]) -> float:
     gap = frr - far  # goes from +1 (first point) to -1 (last point), non-increasing
     k = int(np.argmax(gap <= 0.0))  # first point at or past the crossing
     if gap[k] == 0.0:
@@ -598,7 +631,9 @@ def mean_average_precision(dissimilarity: ArrayLike, labels: ArrayLike) -> float
     return _mean_average_precision(_ranked_relevance(dissimilarity, labels))
 
 
-def retrieval_scores(dissimilarity: ArrayLike, labels: ArrayLike) -> dict[str, float]:
+def retrieval_scores(
+    dissimilarity: ArrayLike, labels: ArrayLike, queries: ArrayLike | None = None
+) -> dict[str, float]:
     """All leave-one-out retrieval scores from a single ranking.
 
     Parameters
@@ -607,6 +642,9 @@ def retrieval_scores(dissimilarity: ArrayLike, labels: ArrayLike) -> dict[str, f
         All-to-all dissimilarities; row ``i`` ranks the other objects for query ``i``.
     labels : (n,) array_like
         Class label of each object; every class needs at least two objects.
+    queries : (q,) array_like of int, optional
+        Average over these queries only (each still ranks all other objects), e.g.
+        the held-out fold of a cross-validation. Default: every object.
 
     Returns
     -------
@@ -621,6 +659,8 @@ def retrieval_scores(dissimilarity: ArrayLike, labels: ArrayLike) -> dict[str, f
         On invalid inputs or a singleton class.
     """
     relevant = _ranked_relevance(dissimilarity, labels)
+    if queries is not None:
+        relevant = relevant[np.asarray(queries, dtype=np.int64)]
     return {
         "nn": _nearest_neighbor(relevant),
         "first_tier": _tier(relevant, 1),

@@ -13,9 +13,9 @@ from worker.engine.presets import MODALITIES, Preset
 
 from . import metrics
 from .cache import engine_fingerprint
-from .compute import ComputedSet
+from .compute import ComputedSet, descriptor_vectors
 from .scoring import COLUMNS, ROWS, dissimilarity_matrices, score_dissimilarity
-from .shapedna import SHAPEDNA_K
+from .shapedna import BASELINE, SHAPEDNA_K
 
 
 def protocol_text(preset: Preset, n_objects: int, n_classes: int, gallery: Sequence[str]) -> dict:
@@ -87,9 +87,8 @@ def build_report(
     start = time.perf_counter()
     names = [m.name for m in computed.meshes]
     labels = [m.label for m in computed.meshes]
-    vectors = {m: np.stack([d.vector(m) for d in computed.descriptors]) for m in MODALITIES}
-    baseline = np.stack([b.descriptor for b in computed.baselines])
-    matrices, info = dissimilarity_matrices(vectors, preset, baseline)
+    vectors = descriptor_vectors(computed)
+    matrices, info = dissimilarity_matrices(vectors, preset, vectors[BASELINE])
     gallery_idx, probe_idx = metrics.first_instance_split(names, labels)
     rows = {}
     for key, matrix in matrices.items():
@@ -208,3 +207,70 @@ def environment_info() -> dict[str, str]:
         "lapy": lapy.__version__,
         "engine_fingerprint": engine_fingerprint()[:16],
     }
+
+
+def render_robustness_markdown(report: Mapping) -> str:
+    """robustness.md: per row, class and self retrieval of the variants and the gap."""
+    preset = report["preset"]
+    titles = report["rows"]
+    scores = report["tessellation"]
+    variants = report["variants"]
+    lines = [
+        f"# Tessellation robustness: preset `{preset['name']}` v{preset['version']}",
+        "",
+        f"Dataset: `{report['dataset']}`. Command: `{report['command'] or '(not recorded)'}`",
+        "",
+        "Every mesh is described as given and as each of its variants (same surface, other "
+        "triangles: " + ", ".join(f"`{v}`" for v in variants) + "). **class**: the variant's "
+        "nearest original, its own source left out, is of its class. **self**: with its source "
+        "in the gallery, the nearest original is its source (no bar). **gap**: median distance "
+        "mesh-variant over the median distance from a mesh to the nearest mesh of another "
+        f"class (bar: below {report['gap_bar']}).",
+        "",
+        "| | class | self | gap | meets the bar |",
+        "|---|---:|---:|---:|---|",
+    ]
+    for key, title in titles.items():
+        if key not in scores:
+            continue
+        row = scores[key]
+        lines.append(
+            f"| {title} | {_pct(row['class_retrieval'], 1)} | {_pct(row['self_retrieval'], 1)} "
+            f"| {row['gap']:.3f} | {'yes' if row['passes'] else 'no'} |"
+        )
+    lines += ["", "Per variant (class % / self % / gap):", ""]
+    lines.append("| | " + " | ".join(variants) + " |")
+    lines.append("|---|" + "---:|" * len(variants))
+    for key, title in titles.items():
+        if key not in scores:
+            continue
+        cells = [
+            f"{_pct(v['class_retrieval'], 0)} / {_pct(v['self_retrieval'], 0)} / {v['gap']:.2f}"
+            for v in (scores[key]["variants"][name] for name in variants)
+        ]
+        lines.append(f"| {title} | " + " | ".join(cells) + " |")
+    if "poses" in report:
+        poses = report["poses"]["scores"]
+        count = next(iter(poses.values()))["poses"]
+        lines += [
+            "",
+            f"## Pose invariance: `{report['poses']['dataset']}` ({count} poses of one object)",
+            "",
+            "In one gallery with the collection. **ratio**: median distance between two poses "
+            "over the median distance between two objects of different classes of the "
+            "collection. **foreign**: poses whose nearest neighbour is not another pose.",
+            "",
+            "| | ratio | foreign |",
+            "|---|---:|---:|",
+        ]
+        for key, title in titles.items():
+            if key in poses:
+                lines.append(
+                    f"| {title} | {poses[key]['ratio']:.3f} | {poses[key]['foreign_nearest']} |"
+                )
+    if report["failures"]:
+        lines += ["", "## Meshes that could not be described", ""]
+        for name, why in report["failures"].items():
+            lines += [f"- `{name}` ({variant}): {text}" for variant, text in why.items()]
+    lines.append("")
+    return "\n".join(lines)

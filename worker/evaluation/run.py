@@ -1,17 +1,27 @@
-"""``shapes evaluate``: describe, compare and score a labelled collection, write the report."""
+"""``shapes evaluate`` and ``shapes robustness``: describe, compare and score a labelled
+collection (and variants of its meshes), write the reports."""
 
 from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+
+import numpy as np
 
 from worker.engine.presets import Preset
 
-from .compute import compute_descriptors
-from .datasets import EvaluationError, read_labels
-from .report import build_report, environment_info, render_markdown
+from .compute import compute_descriptors, descriptor_vectors
+from .datasets import EvaluationError, pose_set, read_labels
+from .report import (
+    build_report,
+    environment_info,
+    render_markdown,
+    render_robustness_markdown,
+)
+from .robustness import GAP_BAR, pose_invariance, row_titles, tessellation_scores
+from .variants import VARIANTS
 
 
 def run_evaluation(
@@ -57,4 +67,77 @@ def run_evaluation(
     report["timings"]["plot_seconds"] = time.perf_counter() - start
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
     (out / "report.md").write_text(render_markdown(report))
+    return report
+
+
+def run_robustness(
+    dataset_dir: str | Path,
+    labels_csv: str | Path,
+    preset: Preset,
+    *,
+    out_dir: str | Path,
+    cache_root: str | Path,
+    variants: Sequence[str] = tuple(VARIANTS),
+    poses_dir: str | Path | None = None,
+    jobs: int = 1,
+    per_class_limit: int | None = None,
+    command: str = "",
+    environment: Mapping[str, str] | None = None,
+    progress: bool = True,
+) -> dict:
+    """The tessellation-robustness protocol (:mod:`.robustness`); writes
+    ``robustness.json`` and ``robustness.md`` to ``out_dir``.
+
+    Every mesh of the collection and each of its ``variants`` is described (through
+    the cache); with ``poses_dir`` (a directory of poses of one object, e.g. SCAPE)
+    the pose invariance is measured against the collection too.
+
+    Returns
+    -------
+    The report dict (as in robustness.json).
+    """
+    unknown = sorted(set(variants) - set(VARIANTS))
+    if unknown:
+        raise EvaluationError(f"unknown variants {unknown}; known: {', '.join(VARIANTS)}")
+    meshes = read_labels(labels_csv, dataset_dir, per_class_limit)
+    start = time.perf_counter()
+    computed = compute_descriptors(meshes, preset, cache_root, jobs=jobs, progress=progress)
+    index = {m.name: i for i, m in enumerate(computed.meshes)}
+    originals = descriptor_vectors(computed)
+    failures = {name: {"original": why} for name, why in computed.failures.items()}
+    described: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
+    for variant in variants:
+        done = compute_descriptors(
+            computed.meshes, preset, cache_root, jobs=jobs, progress=progress, variant=variant
+        )
+        for name, why in done.failures.items():
+            failures.setdefault(name, {})[variant] = why
+        sources = np.array([index[m.name] for m in done.meshes], dtype=np.int64)
+        described[variant] = (sources, descriptor_vectors(done))
+    labels = [m.label for m in computed.meshes]
+    report: dict = {
+        "dataset": str(dataset_dir),
+        "command": command,
+        "preset": preset.to_dict(),
+        "rows": row_titles(preset),
+        "gap_bar": GAP_BAR,
+        "variants": list(variants),
+        "tessellation": tessellation_scores(originals, labels, described, preset),
+        "failures": failures,
+        "environment": {**environment_info(), **(environment or {})},
+    }
+    if poses_dir is not None:
+        poses = pose_set(poses_dir)
+        posed = compute_descriptors(poses, preset, cache_root, jobs=jobs, progress=progress)
+        for name, why in posed.failures.items():
+            failures[name] = {"original": why}
+        report["poses"] = {
+            "dataset": str(poses_dir),
+            "scores": pose_invariance(descriptor_vectors(posed), originals, labels, preset),
+        }
+    report["seconds"] = time.perf_counter() - start
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "robustness.json").write_text(json.dumps(report, indent=1) + "\n")
+    (out / "robustness.md").write_text(render_robustness_markdown(report))
     return report

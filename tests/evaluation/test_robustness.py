@@ -1,0 +1,109 @@
+"""The robustness protocol: its numbers on hand-made descriptors, and one real run."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from worker.engine.presets import Preset
+from worker.evaluation.datasets import pose_set, shared_dataset
+from worker.evaluation.robustness import PRESET_ROW, pose_invariance, tessellation_scores
+from worker.evaluation.run import run_robustness
+from worker.evaluation.shapedna import BASELINE
+
+PRESET = Preset(
+    name="test-robust", version=0, dissimilarity="D1", fusion="product", fused_modalities=("gdm",)
+)
+
+
+def _descriptors(points: np.ndarray) -> dict[str, np.ndarray]:
+    """Every modality (and the baseline) the same positive 2-D points."""
+    vectors = {m: points.copy() for m in ("gdm", "ddt", "spectrum")}
+    vectors[BASELINE] = points.copy()
+    return vectors
+
+
+@pytest.fixture
+def collection():
+    # Three classes of two objects, far apart; within a class 0.1 apart.
+    centres = np.array([[1.0, 1.0], [1.0, 4.0], [4.0, 1.0]])
+    points = np.repeat(centres, 2, axis=0) + np.tile([[0.0, 0.0], [0.1, 0.0]], (3, 1))
+    return _descriptors(points), ["a", "a", "b", "b", "c", "c"]
+
+
+def test_variants_equal_to_their_sources_pass_with_no_gap(collection):
+    originals, labels = collection
+    sources = np.arange(6)
+    scores = tessellation_scores(originals, labels, {"same": (sources, originals)}, PRESET)
+    for row in ("gdm", "ddt", "spectrum", PRESET_ROW, BASELINE):
+        assert scores[row]["class_retrieval"] == 1.0 and scores[row]["self_retrieval"] == 1.0
+        assert scores[row]["gap"] == 0.0 and scores[row]["passes"]
+
+
+def test_a_variant_that_drifts_towards_another_class_fails(collection):
+    originals, labels = collection
+    drifted = _descriptors(originals["gdm"][[0]] + [[0.0, 2.4]])  # object 0 moved near b
+    scores = tessellation_scores(originals, labels, {"drift": (np.array([0]), drifted)}, PRESET)
+    row = scores["gdm"]
+    assert row["class_retrieval"] == 0.0 and row["self_retrieval"] == 0.0 and not row["passes"]
+    d1_to_source = np.mean(2 * np.abs([0.0, 2.4]) / (originals["gdm"][0] * 2 + [0.0, 2.4]))
+    assert row["gap"] == pytest.approx(d1_to_source / row["nearest_other_class_median"])
+    assert row["variants"]["drift"]["count"] == 1
+
+
+def test_pose_invariance_counts_poses_closer_to_the_collection(collection):
+    originals, labels = collection
+    poses = _descriptors(np.array([[8.0, 8.0], [8.0, 8.2], [1.02, 1.0]]))  # one near class a
+    scores = pose_invariance(poses, originals, labels, PRESET)
+    assert scores["gdm"]["foreign_nearest"] == 1 and scores["gdm"]["poses"] == 3
+    assert 0 < scores[PRESET_ROW]["ratio"] < 10
+
+
+@pytest.mark.slow  # describes 4 meshes, 2 variants each, and 2 poses
+def test_run_writes_the_report_and_rotation_costs_nothing(tmp_path):
+    tosca = shared_dataset("tosca")
+    if not tosca.is_dir():
+        pytest.skip(f"TOSCA set not found at {tosca}")
+    labels = tmp_path / "labels.csv"
+    labels.write_text(
+        "file,class\nwolf0.off.gz,wolf\nwolf1.off.gz,wolf\n"
+        "centaur0.off.gz,centaur\ncentaur1.off.gz,centaur\n"
+    )
+    poses = tmp_path / "wolves"
+    poses.mkdir()
+    for name in ("wolf2.off.gz", "wolf0.off.gz"):
+        shutil.copy(tosca / name, poses / name)
+    preset = Preset(
+        name="test-robust-run",
+        version=0,
+        n_vertices=500,
+        n_eigenpairs=100,
+        measure="surface",
+        heat_time_factor=12.0,
+        ddt_elements="diagonal",
+        dissimilarity="D1",
+        fused_modalities=("gdm", "ddt", "spectrum"),
+    )
+    report = run_robustness(
+        tosca,
+        labels,
+        preset,
+        out_dir=tmp_path / "out",
+        cache_root=tmp_path / "cache",
+        variants=("rotated-scaled", "decimated-50"),
+        poses_dir=poses,
+        progress=False,
+    )
+    saved = json.loads((tmp_path / "out" / "robustness.json").read_text())
+    assert saved["tessellation"] == report["tessellation"]
+    assert "| GDM+DDT+Spectrum product" in (tmp_path / "out" / "robustness.md").read_text()
+    for row in ("gdm", "ddt", "spectrum", PRESET_ROW, BASELINE):
+        rotated = report["tessellation"][row]["variants"]["rotated-scaled"]
+        assert rotated["gap"] == pytest.approx(0.0, abs=1e-6) and rotated["self_retrieval"] == 1.0
+        assert report["tessellation"][row]["variants"]["decimated-50"]["count"] == 4
+    assert report["poses"]["scores"][PRESET_ROW]["poses"] == 2
+    assert [m.name for m in pose_set(poses)] == ["wolf0.off.gz", "wolf2.off.gz"]
+    assert report["failures"] == {}

@@ -1,0 +1,190 @@
+"""How much a descriptor cares about the triangles: the tessellation-robustness protocol.
+
+Pure functions on descriptor arrays (the describing is :mod:`.compute`'s, the
+variants :mod:`.variants`'). For every mesh of a labelled collection and each of
+its variants (same surface, other triangles), per modality, for the preset's own
+fused score and for the ShapeDNA baseline:
+
+* **class retrieval**: the variant's nearest *original*, its own source left out of
+  the gallery, is of its class (a user uploading another file of an enrolled kind
+  of object gets the right kind);
+* **self retrieval**: with its own source in the gallery, the nearest original is
+  its source (reported without a bar: a fully pose-invariant descriptor may rightly
+  tie two poses of one figure);
+* **tessellation gap**: the median distance between a mesh and its variants over the
+  median distance from a mesh to the nearest original of another class. Below 1 a
+  file's tessellation moves its descriptor less than the nearest other kind of object
+  is away; the bar is 0.1.
+
+And on a set of poses of one object (SCAPE), next to the labelled collection in one
+gallery, the **pose invariance**: the median distance between two poses over the
+median distance between two objects of different classes of the collection, and
+how many poses have their nearest neighbour outside the pose set.
+
+Distances are the preset's: D1 or D2 per modality (for D2, sigma over the gallery
+of originals), fused with the preset's rule and weights.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from worker.engine.compare import dissimilarity, fuse, gallery_sigma
+from worker.engine.presets import MODALITIES, Preset
+
+from .shapedna import BASELINE, shapedna_dissimilarity
+
+#: The bar on the tessellation gap.
+GAP_BAR = 0.1
+#: Row key of the preset's own fused score.
+PRESET_ROW = "preset"
+
+
+def row_titles(preset: Preset) -> dict[str, str]:
+    """Row key -> title, in table order."""
+    fused = "+".join(m.upper() if m != "spectrum" else "Spectrum" for m in preset.fused_modalities)
+    return {
+        "gdm": "GDM",
+        "ddt": "DDT",
+        "spectrum": "Spectrum",
+        PRESET_ROW: f"{fused} {preset.fusion} (the preset's score)",
+        BASELINE: "ShapeDNA (lapy)",
+    }
+
+
+def _cross(
+    queries: Mapping[str, np.ndarray],
+    gallery: Mapping[str, np.ndarray],
+    preset: Preset,
+    baseline: tuple[np.ndarray, np.ndarray] | None,
+) -> dict[str, np.ndarray]:
+    """Row key -> (p, q) dissimilarity of every query to every gallery object."""
+    per: dict[str, np.ndarray] = {}
+    for m in MODALITIES:
+        sigma = gallery_sigma(gallery[m]) if preset.dissimilarity == "D2" else None
+        per[m] = dissimilarity(queries[m], gallery[m], preset.dissimilarity, sigma)
+    weights = {m: preset.weight(m) for m in preset.fused_modalities}
+    out = dict(per)
+    out[PRESET_ROW] = fuse({m: per[m] for m in preset.fused_modalities}, preset.fusion, weights)
+    if baseline is not None:
+        q, g = baseline
+        both = shapedna_dissimilarity(np.concatenate([q, g]))
+        out[BASELINE] = both[: len(q), len(q) :]
+    return out
+
+
+def tessellation_scores(
+    originals: Mapping[str, np.ndarray],
+    labels: Sequence[str],
+    variants: Mapping[str, tuple[np.ndarray, Mapping[str, np.ndarray]]],
+    preset: Preset,
+) -> dict[str, dict]:
+    """The protocol's numbers per row.
+
+    Parameters
+    ----------
+    originals : modality -> (n, M) float, and optionally ``BASELINE`` -> (n, k).
+    labels : (n,) class of each original.
+    variants : variant name -> (sources (v,) int, modality -> (v, M) float
+        [and ``BASELINE``]), ``sources[j]`` the index of the original variant ``j``
+        was made from.
+    preset : the dissimilarity, fusion rule and weights.
+
+    Returns
+    -------
+    row key -> {"class_retrieval", "self_retrieval", "gap", "passes",
+    "variants": {name: {"count", "class_retrieval", "self_retrieval", "gap"}}};
+    rates are fractions, ``passes`` says whether class retrieval is 100% and the gap
+    below ``GAP_BAR``.
+    """
+    labels_arr = np.asarray([str(x) for x in labels])
+    has_baseline = BASELINE in originals
+    base = (originals[BASELINE], originals[BASELINE]) if has_baseline else None
+    among = _cross(originals, originals, preset, base)
+    n = len(labels_arr)
+    other_class = labels_arr[:, None] != labels_arr[None, :]
+    cross = {}
+    for name, (sources, vectors) in variants.items():
+        queries_base = (vectors[BASELINE], originals[BASELINE]) if has_baseline else None
+        cross[name] = (np.asarray(sources), _cross(vectors, originals, preset, queries_base))
+    scores: dict[str, dict] = {}
+    for row, matrix in among.items():
+        nearest_other = np.where(other_class, matrix, np.inf).min(axis=1)
+        scale = float(np.median(nearest_other))
+        per_variant: dict[str, dict] = {}
+        all_self, all_class, all_distance = [], [], []
+        for name, (sources, matrices) in cross.items():
+            d = matrices[row]
+            rows = np.arange(len(sources))
+            own = d[rows, sources]
+            self_hit = np.argmin(d, axis=1) == sources
+            without = d.copy()
+            without[rows, sources] = np.inf
+            class_hit = labels_arr[np.argmin(without, axis=1)] == labels_arr[sources]
+            per_variant[name] = {
+                "count": len(sources),
+                "class_retrieval": float(class_hit.mean()),
+                "self_retrieval": float(self_hit.mean()),
+                "gap": float(np.median(own) / scale),
+            }
+            all_self.append(self_hit)
+            all_class.append(class_hit)
+            all_distance.append(own)
+        class_rate = float(np.concatenate(all_class).mean())
+        gap = float(np.median(np.concatenate(all_distance)) / scale)
+        scores[row] = {
+            "class_retrieval": class_rate,
+            "self_retrieval": float(np.concatenate(all_self).mean()),
+            "gap": gap,
+            "passes": bool(class_rate == 1.0 and gap < GAP_BAR),
+            "nearest_other_class_median": scale,
+            "originals": n,
+            "variants": per_variant,
+        }
+    return scores
+
+
+def pose_invariance(
+    poses: Mapping[str, np.ndarray],
+    collection: Mapping[str, np.ndarray],
+    labels: Sequence[str],
+    preset: Preset,
+) -> dict[str, dict]:
+    """Poses of one object against a labelled collection, in one gallery.
+
+    Parameters
+    ----------
+    poses : modality -> (p, M) float [and ``BASELINE``], poses of one object.
+    collection : modality -> (n, M) float [and ``BASELINE``].
+    labels : (n,) classes of the collection.
+    preset : the dissimilarity, fusion rule and weights.
+
+    Returns
+    -------
+    row key -> {"ratio": median pose-pose distance / median between-class distance
+    of the collection, "foreign_nearest": poses whose nearest neighbour in the
+    combined gallery is not another pose, "poses"}.
+    """
+    keys = [k for k in collection if k in poses]
+    combined = {k: np.concatenate([poses[k], collection[k]]) for k in keys}
+    base = (combined[BASELINE], combined[BASELINE]) if BASELINE in combined else None
+    matrices = _cross(combined, combined, preset, base)
+    p = len(next(iter(poses.values())))
+    labels_arr = np.asarray([str(x) for x in labels])
+    between = labels_arr[:, None] != labels_arr[None, :]
+    out: dict[str, dict] = {}
+    for row, d in matrices.items():
+        d = 0.5 * (d + d.T)
+        within = d[:p, :p][np.triu_indices(p, 1)]
+        coll = d[p:, p:][np.triu_indices(len(labels_arr), 1)]
+        coll_between = coll[between[np.triu_indices(len(labels_arr), 1)]]
+        np.fill_diagonal(d, np.inf)
+        foreign = int(np.count_nonzero(np.argmin(d[:p], axis=1) >= p))
+        out[row] = {
+            "ratio": float(np.median(within) / np.median(coll_between)),
+            "foreign_nearest": foreign,
+            "poses": p,
+        }
+    return out
