@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import gzip
+import io
 
 import numpy as np
 import pytest
 import trimesh
 from conftest import random_rotation
 
-from worker.engine import errors
+from worker.engine import errors, mesh_io
 from worker.engine.mesh_io import Mesh, canonical_frame, clean_mesh, load_mesh, mesh_format
 
 
@@ -194,3 +195,38 @@ def test_canonical_frame_undoes_rotation_translation_and_scale(sphere):
         rotated = shape.vertices @ random_rotation(rng).T
         moved = Mesh((rotated + [5.0, -3.0, 2.0]) * scale, shape.faces)
         np.testing.assert_allclose(canonical_frame(moved).vertices, canonical.vertices, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("header", "vertex_extra", "note"),
+    [
+        ("OFF", "", "plain"),
+        ("NOFF", " 0 0 1", "normals"),
+        ("OFF", "", "comment"),
+        ("OFF", "", "quad"),
+        ("OFF", "", "face colour"),
+    ],
+)
+def test_fast_off_reader_agrees_with_trimesh(header, vertex_extra, note):
+    """The numpy OFF reader takes the common layout; anything else goes to trimesh,
+    and either way the mesh read is trimesh's."""
+    vertices = ["0 0 0", "1 0 0", "1 1 0", "0 1 0", "0.5 0.5 1"]
+    faces = ["3 0 1 4", "3 1 2 4", "3 2 3 4", "3 3 0 4"]
+    faces += ["4 0 3 2 1"] if note == "quad" else ["3 0 2 1", "3 0 3 2"]
+    if note == "face colour":
+        faces = [f + " 255 0 0" for f in faces]
+    lines = [header, f"{len(vertices)} {len(faces)} 0"] + [v + vertex_extra for v in vertices]
+    if note == "comment":
+        lines.insert(1, "# made by hand")
+    data = ("\n".join(lines + faces) + "\n").encode()
+    loaded = trimesh.load(io.BytesIO(data), file_type="off", process=False)
+    fast = mesh_io._parse_triangle_off(data)
+    assert (fast is not None) == (note in ("plain", "normals"))
+    vertices_read, faces_read = mesh_io._parse(data, "off")
+    np.testing.assert_array_equal(vertices_read, loaded.vertices)
+    np.testing.assert_array_equal(faces_read, loaded.faces)
+
+
+def test_fast_off_reader_refuses_what_is_not_its_layout():
+    for data in (b"OFF\n3 1 0\n0 0 0\n1 0 0\n", b"OFF\nx y z\n", "OFF\n1 0 0\n0 0 \xe9\n".encode()):
+        assert mesh_io._parse_triangle_off(data) is None
