@@ -11,7 +11,14 @@ import trimesh
 from conftest import random_rotation
 
 from worker.engine import errors, mesh_io
-from worker.engine.mesh_io import Mesh, canonical_frame, clean_mesh, load_mesh, mesh_format
+from worker.engine.mesh_io import (
+    CANONICAL_AREA,
+    Mesh,
+    canonical_frame,
+    clean_mesh,
+    load_mesh,
+    mesh_format,
+)
 
 
 @pytest.fixture(scope="module")
@@ -189,12 +196,14 @@ def test_canonical_frame_undoes_rotation_translation_and_scale(sphere):
     canonical = canonical_frame(shape)
     tri = canonical.vertices[canonical.faces]
     areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    assert areas.sum() == pytest.approx(1.0)
-    assert np.linalg.norm(areas @ tri.mean(axis=1)) < 1e-12
+    assert areas.sum() == pytest.approx(CANONICAL_AREA)
+    assert np.linalg.norm(areas @ tri.mean(axis=1)) < 1e-9
     for scale in (1e-30, 0.01, 100.0, 1e30):
         rotated = shape.vertices @ random_rotation(rng).T
         moved = Mesh((rotated + [5.0, -3.0, 2.0]) * scale, shape.faces)
-        np.testing.assert_allclose(canonical_frame(moved).vertices, canonical.vertices, atol=1e-9)
+        np.testing.assert_allclose(
+            canonical_frame(moved).vertices, canonical.vertices, atol=1e-9 * CANONICAL_AREA**0.5
+        )
 
 
 @pytest.mark.parametrize(

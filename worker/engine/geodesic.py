@@ -5,7 +5,7 @@ method (Crane, Weischedel & Wardetzky 2013) on the intrinsic Delaunay
 triangulation, which solves the same problem with two sparse linear systems:
 
 1. heat flow ``(M + t L) u = delta_s`` for a short time ``t = h^2`` (longer on
-   very long, thin surfaces, see :func:`shortest_safe_time`),
+   very long, thin surfaces, see :class:`HeatMethod`),
 2. the unit field ``X = -grad u / |grad u|`` points along geodesics,
 3. ``L phi = div X`` recovers the distance ``phi`` up to a constant.
 
@@ -53,24 +53,9 @@ def heat_time(
     return factor * 2.0 * float(ops.face_areas.sum()) / (math.sqrt(3.0) * n_reference)
 
 
-def shortest_safe_time(mesh: IntrinsicMesh) -> float:
-    """The shortest heat time at which ``u`` stays a normal float across the mesh.
-
-    One backward-Euler heat step decays like ``exp(-d / sqrt(t))`` with the
-    distance ``d`` from the source. On a long thin surface (a helical spring of
-    wire at 2,500 vertices is 700 edge lengths long) ``u`` underflows to zero far
-    from the source with ``t = h^2``, the unit field loses its direction there and
-    the distances become meaningless. Keeping ``diameter / sqrt(t)`` below
-    ``TOL.heat_max_decay`` prevents that; on ordinary shapes the bound is far below
-    ``h^2`` and changes nothing.
-
-    The diameter is bounded from above by twice the eccentricity of vertex 0 on
-    the edge graph (graph paths are never shorter than geodesics).
-
-    Returns
-    -------
-    float, a heat time in squared length units.
-    """
+def diameter_bound(mesh: IntrinsicMesh) -> float:
+    """An upper bound of the surface's geodesic diameter: twice the eccentricity of
+    vertex 0 on the edge graph (graph paths are never shorter than geodesics)."""
     # Each interior edge is listed by both its faces: keep one copy (a sparse matrix
     # would add the two lengths).
     _, first = np.unique(edge_keys(mesh.faces, mesh.n_vertices).ravel(), return_index=True)
@@ -80,8 +65,7 @@ def shortest_safe_time(mesh: IntrinsicMesh) -> float:
         shape=(mesh.n_vertices, mesh.n_vertices),
     )
     reach = dijkstra(graph, directed=False, indices=np.array([0]))[0]
-    diameter = 2.0 * float(np.max(reach[np.isfinite(reach)]))
-    return (diameter / TOL.heat_max_decay) ** 2
+    return 2.0 * float(np.max(reach[np.isfinite(reach)]))
 
 
 class HeatMethod:
@@ -98,8 +82,19 @@ class HeatMethod:
         version the fast path is tested against). The fast path factors both
         systems with :class:`BandedCholesky` and runs the Poisson step in single
         precision: its input is a unit vector field and its output a distance, both
-        of order one, whereas the heat step needs double precision (``u`` decays
-        like ``exp(-d / h)`` and reaches 1e-60 across a mesh).
+        of order one.
+
+    Notes
+    -----
+    One backward-Euler heat step decays like ``exp(-d / sqrt(t))`` with the distance
+    ``d`` from the source. On a long thin surface (a helical spring of wire at 2,500
+    vertices is 700 edge lengths long) ``u`` underflows to zero far from the source
+    with ``t = h^2``, the unit field loses its direction there and the distances
+    become meaningless: the time is therefore never shorter than keeps
+    ``diameter / sqrt(t)`` below ``TOL.heat_max_decay`` (on ordinary shapes that
+    bound is far below ``h^2`` and changes nothing). When the decay stays within
+    ``TOL.heat_max_decay_single`` (the surface presets' longer times), ``u`` fits
+    single precision too and the fast path runs the heat step in it as well.
     """
 
     def __init__(
@@ -111,23 +106,28 @@ class HeatMethod:
         reference: bool = False,
     ):
         self.n = mesh.n_vertices
-        t = max(heat_time(mesh, ops, time_factor, n_reference), shortest_safe_time(mesh))
+        diameter = diameter_bound(mesh)
+        t = max(
+            heat_time(mesh, ops, time_factor, n_reference), (diameter / TOL.heat_max_decay) ** 2
+        )
         mass = sp.diags(ops.vertex_areas)
         heat = (mass + t * ops.stiffness).tocsc()
         # L is singular (constants); a tiny mass term makes it definite and only
         # shifts phi by a constant, which the source normalization removes.
         eps = TOL.poisson_regularization * ops.stiffness.diagonal().mean() / ops.vertex_areas.mean()
         poisson = (ops.stiffness + eps * mass).tocsc()
-        self._gradient = ops.gradient
         # Either solver answers solve(b) for a block of right-hand sides.
         self._heat: sla.SuperLU | BandedCholesky
         self._poisson: sla.SuperLU | BandedCholesky
         if reference:
             self._heat, self._poisson = sla.splu(heat), sla.splu(poisson)
-            self._divergence = ops.divergence
+            self._gradient, self._divergence = ops.gradient, ops.divergence
         else:
-            self._heat = BandedCholesky(heat)
+            single = diameter / np.sqrt(t) <= TOL.heat_max_decay_single
+            heat_dtype = np.float32 if single else np.float64
+            self._heat = BandedCholesky(heat, dtype=heat_dtype)
             self._poisson = BandedCholesky(poisson, dtype=np.float32)
+            self._gradient = ops.gradient.astype(heat_dtype)
             self._divergence = ops.divergence.astype(np.float32)
 
     def distances_from(self, sources: np.ndarray) -> np.ndarray:
@@ -139,7 +139,8 @@ class HeatMethod:
 
         Returns
         -------
-        (n, s) float, column ``c`` holds the distances from ``sources[c]``.
+        (n, s) float (float32 on the fast path, whose Poisson step is single
+        precision), column ``c`` holds the distances from ``sources[c]``.
         """
         sources = np.asarray(sources, dtype=np.int64)
         rhs = np.zeros((self.n, len(sources)))
@@ -152,14 +153,12 @@ class HeatMethod:
         # 1e-154, whose square underflows and would turn the unit field into 1e150s.
         # A face where u is flat to the last bit has no direction; it stays zero.
         length = np.hypot(gx, gy)
-        inverse = np.zeros_like(length)
-        np.divide(-1.0, length, out=inverse, where=length > 0)
-        gx *= inverse
-        gy *= inverse
-        phi = self._poisson.solve(self._divergence @ g.astype(self._divergence.dtype))
-        phi = phi.astype(np.float64)
+        np.divide(-1.0, length, out=length, where=length > 0)
+        gx *= length
+        gy *= length
+        phi = self._poisson.solve(self._divergence @ g.astype(self._divergence.dtype, copy=False))
         phi -= phi[sources, np.arange(len(sources))]
-        distances: np.ndarray = np.maximum(phi, 0.0)
+        distances: np.ndarray = np.maximum(phi, 0.0, out=phi)
         return distances
 
 
@@ -178,16 +177,21 @@ def geodesic_distance_matrix(
 
     Returns
     -------
-    (n, n) float, symmetric with zero diagonal, in the mesh's length unit.
+    (n, n) float32, symmetric with zero diagonal, in the mesh's length unit (single
+    precision, as the Poisson step that makes it: 2,500 vertices take 25 MB).
     """
     solver = HeatMethod(mesh, ops, time_factor, n_reference)
     n = mesh.n_vertices
-    gdm = np.empty((n, n))
+    gdm = np.empty((n, n), dtype=np.float32)
     for start in range(0, n, SOURCE_BLOCK):
         stop = min(start + SOURCE_BLOCK, n)
         gdm[:, start:stop] = solver.distances_from(np.arange(start, stop))
-    gdm += gdm.T
-    gdm *= 0.5
+    # Symmetrize block by block: gdm += gdm.T would copy the whole transpose first.
+    for start in range(0, n, SOURCE_BLOCK):
+        rows = slice(start, min(start + SOURCE_BLOCK, n))
+        upper = 0.5 * (gdm[rows, start:] + gdm[start:, rows].T)
+        gdm[rows, start:] = upper
+        gdm[start:, rows] = upper.T
     np.fill_diagonal(gdm, 0.0)
     return gdm
 

@@ -87,8 +87,9 @@ def modal_gdm(gdm: np.ndarray, k: int, mass: np.ndarray | None = None) -> np.nda
 def _normalized_gdm(gdm: np.ndarray, mass: np.ndarray | None) -> np.ndarray:
     if mass is None:
         return normalize_slices(gdm)
-    root = np.sqrt(mass)
-    weighted: np.ndarray = gdm * np.outer(root, root) / float(mass.sum()) ** 1.5
+    root = (np.sqrt(mass) / float(mass.sum()) ** 0.75).astype(gdm.dtype)
+    weighted: np.ndarray = gdm * root[:, None]
+    weighted *= root[None, :]
     return weighted
 
 

@@ -30,6 +30,9 @@ class Tolerances:
     # Largest diameter / sqrt(heat time): the heat step decays like exp(-d / sqrt(t)),
     # and exp(-400) = 1e-174 leaves room above float64's smallest normal number.
     heat_max_decay: float = 400.0
+    # The same bound under which the heat step fits single precision (exp(-60) =
+    # 9e-27, above float32's smallest normal 1e-38 with room for the gradient).
+    heat_max_decay_single: float = 60.0
 
 
 TOL = Tolerances()
