@@ -1,10 +1,10 @@
 """``python -m app``: the embedded deployment in one command.
 
-Runs ``alembic upgrade head``, then starts the API (uvicorn, one process) and
-``SHAPES_WORKERS`` queue consumers (``python -m worker``) as child processes,
-and stops them all cleanly on Ctrl-C / SIGTERM: consumers get SIGINT (finish
-the running task), then SIGTERM, then SIGKILL after a grace period. A consumer
-that dies is restarted.
+Runs ``alembic upgrade head``, then starts the API (uvicorn, one process),
+``SHAPES_WORKERS`` enrollment consumers and ``SHAPES_QUERY_WORKERS`` query consumers
+(``python -m worker --queue ...``) as child processes, and stops them all
+cleanly on Ctrl-C / SIGTERM: consumers get SIGINT (finish the running task), then
+SIGTERM, then SIGKILL after a grace period. A consumer that dies is restarted.
 """
 
 from __future__ import annotations
@@ -59,10 +59,11 @@ def serve(settings: Settings) -> int:
     upgrade_head(settings.sqlalchemy_url)
     env = _consumer_env(settings)
 
-    def start_consumer() -> subprocess.Popen:
-        return subprocess.Popen([sys.executable, "-m", "worker"], env=env)
+    def start_consumer(queue: str) -> subprocess.Popen:
+        return subprocess.Popen([sys.executable, "-m", "worker", "--queue", queue], env=env)
 
-    consumers = [start_consumer() for _ in range(settings.workers)]
+    queues = ["enroll"] * settings.workers + ["query"] * settings.query_workers
+    consumers = [start_consumer(queue) for queue in queues]
     api_env = dict(os.environ, SHAPES_DATA_DIR=env["SHAPES_DATA_DIR"])
     # The API's numeric work is many small searches: BLAS threads only add
     # synchronisation (a refit took 3x longer with two threads on a busy machine).
@@ -92,7 +93,11 @@ def serve(settings: Settings) -> int:
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     log.info(
-        "serving on http://%s:%d with %d worker(s)", settings.host, settings.port, len(consumers)
+        "serving on http://%s:%d with %d enrollment and %d query worker(s)",
+        settings.host,
+        settings.port,
+        settings.workers,
+        settings.query_workers,
     )
     code = 0
     while not stopping["signal"]:
@@ -103,7 +108,7 @@ def serve(settings: Settings) -> int:
         for i, p in enumerate(consumers):
             if p.poll() is not None:
                 log.warning("worker %d exited with %s; restarting it", p.pid, p.returncode)
-                consumers[i] = start_consumer()
+                consumers[i] = start_consumer(queues[i])
         time.sleep(0.5)
     # The API first (it stops taking requests and saves the index), then the workers.
     _stop([api], signal.SIGTERM)
@@ -115,7 +120,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m app", description=__doc__.splitlines()[0])
     parser.add_argument("--host", help="default SHAPES_HOST or 127.0.0.1")
     parser.add_argument("--port", type=int, help="default SHAPES_PORT or 8000")
-    parser.add_argument("--workers", type=int, help="queue consumers (default SHAPES_WORKERS or 1)")
+    parser.add_argument(
+        "--workers", type=int, help="enrollment consumers (default SHAPES_WORKERS or 2)"
+    )
+    parser.add_argument(
+        "--query-workers", type=int, help="query consumers (default SHAPES_QUERY_WORKERS or 1)"
+    )
     parser.add_argument("--data-dir", help="default SHAPES_DATA_DIR or ./data")
     args = parser.parse_args(argv)
     overrides = {
@@ -124,6 +134,7 @@ def main(argv: list[str] | None = None) -> int:
             "host": args.host,
             "port": args.port,
             "workers": args.workers,
+            "query_workers": args.query_workers,
             "data_dir": args.data_dir,
         }.items()
         if v is not None

@@ -27,7 +27,12 @@ class Settings(QueueSettings):
     # Serving (python -m app)
     host: str = "127.0.0.1"
     port: int = 8000
-    workers: int = Field(default=1, ge=0, description="queue consumer processes started by serve")
+    workers: int = Field(
+        default=2, ge=0, description="enrollment consumer processes started by serve"
+    )
+    query_workers: int = Field(
+        default=1, ge=0, description="query consumer processes started by serve"
+    )
 
     # Access
     api_key: SecretStr | None = Field(
@@ -54,7 +59,9 @@ class Settings(QueueSettings):
 
     # Jobs
     query_timeout_seconds: float = Field(default=120.0, gt=0)
-    query_priority: int = 100
+    query_cache_size: int = Field(
+        default=1024, ge=0, description="descriptors of recent query uploads kept in memory"
+    )
     collector_interval_seconds: float = Field(default=0.5, gt=0)
     stalled_after_seconds: float = Field(
         default=30.0, gt=0, description="a running job whose heartbeat is older is re-enqueued"

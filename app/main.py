@@ -24,6 +24,7 @@ from .meshes.router import router as meshes_router
 from .metrics import Metrics, RequestMetricsMiddleware
 from .migrations import upgrade_head
 from .queue import DescriptorQueue
+from .search.recent import RecentDescriptors
 from .search.router import document_limits
 from .search.router import router as search_router
 from .state import AppState
@@ -83,6 +84,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 refit_fraction=settings.index_refit_fraction,
                 metrics=metrics,
             ),
+            recent_queries=RecentDescriptors(settings.query_cache_size),
         )
         app.state.shapes = state
         collector = JobCollector(state)

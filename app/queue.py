@@ -6,6 +6,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from huey import Huey
 from huey.exceptions import ResultTimeout, TaskException
 from huey.utils import Error
 
@@ -26,10 +27,13 @@ class QueryMeshError(MeshError):
 
 
 class DescriptorQueue:
+    """Enrollments go to one Huey queue (collected by :mod:`app.jobs.collector`),
+    queries to another with consumers of their own (:func:`describe_now` waits)."""
+
     def __init__(self, settings: Settings) -> None:
         self.settings = settings
-        self.huey = make_huey(settings)
-        self._task = self.huey.describe_upload
+        self.huey = make_huey(settings, "enroll")
+        self.query_huey = make_huey(settings, "query")
 
     def task_path(self, path: Path) -> str:
         """The path handed to workers: relative to the data directory when inside it,
@@ -39,36 +43,32 @@ class DescriptorQueue:
         except ValueError:
             return str(path.resolve())
 
-    def enqueue_describe(
-        self, task_id: str, path: Path, filename: str, preset: str, *, priority: int = 0
-    ) -> None:
-        self.huey.delete(heartbeat_key(task_id))
-        self.huey.enqueue(
-            self._task.s(
-                self.task_path(path),
-                filename,
-                preset,
-                self.settings.max_faces,
-                id=task_id,
-                priority=priority,
+    def _enqueue(self, huey: Huey, task_id: str, path: Path, filename: str, preset: str) -> None:
+        huey.delete(heartbeat_key(task_id))
+        huey.enqueue(
+            huey.describe_upload.s(
+                self.task_path(path), filename, preset, self.settings.max_faces, id=task_id
             )
         )
 
+    def enqueue_describe(self, task_id: str, path: Path, filename: str, preset: str) -> None:
+        """Queue the description of an enrolled mesh (the collector stores the result)."""
+        self._enqueue(self.huey, task_id, path, filename, preset)
+
     def describe_now(self, task_id: str, path: Path, filename: str, preset: str) -> ShapeDescriptor:
-        """Describe a file in the worker pool and wait (blocking) for it.
+        """Describe a file on the query queue and wait (blocking) for it.
 
         Raises
         ------
         MeshError
             The worker refused the mesh (its code and sentence).
         UnavailableError
-            No worker answered in time, or the task crashed on every try.
+            No query worker answered in time, or the task crashed on every try.
         """
-        self.enqueue_describe(
-            task_id, path, filename, preset, priority=self.settings.query_priority
-        )
+        huey = self.query_huey
+        self._enqueue(huey, task_id, path, filename, preset)
         try:
-            result = self.huey.result(
+            result = huey.result(
                 task_id,
                 blocking=True,
                 timeout=self.settings.query_timeout_seconds,
@@ -85,7 +85,7 @@ class DescriptorQueue:
                 code="describe_crashed",
             ) from None
         finally:
-            self.huey.delete(heartbeat_key(task_id))
+            huey.delete(heartbeat_key(task_id))
         if not result["ok"]:
             raise QueryMeshError(result["code"], result["message"])
         return ShapeDescriptor.from_npz_bytes(descriptor_npz(result))

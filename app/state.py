@@ -13,6 +13,7 @@ from .config import Settings
 from .gallery.service import Gallery
 from .metrics import Metrics
 from .queue import DescriptorQueue
+from .search.recent import RecentDescriptors
 from .storage import UploadStore
 
 
@@ -27,3 +28,4 @@ class AppState:
     store: UploadStore
     metrics: Metrics
     gallery: Gallery
+    recent_queries: RecentDescriptors

@@ -1,11 +1,15 @@
-"""``python -m worker``: run one descriptor-queue consumer (settings from ``SHAPES_*``)."""
+"""``python -m worker``: run one descriptor-queue consumer (settings from ``SHAPES_*``).
+
+``--queue enroll`` (the default) describes enrolled meshes at a lower CPU priority;
+``--queue query`` describes the meshes clients are waiting for.
+"""
 
 from __future__ import annotations
 
 import argparse
 
 from .jobs.queue import run_consumer
-from .jobs.settings import QueueSettings
+from .jobs.settings import QUEUES, QueueSettings
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -16,8 +20,11 @@ def main(argv: list[str] | None = None) -> None:
         default=1,
         help="tasks run at once in this process (default 1; start more processes instead)",
     )
+    parser.add_argument(
+        "--queue", choices=QUEUES, default="enroll", help="which queue to consume (default enroll)"
+    )
     args = parser.parse_args(argv)
-    run_consumer(QueueSettings(), workers=args.threads)
+    run_consumer(QueueSettings(), workers=args.threads, queue=args.queue)
 
 
 if __name__ == "__main__":

@@ -122,6 +122,7 @@ def query_out(result: service.SearchResult) -> QueryOut:
         ],
         timings=result.timings,
         query=result.query,
+        descriptor_source=result.descriptor_source,
     )
 
 

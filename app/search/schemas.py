@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Literal
+
 from pydantic import BaseModel, ConfigDict, Field
 
 
@@ -36,8 +38,9 @@ class QueryOut(BaseModel):
                             "scores": {"gdm": 0.52, "ddt": 0.79},
                         }
                     ],
-                    "timings": {"describe": 2.1, "search": 0.0004},
+                    "timings": {"describe_wall": 1.3, "search": 0.0004},
                     "query": {"input_vertices": 4344, "vertices": 2500},
+                    "descriptor_source": "computed",
                 }
             ]
         }
@@ -55,3 +58,8 @@ class QueryOut(BaseModel):
         description="seconds: descriptor stages of the query (if computed), 'search', 'total'"
     )
     query: dict[str, int] = Field(default_factory=dict)
+    descriptor_source: Literal["computed", "enrolled", "recent", "stored"] = Field(
+        description="where the query's descriptor came from: computed now by a query worker, "
+        "the enrolled mesh with the same bytes and format, a recent query with the same "
+        "bytes, or the stored descriptor of the mesh /similar starts from"
+    )

@@ -17,6 +17,7 @@ def limited(tmp_path_factory) -> Iterator[Service]:
     svc = make_service(tmp_path_factory, "limited", SHAPES_JOB_TIME_LIMIT_SECONDS="1")
     try:
         svc.start_worker()
+        svc.start_worker("query")
         svc.start_api()
         yield svc
     finally:

@@ -47,6 +47,7 @@ def fuzzed(tmp_path_factory) -> Iterator[Service]:
     )
     try:
         svc.start_worker()
+        svc.start_worker("query")
         svc.start_api()
         svc.client.headers["X-API-Key"] = KEY
         created = svc.upload("wolf0", "wolf")

@@ -55,7 +55,7 @@ class Service:
             OPENBLAS_NUM_THREADS="1",
         )
         self.api: subprocess.Popen | None = None
-        self.workers: list[subprocess.Popen] = []
+        self.workers: dict[str, list[subprocess.Popen]] = {"enroll": [], "query": []}
         self.client = httpx.Client(base_url=self.url, timeout=TIMEOUT)
         self._logs = data_dir / "logs"
         self._logs.mkdir(parents=True, exist_ok=True)
@@ -91,22 +91,27 @@ class Service:
             self.api.wait(60)
         self.api = None
 
-    def start_worker(self) -> subprocess.Popen:
-        worker = self._spawn(["-m", "worker"], "worker")
-        self.workers.append(worker)
+    def start_worker(self, queue: str = "enroll") -> subprocess.Popen:
+        """A ``python -m worker`` consumer of the enrollment or the query queue."""
+        worker = self._spawn(["-m", "worker", "--queue", queue], f"worker-{queue}")
+        self.workers[queue].append(worker)
         return worker
 
-    def stop_workers(self) -> None:
-        for worker in self.workers:
+    def stop_workers(self, queue: str | None = None) -> None:
+        """Stop the consumers of ``queue`` (default: all), gracefully (SIGINT)."""
+        stopping = [w for q, ws in self.workers.items() if queue in (None, q) for w in ws]
+        for worker in stopping:
             if worker.poll() is None:
                 worker.send_signal(signal.SIGINT)
-        for worker in self.workers:
+        for worker in stopping:
             try:
                 worker.wait(60)
             except subprocess.TimeoutExpired:
                 worker.kill()
                 worker.wait()
-        self.workers = []
+        for q in self.workers:
+            if queue in (None, q):
+                self.workers[q] = []
 
     def logs(self) -> str:
         out = []
@@ -156,10 +161,12 @@ def migrated_service(tmp_path_factory, name: str, **env: str) -> Service:
 
 @contextmanager
 def running(svc: Service, workers: int = 2) -> Iterator[Service]:
-    """Start ``workers`` queue consumers and the API; stop them all on exit."""
+    """Start ``workers`` enrollment consumers, one query consumer and the API; stop them
+    all on exit."""
     try:
         for _ in range(workers):
             svc.start_worker()
+        svc.start_worker("query")
         svc.start_api()
         yield svc
     finally:

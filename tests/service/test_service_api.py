@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import gzip
 
+import numpy as np
+
+from worker.engine.presets import DEFAULT_PRESET, get_preset
+
 from .conftest import GALLERY, TOSCA, Service
+
+DEFAULT = get_preset(DEFAULT_PRESET)
 
 
 def test_enrolled_meshes_are_ready_with_descriptor_info(service: Service, gallery):
@@ -12,8 +18,8 @@ def test_enrolled_meshes_are_ready_with_descriptor_info(service: Service, galler
     assert body["status"] == "ready"
     assert body["label"] == "wolf"
     assert body["metadata"] == {"source": "TOSCA"}
-    assert body["descriptor"]["preset"] == "smeets2010-shrec"
-    assert body["descriptor"]["preset_version"] == 1
+    assert body["descriptor"]["preset"] == DEFAULT.name
+    assert body["descriptor"]["preset_version"] == DEFAULT.version
     assert body["descriptor"]["input_vertices"] == 4344
     assert 2400 <= body["descriptor"]["vertices"] <= 2500
     assert body["descriptor"]["timings"]["total"] > 0
@@ -26,8 +32,8 @@ def test_query_with_another_pose_ranks_the_right_class_first(service: Service, g
     response = service.query("wolf2", k=4)
     assert response.status_code == 200, response.text
     body = response.json()
-    assert body["preset"] == "smeets2010-shrec"
-    assert body["dissimilarity"] == "D2" and body["fusion"] == "product"
+    assert body["preset"] == DEFAULT.name and body["descriptor_source"] == "computed"
+    assert body["dissimilarity"] == "D1" and body["fusion"] == "product"
     assert body["gallery_size"] >= len(GALLERY)
     matches = body["matches"]
     assert [m["rank"] for m in matches] == [1, 2, 3, 4]
@@ -35,17 +41,33 @@ def test_query_with_another_pose_ranks_the_right_class_first(service: Service, g
     assert {m["label"] for m in matches[:2]} == {"wolf"}
     scores = [m["score"] for m in matches]
     assert scores == sorted(scores)
-    for m in matches:  # the fused score is the product of the per-modality D2
-        assert abs(m["score"] - m["scores"]["gdm"] * m["scores"]["ddt"]) <= 1e-9 * m["score"]
+    for m in matches:  # the fused score: the weighted product of the per-modality D1
+        product = np.prod([m["scores"][k] ** DEFAULT.weight(k) for k in DEFAULT.fused_modalities])
+        assert abs(m["score"] - product) <= 1e-9 * m["score"]
     assert body["timings"]["total"] > 0 and body["timings"]["search"] < 1.0
+
+
+def test_bytes_already_described_answer_without_a_worker(service: Service, gallery):
+    enrolled = service.query("horse0", k=1).json()
+    assert enrolled["descriptor_source"] == "enrolled"
+    assert enrolled["matches"][0]["mesh_id"] == gallery["horse0"]
+    assert enrolled["matches"][0]["score"] == 0.0
+    first = service.query("horse6", k=1).json()
+    again = service.query("horse6", k=1).json()
+    assert (first["descriptor_source"], again["descriptor_source"]) == ("computed", "recent")
+    assert again["matches"] == first["matches"]
+    assert again["timings"]["describe_wall"] < 0.1 < first["timings"]["describe_wall"]
 
 
 def test_query_options_fusion_and_modalities(service: Service, gallery):
     body = service.query("centaur2", k=2, fusion="sum", modalities="gdm,ddt").json()
     assert body["fusion"] == "sum"
     assert body["matches"][0]["label"] == "centaur"
-    m = body["matches"][0]
-    assert abs(m["score"] - (m["scores"]["gdm"] + m["scores"]["ddt"])) <= 1e-9 * m["score"]
+    m = body["matches"][0]  # the preset's weights, with the requested rule and modalities
+    weighted = (
+        DEFAULT.weight("gdm") * m["scores"]["gdm"] + DEFAULT.weight("ddt") * m["scores"]["ddt"]
+    )
+    assert abs(m["score"] - weighted) <= 1e-9 * m["score"]
 
 
 def test_similar_uses_the_stored_descriptor_and_leaves_the_mesh_out(service: Service, gallery):
@@ -227,7 +249,7 @@ def test_health_ready_metrics_and_docs(service: Service, gallery):
     # the deployment's limits are documented, and an enrolled mesh links to what takes its id
     similar = schema["paths"]["/meshes/{mesh_id}/similar"]["post"]
     options = {p["name"]: p["schema"] for p in similar["parameters"]}
-    assert options["k"]["maximum"] == 100 and options["preset"]["enum"] == ["smeets2010-shrec"]
+    assert options["k"]["maximum"] == 100 and options["preset"]["enum"] == [DEFAULT.name]
     links = schema["paths"]["/meshes"]["post"]["responses"]["202"]["links"]
     assert {link["operationId"] for link in links.values()} == {
         "get_mesh",

@@ -20,7 +20,7 @@ def _wait_processing(service: Service, job_id: int) -> dict:
 
 
 def test_worker_killed_mid_job_is_retried_after_a_new_worker_starts(service: Service, gallery):
-    service.stop_workers()
+    service.stop_workers("enroll")
     victim = service.start_worker()
     created = service.upload("centaur3", "centaur")
     assert created.status_code == 202
@@ -44,7 +44,7 @@ def test_worker_killed_mid_job_is_retried_after_a_new_worker_starts(service: Ser
 
 def test_restart_loses_nothing_queued_and_reloads_the_index(service: Service, gallery):
     size_before = service.client.get("/ready").json()["checks"]["index"]
-    service.stop_workers()
+    service.stop_workers("enroll")
     created = service.upload("wolf2", "wolf")  # queued; no worker is running
     assert created.status_code == 202
     mesh_id = created.json()["id"]

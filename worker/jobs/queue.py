@@ -35,7 +35,7 @@ from typing import Any
 from huey import Huey, PriorityRedisHuey, SqliteHuey
 
 from .limits import describe_limited
-from .settings import QueueSettings
+from .settings import Queue, QueueSettings
 
 TASK_NAME = "describe_upload"
 TASK_RETRIES = 2
@@ -54,22 +54,22 @@ def descriptor_npz(result: Mapping[str, Any]) -> bytes:
     return base64.b64decode(result["descriptor"])
 
 
-def make_huey(settings: QueueSettings) -> Huey:
-    """The Huey instance for ``settings``, with the ``describe_upload`` task registered.
+def make_huey(settings: QueueSettings, queue: Queue = "enroll") -> Huey:
+    """The Huey instance of one of the two queues, with ``describe_upload`` registered.
 
-    SQLite (``<data_dir>/queue.sqlite3``, WAL) unless ``redis_url`` is set; both
-    honour task priorities (queries jump ahead of enrollments).
-    Intermediate errors are not stored, so a task's result is either its value
-    or, after the last retry, its final error.
+    SQLite (``<data_dir>/queue.sqlite3``, WAL; both queues in the one file) unless
+    ``redis_url`` is set. Intermediate errors are not stored, so a task's result is
+    either its value or, after the last retry, its final error.
     """
+    name = settings.queue_name_of(queue)
     if settings.redis_url:
         huey: Huey = PriorityRedisHuey(
-            settings.queue_name, url=settings.redis_url, store_intermediate_errors=False
+            name, url=settings.redis_url, store_intermediate_errors=False
         )
     else:
         settings.data_dir.mkdir(parents=True, exist_ok=True)
         huey = SqliteHuey(
-            settings.queue_name,
+            name,
             filename=str(settings.data_dir / QUEUE_FILE),
             store_intermediate_errors=False,
             timeout=30,
@@ -130,17 +130,24 @@ def make_huey(settings: QueueSettings) -> Huey:
     return huey
 
 
-def run_consumer(settings: QueueSettings | None = None, workers: int = 1) -> None:
-    """Run a Huey consumer (blocking) on the queue described by ``settings``.
+def run_consumer(
+    settings: QueueSettings | None = None, workers: int = 1, queue: Queue = "enroll"
+) -> None:
+    """Run a Huey consumer (blocking) on one of the queues described by ``settings``.
 
-    SIGINT stops it gracefully (the running task finishes), SIGTERM at once;
-    a task interrupted either way is re-enqueued by the service's collector
+    An enrollment consumer first lowers its CPU priority by ``enroll_nice`` (its
+    descriptor processes inherit it), so query consumers on the same machine get the
+    cores first. SIGINT stops it gracefully (the running task finishes), SIGTERM at
+    once; a task interrupted either way is re-enqueued by the service's collector
     once its heartbeat goes stale.
     """
+    settings = settings or QueueSettings()
     logging.basicConfig(
         level=logging.INFO, format="%(asctime)s %(process)d %(name)s %(levelname)s %(message)s"
     )
-    huey = make_huey(settings or QueueSettings())
+    if queue == "enroll" and settings.enroll_nice:
+        os.nice(settings.enroll_nice)
+    huey = make_huey(settings, queue)
     consumer = huey.create_consumer(
         workers=workers, worker_type="thread", initial_delay=0.1, backoff=1.15, max_delay=0.5
     )
