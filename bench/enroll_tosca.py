@@ -13,7 +13,6 @@ nearest-neighbour accuracy by class) as a sanity check.
 from __future__ import annotations
 
 import argparse
-import os
 import signal
 import statistics
 import subprocess
@@ -32,19 +31,12 @@ from bench._tosca import TOSCA, tosca_labels  # noqa: E402
 REPO = Path(__file__).resolve().parents[1]
 
 
-def start_service(port: int, workers: int, data_dir: Path) -> subprocess.Popen:
+def start_service(port: int, workers: int | None, data_dir: Path) -> subprocess.Popen:
+    """``python -m app`` on a fresh data dir (``workers`` enrollment consumers, or its
+    default), returned once it answers ``/ready``."""
+    extra = [] if workers is None else ["--workers", str(workers)]
     proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "app",
-            "--port",
-            str(port),
-            "--workers",
-            str(workers),
-            "--data-dir",
-            str(data_dir),
-        ],
+        [sys.executable, "-m", "app", "--port", str(port), "--data-dir", str(data_dir), *extra],
         cwd=REPO,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
@@ -59,6 +51,11 @@ def start_service(port: int, workers: int, data_dir: Path) -> subprocess.Popen:
         time.sleep(0.3)
     proc.terminate()
     raise SystemExit("the service did not start")
+
+
+def stop_service(proc: subprocess.Popen) -> None:
+    proc.send_signal(signal.SIGTERM)
+    proc.wait(60)
 
 
 def run(url: str) -> None:
@@ -116,7 +113,9 @@ def run(url: str) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--url", help="a running service (default: start one)")
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser.add_argument(
+        "--workers", type=int, help="enrollment consumers (default: the service's, 2)"
+    )
     parser.add_argument("--port", type=int, default=8765)
     args = parser.parse_args()
     if args.url:
@@ -125,11 +124,11 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         proc = start_service(args.port, args.workers, Path(tmp) / "data")
         try:
-            print(f"service: python -m app --workers {args.workers} (fresh data dir)")
+            shown = "" if args.workers is None else f" --workers {args.workers}"
+            print(f"service: python -m app{shown} (fresh data dir)")
             run(f"http://127.0.0.1:{args.port}")
         finally:
-            proc.send_signal(signal.SIGTERM)
-            proc.wait(60)
+            stop_service(proc)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,150 @@
+"""Query latency on an idle service and during a bulk enrollment, side by side.
+
+    python bench/query_under_load.py [--gallery 20] [--bulk 332] [--clients 4] [--queries 12]
+
+Starts ``python -m app`` (its default consumers: two enrollment workers and one
+query worker) on a fresh data directory, enrolls a small TOSCA gallery and waits
+for it, then:
+
+1. idle: ``--queries`` queries one after the other;
+2. under load: uploads ``--bulk`` enrollments (TOSCA files re-gzipped with other
+   header bytes, so every upload is new work) and, while they are being described,
+   ``--clients`` concurrent clients send ``--queries`` queries each.
+
+Every query sends bytes the service has not seen (a fresh gzip of a TOSCA file
+that is not enrolled), so each one is described by a worker, none answered from a
+stored or recent descriptor. Prints the latency table (median, p95, max) and the
+ratio of the loaded p95 to the idle median, and how many enrollments were still
+queued when the last query answered (the load was real throughout).
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures
+import gzip
+import itertools
+import statistics
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import httpx
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench._tosca import TOSCA, tosca_labels  # noqa: E402
+from bench.enroll_tosca import start_service, stop_service  # noqa: E402
+
+_variant = itertools.count(1)
+
+
+def fresh_bytes(name: str) -> bytes:
+    """The file's mesh, gzipped with a new header time: new bytes, same mesh."""
+    return gzip.compress(gzip.decompress((TOSCA / name).read_bytes()), mtime=next(_variant))
+
+
+def timed_query(client: httpx.Client, name: str) -> float:
+    start = time.perf_counter()
+    response = client.post("/query", files={"file": (name, fresh_bytes(name))}, data={"k": "5"})
+    elapsed = time.perf_counter() - start
+    body = response.json()
+    if response.status_code != 200 or body["descriptor_source"] != "computed":
+        raise RuntimeError(f"query of {name}: {response.status_code} {response.text[:200]}")
+    return elapsed
+
+
+def percentile(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(round(q * (len(ordered) - 1))))]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--gallery", type=int, default=20)
+    parser.add_argument("--bulk", type=int, default=332)
+    parser.add_argument("--clients", type=int, default=4)
+    parser.add_argument("--queries", type=int, default=12)
+    parser.add_argument("--port", type=int, default=8142)
+    args = parser.parse_args()
+
+    labels = tosca_labels()
+    names = sorted(labels)
+    gallery = names[:: len(names) // args.gallery][: args.gallery]
+    probes = [n for n in names if n not in gallery]
+    with tempfile.TemporaryDirectory(prefix="shapes-bench-") as tmp:
+        service = start_service(args.port, None, Path(tmp) / "data")
+        url = f"http://127.0.0.1:{args.port}"
+        try:
+            client = httpx.Client(base_url=url, timeout=300)
+            ids = [
+                client.post(
+                    "/meshes",
+                    files={"file": (n, (TOSCA / n).read_bytes())},
+                    data={"label": labels[n]},
+                ).json()["id"]
+                for n in gallery
+            ]
+            while client.get("/meshes", params={"status": "ready"}).json()["total"] < len(ids):
+                time.sleep(0.5)
+
+            idle = [timed_query(client, probes[i % len(probes)]) for i in range(args.queries)]
+
+            stop = threading.Event()
+
+            def enroll_bulk() -> None:
+                with httpx.Client(base_url=url, timeout=300) as bulk:
+                    for i in range(args.bulk):
+                        if stop.is_set():
+                            return
+                        name = names[i % len(names)]
+                        bulk.post(
+                            "/meshes",
+                            files={"file": (name, fresh_bytes(name))},
+                            data={"label": labels[name]},
+                        )
+
+            uploader = threading.Thread(target=enroll_bulk, daemon=True)
+            uploader.start()
+            # Let the enrollment queue fill before measuring.
+            while client.get("/meshes", params={"status": "queued"}).json()["total"] < 20:
+                time.sleep(0.5)
+
+            def one_client(c: int) -> list[float]:
+                with httpx.Client(base_url=url, timeout=300) as own:
+                    return [
+                        timed_query(own, probes[(c * args.queries + i) % len(probes)])
+                        for i in range(args.queries)
+                    ]
+
+            with concurrent.futures.ThreadPoolExecutor(args.clients) as pool:
+                loaded = [t for ts in pool.map(one_client, range(args.clients)) for t in ts]
+            queued = client.get("/meshes", params={"status": "queued"}).json()["total"]
+            processing = client.get("/meshes", params={"status": "processing"}).json()["total"]
+            stop.set()
+        finally:
+            stop_service(service)
+
+    base = statistics.median(idle)
+    print(
+        f"{args.gallery} meshes enrolled; queries of fresh bytes (k=5); bulk enrollment "
+        f"of {args.bulk} uploads; {args.clients} concurrent query clients\n"
+    )
+    print("| | queries | median s | p95 s | max s | p95 / idle median |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for title, values in (("idle, one client", idle), ("during bulk enrollment", loaded)):
+        print(
+            f"| {title} | {len(values)} | {statistics.median(values):.2f} | "
+            f"{percentile(values, 0.95):.2f} | {max(values):.2f} | "
+            f"{percentile(values, 0.95) / base:.2f} |"
+        )
+    print(
+        f"\nwhen the last query answered: {queued} enrollments still queued, "
+        f"{processing} being described"
+    )
+
+
+if __name__ == "__main__":
+    main()
