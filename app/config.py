@@ -68,6 +68,14 @@ class Settings(QueueSettings):
     )
     max_requeues: int = Field(default=2, ge=0)
 
+    # Calibration (GET /calibration, POST /verify, match confidences)
+    calibration_refit_seconds: float = Field(
+        default=10.0, ge=0, description="a stale calibration is refitted at most this often"
+    )
+    calibration_max_pairs: int = Field(
+        default=200_000, ge=20, description="labelled pairs scored per fit (a sample above)"
+    )
+
     # Index
     index_refit_fraction: float = Field(
         default=0.05, gt=0, description="refit sigma and projections after this fraction changed"

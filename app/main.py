@@ -14,6 +14,7 @@ from fastapi.middleware.cors import CORSMiddleware
 
 from worker.engine.presets import get_preset
 
+from .calibration.router import router as calibration_router
 from .config import Settings, get_settings
 from .db import make_engine, make_session_factory
 from .errors import install_error_handlers
@@ -115,7 +116,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             allow_methods=["GET", "POST", "DELETE"],
             allow_headers=["X-API-Key", "Content-Type"],
         )
-    for router in (meshes_router, search_router, jobs_router, system_router):
+    for router in (meshes_router, search_router, calibration_router, jobs_router, system_router):
         app.include_router(router)
 
     def openapi() -> dict[str, Any]:

@@ -24,6 +24,7 @@ from worker.engine.presets import MODALITIES, Preset
 from ..errors import UnavailableError
 from ..meshes import repository as meshes
 from ..metrics import Metrics
+from .calibration import GalleryCalibration, fit_calibration
 from .index import GalleryIndex, Match, SearchStats
 from .persistence import load_index, save_index
 
@@ -63,6 +64,10 @@ class Gallery:
         # Held while the database and the index change together (collector, delete),
         # so a shape deleted while its descriptor is being stored never reaches the index.
         self._lock = threading.RLock()
+        # Counts adds and removes; a calibration fitted at another count is stale.
+        self._version = 0
+        self._calibration: GalleryCalibration | None = None
+        self._calibration_lock = threading.Lock()
 
     # ------------------------------------------------------------- state
     @property
@@ -95,13 +100,14 @@ class Gallery:
         with self._lock:
             if self._index is not None:
                 self._index.add(mesh_id, descriptor_vectors(descriptor))
+                self._version += 1
                 self._publish_size()
 
     def remove(self, mesh_id: int) -> None:
         """Take a shape out of every search from now on."""
         with self._lock:
-            if self._index is not None:
-                self._index.remove(mesh_id)
+            if self._index is not None and self._index.remove(mesh_id):
+                self._version += 1
                 self._publish_size()
 
     # ------------------------------------------------------------ search
@@ -133,6 +139,58 @@ class Gallery:
         )
         self.metrics.search_seconds.observe(stats.seconds)
         return matches, stats
+
+    def scores(
+        self, descriptor: ShapeDescriptor, mesh_ids: list[int]
+    ) -> dict[int, tuple[float, dict[str, float]]]:
+        """The preset's fused and per-modality dissimilarities of ``descriptor`` to each
+        of ``mesh_ids`` that is in the index (the others are left out)."""
+        index = self._ready()
+        preset = self.preset
+        with index.lock:
+            present = np.array([i for i in mesh_ids if i in index], dtype=np.int64)
+            if not len(present):
+                return {}
+            fused, per = index.exact_scores(
+                descriptor_vectors(descriptor),
+                index.store.positions(present),
+                tuple(preset.fused_modalities),
+                preset.fusion,
+            )
+        return {
+            int(mesh_id): (float(fused[j]), {m: float(v[j]) for m, v in per.items()})
+            for j, mesh_id in enumerate(present)
+        }
+
+    def calibration(
+        self, session: Session, *, max_pairs: int, refit_seconds: float
+    ) -> GalleryCalibration:
+        """The verification calibration of the labelled shapes (:mod:`.calibration`).
+
+        Refitted when shapes were added or removed since the last fit, at most every
+        ``refit_seconds`` (a fit of the default 200,000 pairs takes about a second);
+        in between the last fit answers.
+
+        Raises
+        ------
+        UnavailableError
+            The index is still loading.
+        NotEnoughPairs
+            Too few labelled pairs to calibrate.
+        """
+        index = self._ready()
+        with self._calibration_lock:
+            fit, version = self._calibration, self._version
+            due = fit is None or (
+                fit.version != version and time.time() - fit.fitted_at >= refit_seconds
+            )
+            if due:
+                fit = fit_calibration(
+                    index, meshes.labels(session), self.preset, max_pairs=max_pairs, version=version
+                )
+                self._calibration = fit
+            assert fit is not None
+            return fit
 
     def check_ready(self) -> None:
         """Raise ``index_loading`` now rather than after a query's descriptor is computed."""

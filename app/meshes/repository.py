@@ -18,6 +18,16 @@ def get_by_sha256(session: Session, sha256: str) -> Mesh | None:
     return session.scalar(select(Mesh).where(Mesh.sha256 == sha256))
 
 
+def labels(session: Session) -> dict[int, str]:
+    """mesh id -> label of every mesh that has one."""
+    rows = session.execute(select(Mesh.id, Mesh.label).where(Mesh.label.is_not(None))).tuples()
+    return {mesh_id: label for mesh_id, label in rows if label is not None}
+
+
+def ids_with_label(session: Session, label: str) -> list[int]:
+    return list(session.scalars(select(Mesh.id).where(Mesh.label == label).order_by(Mesh.id)))
+
+
 def add(session: Session, mesh: Mesh) -> Mesh:
     session.add(mesh)
     session.flush()

@@ -39,6 +39,15 @@ OPTION_SCHEMAS: dict[str, dict[str, Any]] = {
         "example": "gdm,ddt",
         "description": "comma-separated, among gdm, ddt, spectrum (default: the preset's)",
     },
+    "far": {
+        "type": "number",
+        "exclusiveMinimum": 0,
+        "exclusiveMaximum": 1,
+        "example": 0.01,
+        "description": "false acceptance rate: mark each match accepted or not at the "
+        "threshold the gallery's calibration gives for it (GET /calibration); 409 "
+        "not_calibrated when the gallery has too few labelled pairs",
+    },
 }
 
 QUERY_BODY = {
@@ -73,13 +82,17 @@ SIMILAR_PARAMETERS = {
 QUERY_ERRORS: dict[int | str, dict[str, Any]] = {
     413: {"description": "File over the size limit, or too many faces"},
     415: {"description": "Not a mesh file type"},
-    422: {"description": "Unreadable mesh, bad k/preset/fusion/modalities"},
+    409: {"description": "far given but the gallery is not calibrated (`not_calibrated`)"},
+    422: {"description": "Unreadable mesh, bad k/preset/fusion/modalities/far"},
     503: {"description": "Index loading, or no worker answered in time"},
 }
 SIMILAR_ERRORS: dict[int | str, dict[str, Any]] = {
     404: {"description": 'Unknown id: `{"error": "not_found", "detail": ...}`'},
-    409: {"description": "The mesh is not ready yet (`mesh_not_ready`)"},
-    422: {"description": "Bad k/preset/fusion/modalities"},
+    409: {
+        "description": "The mesh is not ready yet (`mesh_not_ready`), or far given but the "
+        "gallery is not calibrated (`not_calibrated`)"
+    },
+    422: {"description": "Bad k/preset/fusion/modalities/far"},
     503: {"description": "Index loading"},
 }
 
@@ -117,9 +130,13 @@ def query_out(result: service.SearchResult) -> QueryOut:
                 rank=m.rank,
                 score=m.score,
                 scores=m.scores,
+                confidence=m.confidence,
+                accepted=m.accepted,
             )
             for m in result.matches
         ],
+        far=options.far,
+        threshold=result.threshold,
         timings=result.timings,
         query=result.query,
         descriptor_source=result.descriptor_source,
@@ -148,7 +165,7 @@ def query(upload: MultipartDep, session: SessionDep, state: StateDep) -> QueryOu
     if unknown:
         raise InvalidInputError(
             f"Unknown form fields: {', '.join(sorted(unknown))}; "
-            "use file, k, preset, fusion and modalities.",
+            "use file, k, preset, fusion, modalities and far.",
             code="unknown_field",
         )
     options = service.parse_options(
@@ -157,6 +174,7 @@ def query(upload: MultipartDep, session: SessionDep, state: StateDep) -> QueryOu
         preset=fields.get("preset"),
         fusion=fields.get("fusion"),
         modalities=fields.get("modalities"),
+        far=fields.get("far"),
     )
     return query_out(service.query_by_upload(session, state, file, options))
 
@@ -170,6 +188,7 @@ def similar_options(request: Request, state: StateDep) -> service.SearchOptions:
         preset=params.get("preset"),
         fusion=params.get("fusion"),
         modalities=params.get("modalities"),
+        far=params.get("far"),
     )
 
 

@@ -14,6 +14,15 @@ class MatchOut(BaseModel):
     rank: int = Field(description="1 = most similar")
     score: float = Field(description="fused dissimilarity (lower is more similar)")
     scores: dict[str, float] = Field(description="per-modality dissimilarity (D1 or D2)")
+    confidence: float | None = Field(
+        None,
+        description="probability that the match has the query's label, from the gallery's "
+        "calibration (isotonic on its labelled pairs); null when the gallery is not "
+        "calibrated or the fusion asked for is not the preset's",
+    )
+    accepted: bool | None = Field(
+        None, description="with far: whether the score is within the threshold at that FAR"
+    )
 
 
 class QueryOut(BaseModel):
@@ -58,6 +67,10 @@ class QueryOut(BaseModel):
         description="seconds: descriptor stages of the query (if computed), 'search', 'total'"
     )
     query: dict[str, int] = Field(default_factory=dict)
+    far: float | None = Field(None, description="the false acceptance rate asked for")
+    threshold: float | None = Field(
+        None, description="with far: the score threshold at that FAR (accepted: score <= it)"
+    )
     descriptor_source: Literal["computed", "enrolled", "recent", "stored"] = Field(
         description="where the query's descriptor came from: computed now by a query worker, "
         "the enrolled mesh with the same bytes and format, a recent query with the same "

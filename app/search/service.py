@@ -18,8 +18,10 @@ from sqlalchemy.orm import Session
 from worker.engine.mesh_io import mesh_format
 from worker.engine.pipeline import ShapeDescriptor
 from worker.engine.presets import MODALITIES, PRESETS, Preset
+from worker.evaluation.calibration import Calibration
 
 from ..errors import ConflictError, InvalidInputError
+from ..gallery.calibration import FUSED, GalleryCalibration, NotEnoughPairs
 from ..meshes import repository as meshes
 from ..meshes import service as mesh_service
 from ..models import Mesh, MeshStatus
@@ -27,7 +29,7 @@ from ..state import AppState
 from ..storage import ReceivedFile
 
 #: The search options a client may send, with ``POST /query``'s file.
-OPTION_NAMES = ("k", "preset", "fusion", "modalities")
+OPTION_NAMES = ("k", "preset", "fusion", "modalities", "far")
 DEFAULT_K = 10
 #: What :func:`parse_modalities` accepts (documented in the schema): blank, or names
 #: separated by commas, spaces and empty items allowed.
@@ -40,12 +42,26 @@ DescriptorSource = Literal["computed", "enrolled", "recent", "stored"]
 @dataclass(frozen=True)
 class SearchOptions:
     """Validated search options: ``k`` matches, ranked under ``preset`` with ``fusion``
-    (None: the preset's rule) over ``modalities``."""
+    (None: the preset's rule) over ``modalities``; with ``far``, each match is also
+    accepted or not at that false acceptance rate (open-set: "not in the gallery" is
+    an answer)."""
 
     k: int
     preset: Preset
     fusion: str | None
     modalities: tuple[str, ...]
+    far: float | None = None
+
+    @property
+    def calibration_row(self) -> str | None:
+        """The calibrated score these options rank by: the preset's own fused score,
+        a single modality, or None (another fusion is not calibrated)."""
+        if len(self.modalities) == 1:
+            return self.modalities[0]
+        own = self.preset
+        if self.modalities == tuple(own.fused_modalities) and self.fusion in (None, own.fusion):
+            return FUSED
+        return None
 
 
 @dataclass
@@ -54,6 +70,10 @@ class RankedMatch:
     rank: int
     score: float
     scores: dict[str, float]
+    #: P(same label as the query), from the gallery's calibration; None if uncalibrated.
+    confidence: float | None = None
+    #: Accepted at the options' FAR (None without one).
+    accepted: bool | None = None
 
 
 @dataclass
@@ -68,6 +88,8 @@ class SearchResult:
     #: Where the query's descriptor came from: "computed" by a worker now, the
     #: "enrolled" mesh with the same bytes, a "recent" query's, or "stored" (/similar).
     descriptor_source: DescriptorSource = "computed"
+    #: The score threshold at the options' FAR (None without one).
+    threshold: float | None = None
 
     @property
     def fusion(self) -> str:
@@ -125,6 +147,21 @@ def check_k(state: AppState, k: int) -> int:
     return k
 
 
+def parse_far(text: str | None) -> float | None:
+    """A false acceptance rate: a number strictly between 0 and 1, or nothing."""
+    if text is None:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0.0 < value < 1.0:
+        raise InvalidInputError(
+            "far must be a false acceptance rate between 0 and 1, e.g. 0.01.", code="invalid_far"
+        )
+    return value
+
+
 def parse_options(
     state: AppState,
     *,
@@ -132,6 +169,7 @@ def parse_options(
     preset: str | None,
     fusion: str | None,
     modalities: str | None,
+    far: str | None = None,
 ) -> SearchOptions:
     """Validate the options as sent (blank means the default).
 
@@ -147,7 +185,39 @@ def parse_options(
     count = parse_k(_blank_to_none(k))
     chosen = resolve_preset(state, _blank_to_none(preset))
     mods = parse_modalities(_blank_to_none(modalities), chosen)
-    return SearchOptions(k=check_k(state, count), preset=chosen, fusion=rule, modalities=mods)
+    options = SearchOptions(
+        k=check_k(state, count),
+        preset=chosen,
+        fusion=rule,
+        modalities=mods,
+        far=parse_far(_blank_to_none(far)),
+    )
+    if options.far is not None and options.calibration_row is None:
+        raise InvalidInputError(
+            "far needs the preset's own fused score or a single modality: the gallery is "
+            "calibrated for those, not for another fusion.",
+            code="invalid_far",
+        )
+    return options
+
+
+def current_calibration(session: Session, state: AppState) -> GalleryCalibration:
+    """The gallery's calibration.
+
+    Raises
+    ------
+    ConflictError
+        ``not_calibrated``: too few labelled pairs, with the sentence saying how many.
+    """
+    settings = state.settings
+    try:
+        return state.gallery.calibration(
+            session,
+            max_pairs=settings.calibration_max_pairs,
+            refit_seconds=settings.calibration_refit_seconds,
+        )
+    except NotEnoughPairs as exc:
+        raise ConflictError(str(exc), code="not_calibrated") from None
 
 
 def rank(
@@ -169,12 +239,28 @@ def rank(
         exclude=exclude,
     )
     rows = meshes.by_ids(session, [m.id for m in matches])
+    calibration = _calibration_for(session, state, options)
+    threshold = None
+    if options.far is not None:
+        assert calibration is not None  # _calibration_for raised otherwise
+        threshold = calibration.threshold_at(options.far)
     ranked: list[RankedMatch] = []
     for match in matches:
         mesh = rows.get(match.id)
         if mesh is None:  # deleted a moment ago
             continue
-        ranked.append(RankedMatch(mesh, len(ranked) + 1, match.score, match.scores))
+        ranked.append(
+            RankedMatch(
+                mesh,
+                len(ranked) + 1,
+                match.score,
+                match.scores,
+                confidence=None
+                if calibration is None
+                else float(calibration.confidence(match.score)),
+                accepted=None if threshold is None else bool(match.score <= threshold),
+            )
+        )
     return SearchResult(
         options=options,
         gallery_size=len(state.gallery),
@@ -182,21 +268,57 @@ def rank(
         timings={**timings, "search": stats.seconds},
         query=query_info,
         descriptor_source=descriptor_source,
+        threshold=threshold,
     )
+
+
+def _calibration_for(
+    session: Session, state: AppState, options: SearchOptions
+) -> Calibration | None:
+    """The calibration of the score the options rank by; None if there is none (too few
+    labelled pairs, or another fusion), unless a FAR was asked for (then 409)."""
+    row = options.calibration_row
+    if row is None:
+        return None
+    try:
+        return current_calibration(session, state).rows[row]
+    except ConflictError:
+        if options.far is not None:
+            raise
+        return None
 
 
 def query_by_upload(
     session: Session, state: AppState, upload: ReceivedFile, options: SearchOptions
 ) -> SearchResult:
-    """Rank the gallery against an uploaded mesh.
+    """Rank the gallery against an uploaded mesh (:func:`upload_descriptor`)."""
+    state.gallery.check_ready()  # before the worker spends seconds on the query
+    descriptor, source, timings = upload_descriptor(session, state, upload, options.preset)
+    return rank(
+        session,
+        state,
+        descriptor,
+        options,
+        timings=timings,
+        query_info={
+            "input_vertices": descriptor.input_vertices,
+            "input_faces": descriptor.input_faces,
+            "vertices": descriptor.vertices,
+        },
+        descriptor_source=source,
+    )
+
+
+def upload_descriptor(
+    session: Session, state: AppState, upload: ReceivedFile, preset: Preset
+) -> tuple[ShapeDescriptor, DescriptorSource, dict[str, float]]:
+    """The descriptor of an uploaded file, where it came from, and its timings.
 
     Bytes already described under the preset (an enrolled mesh's file, or a recent
     query's) answer from that descriptor; others are described by a query worker
     (blocking, seconds).
     """
-    state.gallery.check_ready()  # before the worker spends seconds on the query
     started = time.perf_counter()
-    preset = options.preset
     key = (upload.sha256, mesh_format(upload.filename), preset.name, preset.version)
     source: DescriptorSource = "enrolled"
     descriptor = _known_descriptor(session, state, upload, preset)
@@ -212,19 +334,7 @@ def query_by_upload(
     else:
         timings = {}
     timings["describe_wall"] = time.perf_counter() - started
-    return rank(
-        session,
-        state,
-        descriptor,
-        options,
-        timings=timings,
-        query_info={
-            "input_vertices": descriptor.input_vertices,
-            "input_faces": descriptor.input_faces,
-            "vertices": descriptor.vertices,
-        },
-        descriptor_source=source,
-    )
+    return descriptor, source, timings
 
 
 def _known_descriptor(
@@ -243,15 +353,7 @@ def similar_to(
     session: Session, state: AppState, mesh_id: int, options: SearchOptions
 ) -> SearchResult:
     """Rank the gallery against an enrolled mesh's stored descriptor (itself left out)."""
-    mesh = mesh_service.get(session, mesh_id)
-    preset = options.preset
-    stored = meshes.get_descriptor(session, mesh_id, preset.name, preset.version)
-    if stored is None or mesh.status != MeshStatus.ready.value:
-        raise ConflictError(
-            f"Mesh {mesh_id} is {mesh.status}, not ready; it has no descriptor to compare yet.",
-            code="mesh_not_ready",
-        )
-    descriptor = ShapeDescriptor.from_npz_bytes(stored.data)
+    descriptor = stored_descriptor(session, mesh_id, options.preset)
     return rank(
         session,
         state,
@@ -262,3 +364,23 @@ def similar_to(
         query_info={"input_vertices": descriptor.input_vertices, "vertices": descriptor.vertices},
         descriptor_source="stored",
     )
+
+
+def stored_descriptor(session: Session, mesh_id: int, preset: Preset) -> ShapeDescriptor:
+    """An enrolled mesh's descriptor under ``preset``.
+
+    Raises
+    ------
+    NotFoundError
+        No such mesh.
+    ConflictError
+        ``mesh_not_ready``: it has no descriptor yet (queued, processing or failed).
+    """
+    mesh = mesh_service.get(session, mesh_id)
+    stored = meshes.get_descriptor(session, mesh_id, preset.name, preset.version)
+    if stored is None or mesh.status != MeshStatus.ready.value:
+        raise ConflictError(
+            f"Mesh {mesh_id} is {mesh.status}, not ready; it has no descriptor to compare yet.",
+            code="mesh_not_ready",
+        )
+    return ShapeDescriptor.from_npz_bytes(stored.data)

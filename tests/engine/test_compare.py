@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 
 from worker.engine.compare import (
+    dissimilarity,
     fuse,
     gallery_sigma,
     mean_normalized_manhattan,
     normalized_euclidean,
+    paired_dissimilarity,
     product_fusion,
     sum_fusion,
 )
@@ -52,3 +54,13 @@ def test_fusion_rules():
     np.testing.assert_allclose(fuse(d, "product", {"gdm": 2.0}), [[3.0, 2.0]])
     with pytest.raises(ValueError, match="fusion rule"):
         fuse(d, "max")
+
+
+@pytest.mark.parametrize("kind", ["D1", "D2"])
+def test_paired_dissimilarity_is_the_diagonal_of_the_matrix(kind):
+    rng = np.random.default_rng(3)
+    a, b = rng.random((7, 12)), rng.random((7, 12))
+    sigma = gallery_sigma(b)
+    np.testing.assert_allclose(
+        paired_dissimilarity(a, b, kind, sigma), np.diag(dissimilarity(a, b, kind, sigma))
+    )

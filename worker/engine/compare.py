@@ -111,6 +111,41 @@ def dissimilarity(
     raise ValueError(f"unknown dissimilarity {kind!r}; use 'D1' or 'D2'")
 
 
+def paired_dissimilarity(
+    first: np.ndarray,
+    second: np.ndarray,
+    kind: Dissimilarity | str,
+    sigma: np.ndarray | None = None,
+) -> np.ndarray:
+    """The dissimilarity of each row of ``first`` to the same row of ``second``.
+
+    The diagonal of :func:`dissimilarity` without the rest of the matrix: what a
+    calibration needs for a sample of pairs out of a large gallery.
+
+    Parameters
+    ----------
+    first, second : (p, M) float
+    kind : ``"D1"`` or ``"D2"``.
+    sigma : (M,) float, D2's sigma_i (required for D2).
+
+    Returns
+    -------
+    (p,) float
+    """
+    a = np.atleast_2d(np.asarray(first, dtype=np.float64))
+    b = np.atleast_2d(np.asarray(second, dtype=np.float64))
+    if kind == "D1":
+        num = 2.0 * np.abs(a - b)
+        den = a + b
+        terms = np.where(den > _TINY, num / np.maximum(den, _TINY), 0.0)
+        return np.asarray(terms.mean(axis=1))
+    if kind == "D2":
+        if sigma is None:
+            raise ValueError("D2 between pairs needs the gallery's sigma")
+        return np.asarray(np.sqrt((((a - b) / sigma) ** 2).sum(axis=1)))
+    raise ValueError(f"unknown dissimilarity {kind!r}; use 'D1' or 'D2'")
+
+
 def sum_fusion(
     dissimilarities: Mapping[str, np.ndarray], weights: Mapping[str, float] | None = None
 ) -> np.ndarray:

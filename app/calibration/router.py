@@ -1,0 +1,193 @@
+"""HTTP layer of verification: ``GET /calibration`` and ``POST /verify``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from fastapi import APIRouter
+
+from worker.evaluation.calibration import Calibration
+
+from ..deps import WRITE_ACCESS, MultipartDep, SessionDep, StateDep, require_file
+from ..errors import InvalidInputError
+from ..gallery.calibration import FUSED
+from ..schemas import ERROR_RESPONSES, UNAUTHORIZED_RESPONSE
+from ..search.service import parse_far
+from . import service
+from .schemas import (
+    CalibrationOut,
+    OperatingPoint,
+    RocOut,
+    ScoreCalibration,
+    VerificationOut,
+)
+
+router = APIRouter(tags=["verification"], responses=ERROR_RESPONSES)
+
+ROC_POINTS = 200
+DEFAULT_FAR = 0.01
+VERIFY_FIELDS = ("mesh_id", "claim_id", "claim_label", "far")
+
+NOT_CALIBRATED: dict[int | str, dict[str, Any]] = {
+    409: {"description": "Too few labelled pairs to calibrate (`not_calibrated`)"},
+}
+VERIFY_BODY = {
+    "requestBody": {
+        "required": True,
+        "content": {
+            "multipart/form-data": {
+                "schema": {
+                    "type": "object",
+                    "properties": {
+                        "file": {
+                            "type": "string",
+                            "format": "binary",
+                            "description": "the mesh to verify (or mesh_id)",
+                        },
+                        "mesh_id": {
+                            "type": "integer",
+                            "minimum": 1,
+                            "description": "an enrolled mesh to verify (or file)",
+                        },
+                        "claim_id": {
+                            "type": "integer",
+                            "minimum": 1,
+                            "description": "the enrolled mesh it is claimed to be",
+                        },
+                        "claim_label": {
+                            "type": "string",
+                            "description": "the label it is claimed to have (the closest "
+                            "enrolled mesh of that label decides)",
+                        },
+                        "far": {
+                            "type": "number",
+                            "exclusiveMinimum": 0,
+                            "exclusiveMaximum": 1,
+                            "default": DEFAULT_FAR,
+                            "description": "false acceptance rate of the decision",
+                        },
+                    },
+                }
+            }
+        },
+    }
+}
+
+
+def _operating_points(row: Calibration) -> list[OperatingPoint]:
+    return [
+        OperatingPoint(far=far, threshold=t, estimated_far=f, estimated_frr=r)
+        for far, t, f, r in service.operating_points(row)
+    ]
+
+
+@router.get(
+    "/calibration",
+    response_model=CalibrationOut,
+    summary="How the gallery's scores separate same from different objects",
+    description=(
+        "From every pair of enrolled meshes that both have a label (a random sample above "
+        "the pair budget): the ROC, the EER, and the score threshold at FAR 0.1%, 1% and 5% "
+        "of the preset's fused score, and of each modality. Refitted after enrollments and "
+        "deletions (at most every SHAPES_CALIBRATION_REFIT_SECONDS)."
+    ),
+    responses=NOT_CALIBRATED,
+)
+def get_calibration(session: SessionDep, state: StateDep) -> CalibrationOut:
+    fit = service.calibration(session, state)
+    row = fit.rows[FUSED]
+    keep = np.unique(np.linspace(0, len(row.far) - 1, min(ROC_POINTS, len(row.far))).astype(int))
+    preset = state.preset
+    return CalibrationOut(
+        preset=preset.name,
+        preset_version=preset.version,
+        score="+".join(preset.fused_modalities) + f" {preset.fusion}",
+        shapes=fit.shapes,
+        labelled_shapes=fit.labelled,
+        labels=fit.labels,
+        genuine_pairs=row.genuine,
+        impostor_pairs=row.impostor,
+        sampled=fit.sampled,
+        trusted=row.trusted,
+        trust_rule=service.TRUST_RULE,
+        eer=row.eer,
+        operating_points=_operating_points(row),
+        roc=RocOut(far=row.far[keep].tolist(), frr=row.frr[keep].tolist()),
+        modalities={
+            m: ScoreCalibration(
+                eer=fit.rows[m].eer, operating_points=_operating_points(fit.rows[m])
+            )
+            for m in fit.rows
+            if m != FUSED
+        },
+        fitted_at=fit.fitted_at,
+    )
+
+
+def _optional_id(fields: dict[str, str], name: str) -> int | None:
+    text = (fields.get(name) or "").strip()
+    if not text:
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= 2**63 - 1:
+        raise InvalidInputError(
+            f"{name} must be a mesh id (a whole number from 1).", code=f"invalid_{name}"
+        )
+    return value
+
+
+@router.post(
+    "/verify",
+    dependencies=WRITE_ACCESS,
+    response_model=VerificationOut,
+    summary="Is this mesh the claimed object? Yes or no at a chosen FAR",
+    description=(
+        "The probe (a file, or an enrolled mesh's id) against a claim (an enrolled mesh's "
+        "id, or a label: the closest enrolled mesh of it decides), under the preset's fused "
+        "score and the gallery's calibration.\n\n"
+        "`curl -F file=@wolf2.off.gz -F claim_label=wolf -F far=0.01 "
+        "http://127.0.0.1:8000/verify`"
+    ),
+    responses=NOT_CALIBRATED
+    | UNAUTHORIZED_RESPONSE
+    | {404: {"description": "No such claimed mesh or label in the gallery"}},
+    openapi_extra=VERIFY_BODY,
+)
+def verify(upload: MultipartDep, session: SessionDep, state: StateDep) -> VerificationOut:
+    fields = upload.fields
+    unknown = set(fields) - set(VERIFY_FIELDS)
+    if unknown:
+        raise InvalidInputError(
+            f"Unknown form fields: {', '.join(sorted(unknown))}; "
+            "use file or mesh_id, claim_id or claim_label, and far.",
+            code="unknown_field",
+        )
+    far = parse_far((fields.get("far") or "").strip() or None)
+    claim_label = (fields.get("claim_label") or "").strip() or None
+    result = service.verify(
+        session,
+        state,
+        upload=require_file(upload) if upload.file is not None else None,
+        mesh_id=_optional_id(fields, "mesh_id"),
+        claim_id=_optional_id(fields, "claim_id"),
+        claim_label=claim_label,
+        far=DEFAULT_FAR if far is None else far,
+    )
+    return VerificationOut(
+        same=result.same,
+        score=result.score,
+        scores=result.scores,
+        threshold=result.threshold,
+        far=result.far,
+        estimated_far=result.estimated_far,
+        estimated_frr=result.estimated_frr,
+        confidence=result.confidence,
+        matched_id=result.matched_id,
+        candidates=result.candidates,
+        probe=result.probe,
+        trusted=result.calibration.rows[FUSED].trusted,
+    )

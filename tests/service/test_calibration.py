@@ -1,0 +1,122 @@
+"""Calibrated answers through HTTP: /calibration, /verify, confidences, open-set /query."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from itertools import combinations
+
+import pytest
+
+from .conftest import TOSCA, Service, migrated_service, running
+
+#: Four classes, 3-4 poses each: 18 genuine and 48 impostor pairs once all are ready.
+LABELLED = {
+    "wolf0": "wolf",
+    "wolf1": "wolf",
+    "wolf2": "wolf",
+    "centaur0": "centaur",
+    "centaur1": "centaur",
+    "centaur2": "centaur",
+    "centaur3": "centaur",
+    "horse0": "horse",
+    "horse5": "horse",
+    "horse6": "horse",
+    "horse7": "horse",
+    "cat0": "cat",
+}
+
+
+def form(**fields: str) -> dict[str, tuple[None, str]]:
+    """Multipart form fields without a file (what /verify takes for an enrolled probe)."""
+    return {name: (None, value) for name, value in fields.items()}
+
+
+def pair_counts(labels: list[str]) -> tuple[int, int]:
+    same = sum(a == b for a, b in combinations(labels, 2))
+    return same, len(labels) * (len(labels) - 1) // 2 - same
+
+
+@pytest.fixture(scope="module")
+def verifier(tmp_path_factory) -> Iterator[Service]:
+    """A service that refits its calibration on every change."""
+    svc = migrated_service(tmp_path_factory, "calibrated", SHAPES_CALIBRATION_REFIT_SECONDS="0")
+    with running(svc) as started:
+        yield started
+
+
+def enroll(svc: Service, names: dict[str, str]) -> dict[str, int]:
+    ids = {name: svc.upload(name, label).json()["id"] for name, label in names.items()}
+    for mesh_id in ids.values():
+        assert svc.wait_mesh(mesh_id)["status"] == "ready"
+    return ids
+
+
+def test_too_few_labelled_pairs_is_a_409_with_a_sentence(verifier: Service):
+    enroll(verifier, {"wolf0": "wolf", "centaur0": "centaur"})
+    response = verifier.client.get("/calibration")
+    assert response.status_code == 409
+    body = response.json()
+    assert body["error"] == "not_calibrated" and "at least 10 of each" in body["detail"]
+    refused = verifier.client.post("/verify", files=form(mesh_id="1", claim_label="centaur"))
+    assert refused.status_code == 409 and refused.json()["error"] == "not_calibrated"
+    assert verifier.query("wolf1", far="0.01").json()["error"] == "not_calibrated"
+    uncalibrated = verifier.query("wolf1", k=1).json()
+    assert uncalibrated["matches"][0]["confidence"] is None
+
+
+@pytest.fixture(scope="module")
+def calibrated(verifier: Service) -> dict[str, int]:
+    return enroll(verifier, LABELLED)
+
+
+def test_calibration_counts_every_labelled_pair(verifier: Service, calibrated):
+    body = verifier.client.get("/calibration").json()
+    genuine, impostor = pair_counts(list(LABELLED.values()))
+    assert (body["genuine_pairs"], body["impostor_pairs"]) == (genuine, impostor)
+    assert body["labelled_shapes"] == len(LABELLED) and body["labels"] == 4
+    assert body["trusted"] is False and not body["sampled"]
+    points = body["operating_points"]
+    assert [p["far"] for p in points] == [0.001, 0.01, 0.05]
+    assert all(p["estimated_far"] <= p["far"] for p in points)
+    thresholds = [p["threshold"] for p in points]
+    assert thresholds == sorted(thresholds)
+    assert 0.0 <= body["eer"] < 0.5
+    assert set(body["modalities"]) == {"gdm", "ddt", "spectrum"}
+    assert body["roc"]["far"][0] == 0.0 and body["roc"]["frr"][-1] == 0.0
+
+
+def test_verify_answers_yes_for_the_same_object_and_no_for_another(verifier: Service, calibrated):
+    with open(TOSCA / "horse10.off.gz", "rb") as fh:  # another pose, not enrolled
+        same = verifier.client.post(
+            "/verify",
+            files={"file": ("horse10.off.gz", fh)},
+            data={"claim_label": "horse", "far": "0.05"},
+        ).json()
+    assert same["same"] is True and same["score"] <= same["threshold"]
+    assert same["candidates"] == 4 and same["probe"] == "upload"
+    assert same["estimated_far"] <= 0.05 and set(same["scores"]) == {"gdm", "ddt", "spectrum"}
+    probe, claim = str(calibrated["wolf2"]), str(calibrated["centaur1"])
+    different = verifier.client.post("/verify", files=form(mesh_id=probe, claim_id=claim)).json()
+    assert different["same"] is False and different["far"] == 0.01
+    assert different["confidence"] < same["confidence"]
+
+
+def test_open_set_query_rejects_a_class_absent_from_the_gallery(verifier: Service, calibrated):
+    absent = verifier.query("gorilla1", k=3, far="0.01").json()
+    assert absent["far"] == 0.01 and absent["threshold"] is not None
+    assert [m["accepted"] for m in absent["matches"]] == [False, False, False]
+    present = verifier.query("centaur5", k=1).json()
+    assert present["matches"][0]["label"] == "centaur"
+    assert 0.0 <= present["matches"][0]["confidence"] <= 1.0
+    assert present["matches"][0]["accepted"] is None  # no far asked
+    summed = verifier.query("centaur5", k=1, fusion="sum").json()
+    assert summed["matches"][0]["confidence"] is None  # another fusion is not calibrated
+
+
+def test_deleted_shapes_leave_the_calibration(verifier: Service, calibrated):
+    before = verifier.client.get("/calibration").json()
+    assert verifier.client.delete(f"/meshes/{calibrated['cat0']}").status_code == 204
+    after = verifier.client.get("/calibration").json()
+    assert after["labelled_shapes"] == before["labelled_shapes"] - 1
+    labels = [label for name, label in LABELLED.items() if name != "cat0"]
+    assert (after["genuine_pairs"], after["impostor_pairs"]) == pair_counts(labels)
