@@ -102,7 +102,7 @@ def test_run_writes_the_report_and_rotation_costs_nothing(tmp_path):
     assert "| GDM+DDT+Spectrum product" in (tmp_path / "out" / "robustness.md").read_text()
     for row in ("gdm", "ddt", "spectrum", PRESET_ROW, BASELINE):
         rotated = report["tessellation"][row]["variants"]["rotated-scaled"]
-        assert rotated["gap"] == pytest.approx(0.0, abs=1e-6) and rotated["self_retrieval"] == 1.0
+        assert rotated["gap"] < 1e-4 and rotated["self_retrieval"] == 1.0
         assert report["tessellation"][row]["variants"]["decimated-50"]["count"] == 4
     assert report["poses"]["scores"][PRESET_ROW]["poses"] == 2
     assert [m.name for m in pose_set(poses)] == ["wolf0.off.gz", "wolf2.off.gz"]

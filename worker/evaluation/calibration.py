@@ -72,19 +72,22 @@ class Calibration:
         return np.interp(np.asarray(scores, dtype=np.float64), self.knots, self.probabilities)
 
 
-def calibrate(genuine: ArrayLike, impostor: ArrayLike) -> Calibration:
+def calibrate(genuine: ArrayLike, impostor: ArrayLike, min_pairs: int = MIN_PAIRS) -> Calibration:
     """The calibration of a score from its genuine and impostor pairs.
+
+    ``min_pairs`` is the fewest pairs of each kind accepted: the service refuses to
+    calibrate on fewer than ``MIN_PAIRS``; an evaluation reports the ROC of any set.
 
     Raises
     ------
     ValueError
-        With fewer than ``MIN_PAIRS`` pairs of either kind.
+        With fewer than ``min_pairs`` pairs of either kind.
     """
     g = np.asarray(genuine, dtype=np.float64).ravel()
     i = np.asarray(impostor, dtype=np.float64).ravel()
-    if g.size < MIN_PAIRS or i.size < MIN_PAIRS:
+    if g.size < max(min_pairs, 1) or i.size < max(min_pairs, 1):
         raise ValueError(
-            f"calibration needs at least {MIN_PAIRS} genuine and {MIN_PAIRS} impostor pairs, "
+            f"calibration needs at least {min_pairs} genuine and {min_pairs} impostor pairs, "
             f"got {g.size} and {i.size}"
         )
     far, frr, thresholds = pair_roc(g, i)

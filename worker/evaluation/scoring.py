@@ -17,6 +17,7 @@ from worker.engine.compare import dissimilarity, fuse, gallery_sigma
 from worker.engine.presets import MODALITIES, Preset
 
 from . import metrics
+from .calibration import calibrate
 from .shapedna import BASELINE, shapedna_dissimilarity
 
 #: Rows of the report, in table order: key -> (title, members, fusion rule).
@@ -163,7 +164,12 @@ def score_dissimilarity(
     d = np.asarray(dissimilarity, dtype=np.float64)
     classes = np.asarray([str(x) for x in labels])
     retrieval = metrics.retrieval_scores(d, classes)
-    far, frr, _ = metrics.roc_curve(d, classes)
+    # Verification with the service's calibration code, so that this report's ROC and
+    # EER are GET /calibration's for a gallery of the same labelled meshes.
+    i, j = np.triu_indices(len(d), 1)
+    same = classes[i] == classes[j]
+    verification = calibrate(d[i, j][same], d[i, j][~same], min_pairs=1)
+    far, frr = verification.far, verification.frr
     cmc = metrics.cmc_curve(d, classes, gallery_idx, probe_idx)
     roc_far, roc_frr = _thin(far, frr, ROC_POINTS_STORED)
     # FRR at a FAR operating point: the lowest FRR among thresholds with FAR <= target.
@@ -191,7 +197,7 @@ def score_dissimilarity(
     return {
         **retrieval,
         "r1rr": float(cmc[0]),
-        "eer": metrics.equal_error_rate(d, classes),
+        "eer": verification.eer,
         "cmc": cmc.tolist(),
         "roc": {"far": roc_far, "frr": roc_frr},
         "frr_at_far": frr_at_far,
