@@ -1,4 +1,6 @@
-"""Command line: ``shapes describe MESH...`` (and ``shapes evaluate``, see worker.evaluation)."""
+"""The ``shapes`` command: ``describe``, ``evaluate`` and ``robustness`` (the engine and
+its evaluation harness), ``import`` and ``query`` (the service's HTTP client,
+:mod:`app.client`)."""
 
 from __future__ import annotations
 
@@ -216,6 +218,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="use only the first N meshes (natural file-name order) of each class, N >= 2",
     )
     robustness.set_defaults(run=_robustness)
+
+    # The service's HTTP client (httpx only): shapes import, shapes query.
+    from app.client import add_subcommands
+
+    add_subcommands(sub)
     return parser
 
 

@@ -1,0 +1,340 @@
+"""The command-line client of the service: ``shapes import`` and ``shapes query``.
+
+HTTP only (httpx); nothing of the server is imported, so it runs against any
+deployment. The defaults point at the local service that ``./scripts/serve.sh``
+starts.
+
+``shapes import DIR|FILES... [--labels labels.csv] [--url URL] [--api-key K]
+[--concurrency N] [--wait]`` enrolls every mesh file with a progress bar and an
+ETA. It is resumable: a file whose content the service already holds answers 200
+with the existing mesh (the service deduplicates by sha256), so a rerun skips what
+is enrolled. With ``--wait`` it follows the descriptions until every mesh is ready
+or failed. It ends with a table of the failures and their reasons, and exits
+non-zero when any file failed.
+
+``shapes query FILE [--url URL] [-k K] [--json]`` prints the ranked matches as a
+table (rank, name, label, score, per-modality scores, confidence).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import sys
+import threading
+import time
+from collections.abc import Iterable
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+DEFAULT_URL = os.environ.get("SHAPES_URL", "http://127.0.0.1:8000")
+MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl", ".glb", ".gltf")
+TIMEOUT = httpx.Timeout(300.0, connect=10.0)
+
+
+class ClientError(RuntimeError):
+    """The service could not be reached or refused the request; the message says why."""
+
+
+def mesh_files(paths: Iterable[str]) -> list[Path]:
+    """The mesh files named or found (recursively) in the directories named, sorted."""
+    found: list[Path] = []
+    for raw in paths:
+        path = Path(raw)
+        if path.is_dir():
+            found.extend(p for p in sorted(path.rglob("*")) if p.is_file() and is_mesh(p))
+        elif path.is_file():
+            found.append(path)
+        else:
+            raise ClientError(f"{raw}: no such file or directory")
+    return found
+
+
+def is_mesh(path: Path) -> bool:
+    name = path.name.lower()
+    name = name[: -len(".gz")] if name.endswith(".gz") else name
+    return name.endswith(MESH_SUFFIXES)
+
+
+def read_labels(path: Path) -> dict[str, str]:
+    """``file,class`` (or ``file,label``) rows: file name -> label."""
+    with open(path, newline="") as handle:
+        reader = csv.DictReader(handle)
+        fields = {f.strip().lower(): f for f in reader.fieldnames or []}
+        column = fields.get("label") or fields.get("class")
+        if "file" not in fields or column is None:
+            raise ClientError(f"{path} needs a header row with 'file' and 'class' (or 'label')")
+        return {
+            Path(row[fields["file"]].strip()).name: row[column].strip()
+            for row in reader
+            if row[fields["file"]].strip()
+        }
+
+
+def _client(url: str, api_key: str | None) -> httpx.Client:
+    headers = {"X-API-Key": api_key} if api_key else {}
+    return httpx.Client(base_url=url.rstrip("/"), timeout=TIMEOUT, headers=headers)
+
+
+def _refusal(response: httpx.Response) -> str:
+    try:
+        body = response.json()
+        return f"{body.get('error', response.status_code)}: {body.get('detail', '')}".strip()
+    except ValueError:
+        return f"HTTP {response.status_code}"
+
+
+@dataclass
+class ImportResult:
+    """What happened to every file of an import."""
+
+    enrolled: dict[Path, int] = field(default_factory=dict)  # new meshes
+    existing: dict[Path, int] = field(default_factory=dict)  # already there (same bytes)
+    failed: dict[Path, str] = field(default_factory=dict)  # refused, or failed to describe
+
+    @property
+    def count(self) -> int:
+        return len(self.enrolled) + len(self.existing) + len(self.failed)
+
+
+class Progress:
+    """A one-line progress bar with a rate and an ETA, on stderr."""
+
+    def __init__(self, total: int, what: str, stream: Any = sys.stderr) -> None:
+        self.total, self.what, self.stream = total, what, stream
+        self.done = 0
+        self.started = time.monotonic()
+        self._lock = threading.Lock()
+
+    def step(self, count: int = 1) -> None:
+        with self._lock:
+            self.done += count
+            self.show()
+
+    def show(self) -> None:
+        elapsed = time.monotonic() - self.started
+        rate = self.done / elapsed if elapsed > 0 else 0.0
+        eta = (self.total - self.done) / rate if rate > 0 else float("nan")
+        width = 30
+        filled = int(width * self.done / max(self.total, 1))
+        bar = "#" * filled + "." * (width - filled)
+        eta_text = f"{eta:5.0f}s" if eta == eta else "    ?"
+        self.stream.write(
+            f"\r{self.what} [{bar}] {self.done}/{self.total} {rate * 60:6.1f}/min ETA {eta_text}"
+        )
+        self.stream.flush()
+
+    def close(self) -> None:
+        self.stream.write("\n")
+        self.stream.flush()
+
+
+def import_files(
+    files: list[Path],
+    *,
+    url: str = DEFAULT_URL,
+    api_key: str | None = None,
+    labels: dict[str, str] | None = None,
+    concurrency: int = 4,
+    wait: bool = False,
+    poll_seconds: float = 1.0,
+    stream: Any = sys.stderr,
+) -> ImportResult:
+    """Enroll ``files`` through ``POST /meshes``; with ``wait``, until each is described."""
+    labels = labels or {}
+    result = ImportResult()
+    lock = threading.Lock()
+    progress = Progress(len(files), "upload  ", stream)
+    with _client(url, api_key) as client:
+        _check_reachable(client, url)
+
+        def upload(path: Path) -> None:
+            data = {"label": labels[path.name]} if path.name in labels else {}
+            try:
+                with open(path, "rb") as handle:
+                    response = client.post(
+                        "/meshes", files={"file": (path.name, handle)}, data=data
+                    )
+            except httpx.HTTPError as exc:
+                outcome: tuple[str, Any] = ("failed", f"connection: {exc}")
+            else:
+                body = response.json() if response.status_code in (200, 202) else {}
+                if response.status_code == 202:
+                    outcome = ("enrolled", body["id"])
+                elif body.get("status") == "failed":  # enrolled before, and failed then
+                    outcome = ("failed", f"{body['error']}: {body['detail']}")
+                elif response.status_code == 200:
+                    outcome = ("existing", body["id"])
+                else:
+                    outcome = ("failed", _refusal(response))
+            with lock:
+                getattr(result, outcome[0])[path] = outcome[1]
+            progress.step()
+
+        with ThreadPoolExecutor(max(1, concurrency)) as pool:
+            for future in as_completed([pool.submit(upload, p) for p in files]):
+                future.result()
+        progress.close()
+        if wait:
+            _wait_described(client, result, poll_seconds, stream)
+    return result
+
+
+def _check_reachable(client: httpx.Client, url: str) -> None:
+    try:
+        client.get("/health")
+    except httpx.HTTPError as exc:
+        raise ClientError(
+            f"no service answers at {url} ({exc}); start it with ./scripts/serve.sh or pass --url"
+        ) from None
+
+
+def _wait_described(
+    client: httpx.Client, result: ImportResult, poll_seconds: float, stream: Any
+) -> None:
+    """Follow every enrolled or existing mesh until it is ready or failed."""
+    pending = {**result.enrolled, **result.existing}
+    progress = Progress(len(pending), "describe", stream)
+    while pending:
+        for path, mesh_id in list(pending.items()):
+            response = client.get(f"/meshes/{mesh_id}")
+            if response.status_code != 200:
+                result.failed[path] = _refusal(response)
+            else:
+                body = response.json()
+                if body["status"] == "failed":
+                    result.failed[path] = f"{body['error']}: {body['detail']}"
+                elif body["status"] != "ready":
+                    continue
+            del pending[path]
+            progress.step()
+        if pending:
+            time.sleep(poll_seconds)
+    progress.close()
+    for path in result.failed:
+        result.enrolled.pop(path, None)
+        result.existing.pop(path, None)
+
+
+def query_file(
+    path: Path, *, url: str = DEFAULT_URL, api_key: str | None = None, k: int = 10
+) -> dict[str, Any]:
+    """``POST /query`` with ``path``; the response body."""
+    with _client(url, api_key) as client:
+        _check_reachable(client, url)
+        with open(path, "rb") as handle:
+            response = client.post(
+                "/query", files={"file": (path.name, handle)}, data={"k": str(k)}
+            )
+    if response.status_code != 200:
+        raise ClientError(f"{path.name}: {_refusal(response)}")
+    body: dict[str, Any] = response.json()
+    return body
+
+
+def format_matches(body: dict[str, Any]) -> str:
+    """The ranked matches as an aligned text table."""
+    modalities = list(body["modalities"])
+    header = ["rank", "name", "label", "score", *modalities, "confidence"]
+    rows = [
+        [
+            str(m["rank"]),
+            m["name"],
+            m["label"] or "-",
+            f"{m['score']:.4g}",
+            *(f"{m['scores'][x]:.4g}" for x in modalities),
+            "-" if m["confidence"] is None else f"{m['confidence']:.0%}",
+        ]
+        for m in body["matches"]
+    ]
+    widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
+    lines = ["  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True))]
+    lines += ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
+    title = (
+        f"{body['preset']} v{body['preset_version']}, {body['fusion']} of "
+        f"{'+'.join(modalities)}, {body['gallery_size']} enrolled (lower score = more alike)"
+    )
+    return "\n".join([title, *lines])
+
+
+def failure_table(result: ImportResult) -> str:
+    width = max(len(p.name) for p in result.failed)
+    lines = [f"{'file'.ljust(width)}  reason"]
+    lines += [f"{p.name.ljust(width)}  {why}" for p, why in sorted(result.failed.items())]
+    return "\n".join(lines)
+
+
+def add_subcommands(sub: Any) -> None:
+    """Register ``import`` and ``query`` on the ``shapes`` parser's subparsers."""
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--url", default=DEFAULT_URL, help=f"the service (default {DEFAULT_URL})")
+    common.add_argument(
+        "--api-key",
+        default=os.environ.get("SHAPES_API_KEY"),
+        help="the service's API key, if it has one (default $SHAPES_API_KEY)",
+    )
+    enroll = sub.add_parser(
+        "import",
+        parents=[common],
+        help="enroll a folder or files through the service's API",
+        description="Enroll mesh files (directories are searched recursively) with a "
+        "progress bar; files already enrolled (same bytes) are skipped. Exits non-zero "
+        "when any file failed.",
+    )
+    enroll.add_argument("paths", nargs="+", help="mesh files or directories")
+    enroll.add_argument("--labels", help="CSV with columns file,class (file names)")
+    enroll.add_argument("--concurrency", type=int, default=4, help="uploads at once (4)")
+    enroll.add_argument("--wait", action="store_true", help="wait until every mesh is described")
+    enroll.set_defaults(run=_import_command)
+    query = sub.add_parser(
+        "query",
+        parents=[common],
+        help="rank the enrolled meshes against a mesh file",
+    )
+    query.add_argument("file", help="the mesh to search with")
+    query.add_argument("-k", type=int, default=10, help="matches (10)")
+    query.add_argument("--json", action="store_true", help="print the service's JSON answer")
+    query.set_defaults(run=_query_command)
+
+
+def _import_command(args: argparse.Namespace) -> int:
+    try:
+        files = mesh_files(args.paths)
+        labels = read_labels(Path(args.labels)) if args.labels else {}
+        if not files:
+            raise ClientError("no mesh files found (.obj .ply .off .stl .glb .gltf, or .gz)")
+        result = import_files(
+            files,
+            url=args.url,
+            api_key=args.api_key,
+            labels=labels,
+            concurrency=args.concurrency,
+            wait=args.wait,
+        )
+    except ClientError as exc:
+        print(f"shapes import: {exc}", file=sys.stderr)
+        return 2
+    print(
+        f"{result.count} files: {len(result.enrolled)} enrolled, "
+        f"{len(result.existing)} already enrolled, {len(result.failed)} failed"
+    )
+    if result.failed:
+        print(failure_table(result))
+        return 1
+    return 0
+
+
+def _query_command(args: argparse.Namespace) -> int:
+    try:
+        body = query_file(Path(args.file), url=args.url, api_key=args.api_key, k=args.k)
+    except (ClientError, OSError) as exc:
+        print(f"shapes query: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(body, indent=1) if args.json else format_matches(body))
+    return 0

@@ -1,0 +1,76 @@
+"""``shapes import`` and ``shapes query`` against a real service, as a person runs them."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from collections.abc import Iterator
+
+import pytest
+
+from .conftest import REPO, TOSCA, Service, migrated_service, running
+
+
+@pytest.fixture(scope="module")
+def served(tmp_path_factory) -> Iterator[Service]:
+    with running(migrated_service(tmp_path_factory, "cli")) as svc:
+        yield svc
+
+
+def shapes(svc: Service, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "worker.cli", *args, "--url", svc.url],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    """Two TOSCA meshes, a broken file and a file that is not a mesh, with labels."""
+    root = tmp_path_factory.mktemp("import")
+    for name in ("wolf0.off.gz", "centaur0.off.gz"):
+        shutil.copy(TOSCA / name, root / name)
+    (root / "broken.off").write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n")  # a face, but no third vertex
+    (root / "notes.txt").write_text("not a mesh: skipped")
+    (root / "labels.csv").write_text("file,class\nwolf0.off.gz,wolf\ncentaur0.off.gz,centaur\n")
+    return root
+
+
+def test_import_reports_the_broken_file_and_resumes(served: Service, folder):
+    first = shapes(served, "import", str(folder), "--labels", str(folder / "labels.csv"), "--wait")
+    assert first.returncode == 1, first.stderr
+    assert "3 files: 2 enrolled, 0 already enrolled, 1 failed" in first.stdout
+    reason = next(line for line in first.stdout.splitlines() if line.startswith("broken.off"))
+    assert "unreadable_mesh" in reason  # the service's code and sentence
+    assert "upload" in first.stderr and "ETA" in first.stderr  # the progress bars
+    listed = served.client.get("/meshes", params={"status": "ready"}).json()["items"]
+    assert {(m["name"], m["label"]) for m in listed} == {("wolf0", "wolf"), ("centaur0", "centaur")}
+
+    again = shapes(served, "import", str(folder), "--labels", str(folder / "labels.csv"))
+    # Nothing uploaded twice; the file that failed before is reported again.
+    assert "3 files: 0 enrolled, 2 already enrolled, 1 failed" in again.stdout
+    assert again.returncode == 1
+
+
+def test_query_prints_the_ranked_matches(served: Service, folder):
+    table = shapes(served, "query", str(TOSCA / "wolf1.off.gz"), "-k", "2")
+    assert table.returncode == 0, table.stderr
+    lines = table.stdout.splitlines()
+    assert lines[1].split()[:4] == ["rank", "name", "label", "score"]
+    assert lines[2].split()[:3] == ["1", "wolf0", "wolf"]
+    body = json.loads(shapes(served, "query", str(TOSCA / "wolf1.off.gz"), "--json").stdout)
+    assert body["matches"][0]["name"] == "wolf0"
+
+
+def test_an_unreachable_service_is_a_sentence_not_a_traceback(tmp_path):
+    down = Service.__new__(Service)
+    down.url = "http://127.0.0.1:9"  # nothing listens on the discard port
+    result = shapes(down, "query", str(TOSCA / "wolf1.off.gz"))
+    assert result.returncode == 2
+    assert "no service answers at http://127.0.0.1:9" in result.stderr
+    assert "Traceback" not in result.stderr
