@@ -72,3 +72,14 @@ def test_settings_load_neither_the_queue_nor_the_engines_pipeline(settings):
     assert "pydantic_settings" in loaded
     assert "huey" not in loaded and "worker.engine.pipeline" not in loaded
     assert "worker.jobs.queue" not in loaded and "faiss" not in loaded
+
+
+def test_the_calibration_the_service_imports_is_pure_numpy():
+    loaded = modules_loaded_by("import worker.evaluation.calibration")
+    assert {m.split(".")[0] for m in loaded} & {"lapy", "matplotlib", "tqdm", "gpytoolbox"} == set()
+
+
+def test_the_cli_client_loads_nothing_of_the_server():
+    loaded = modules_loaded_by("import app.client")
+    assert {m.split(".")[0] for m in loaded} & {"fastapi", "sqlalchemy", "faiss", "huey"} == set()
+    assert {m for m in loaded if m.startswith(("app.", "worker."))} == {"app.client"}
