@@ -6,11 +6,14 @@ import logging
 import threading
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from pathlib import Path
 from typing import Any
 
 import anyio
 from fastapi import FastAPI
 from fastapi.middleware.cors import CORSMiddleware
+from fastapi.responses import FileResponse
+from fastapi.staticfiles import StaticFiles
 
 from worker.engine.presets import get_preset
 
@@ -25,7 +28,7 @@ from .meshes.router import router as meshes_router
 from .metrics import Metrics, RequestMetricsMiddleware
 from .migrations import upgrade_head
 from .queue import DescriptorQueue
-from .search.recent import RecentDescriptors
+from .search.recent import Recent
 from .search.router import document_limits
 from .search.router import router as search_router
 from .state import AppState
@@ -33,6 +36,8 @@ from .storage import UploadStore
 from .system.router import router as system_router
 
 log = logging.getLogger("shapes")
+
+STATIC = Path(__file__).parent / "static"
 
 DESCRIPTION = """
 Pose-invariant 3D shape retrieval with the modal representation of Smeets et al.
@@ -85,7 +90,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 refit_fraction=settings.index_refit_fraction,
                 metrics=metrics,
             ),
-            recent_queries=RecentDescriptors(settings.query_cache_size),
+            recent_queries=Recent(settings.query_cache_size),
+            recent_previews=Recent(settings.query_cache_size),
         )
         app.state.shapes = state
         collector = JobCollector(state)
@@ -118,6 +124,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         )
     for router in (meshes_router, search_router, calibration_router, jobs_router, system_router):
         app.include_router(router)
+    # The web page: static files, no build step (three.js vendored under static/vendor).
+    app.mount("/static", StaticFiles(directory=STATIC), name="static")
+
+    @app.get("/", include_in_schema=False)
+    def page() -> FileResponse:
+        return FileResponse(STATIC / "index.html")
 
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is not None:

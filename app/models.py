@@ -62,6 +62,9 @@ class Mesh(Base):
         passive_deletes=True,
         order_by="Job.id",
     )
+    preview: Mapped[Preview | None] = relationship(
+        back_populates="mesh", cascade="all, delete-orphan", passive_deletes=True
+    )
 
 
 class Descriptor(Base):
@@ -109,3 +112,18 @@ class Job(Base):
     updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
 
     mesh: Mapped[Mesh] = relationship(back_populates="jobs")
+
+
+class Preview(Base):
+    """What the web page shows of a described mesh: a small GLB and a PNG thumbnail
+    (made by the descriptor job, ``worker/jobs/previews.py``)."""
+
+    __tablename__ = "previews"
+
+    mesh_id: Mapped[int] = mapped_column(
+        ForeignKey("meshes.id", ondelete="CASCADE"), primary_key=True
+    )
+    glb: Mapped[bytes] = mapped_column(LargeBinary)
+    png: Mapped[bytes] = mapped_column(LargeBinary)
+
+    mesh: Mapped[Mesh] = relationship(back_populates="preview")

@@ -12,7 +12,7 @@ from huey.utils import Error
 
 from worker.engine.errors import MeshError
 from worker.engine.pipeline import ShapeDescriptor
-from worker.jobs.queue import descriptor_npz, heartbeat_key, make_huey
+from worker.jobs.queue import descriptor_npz, heartbeat_key, make_huey, preview_bytes
 
 from .config import Settings
 from .errors import UnavailableError
@@ -55,8 +55,11 @@ class DescriptorQueue:
         """Queue the description of an enrolled mesh (the collector stores the result)."""
         self._enqueue(self.huey, task_id, path, filename, preset)
 
-    def describe_now(self, task_id: str, path: Path, filename: str, preset: str) -> ShapeDescriptor:
-        """Describe a file on the query queue and wait (blocking) for it.
+    def describe_now(
+        self, task_id: str, path: Path, filename: str, preset: str
+    ) -> tuple[ShapeDescriptor, bytes | None]:
+        """Describe a file on the query queue and wait (blocking) for it: its
+        descriptor and its preview (GLB; None when the worker could not make one).
 
         Raises
         ------
@@ -88,7 +91,8 @@ class DescriptorQueue:
             huey.delete(heartbeat_key(task_id))
         if not result["ok"]:
             raise QueryMeshError(result["code"], result["message"])
-        return ShapeDescriptor.from_npz_bytes(descriptor_npz(result))
+        descriptor = ShapeDescriptor.from_npz_bytes(descriptor_npz(result))
+        return descriptor, preview_bytes(result, "preview")
 
     # -- for the collector ----------------------------------------------------
     def peek(self, keys: list[str]) -> dict[str, Any]:

@@ -7,13 +7,14 @@ from dataclasses import dataclass
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
+from worker.engine.pipeline import ShapeDescriptor
 from worker.engine.presets import Preset
 
 from .config import Settings
 from .gallery.service import Gallery
 from .metrics import Metrics
 from .queue import DescriptorQueue
-from .search.recent import RecentDescriptors
+from .search.recent import Recent
 from .storage import UploadStore
 
 
@@ -28,4 +29,5 @@ class AppState:
     store: UploadStore
     metrics: Metrics
     gallery: Gallery
-    recent_queries: RecentDescriptors
+    recent_queries: Recent[ShapeDescriptor]
+    recent_previews: Recent[bytes]

@@ -24,6 +24,9 @@ SERVICE_FIXTURES = {
     "guarded",
     "crashy",
     "limited",
+    "verifier",
+    "served",
+    "site",
 }
 
 

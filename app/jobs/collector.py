@@ -29,7 +29,7 @@ from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
 from worker.engine.pipeline import ShapeDescriptor
-from worker.jobs.queue import descriptor_npz
+from worker.jobs.queue import descriptor_npz, preview_bytes
 
 from ..db import unit_of_work
 from ..meshes import repository as meshes
@@ -196,6 +196,9 @@ class JobCollector:
                 timings=descriptor.timings,
             ),
         )
+        glb, png = preview_bytes(result, "preview"), preview_bytes(result, "thumbnail")
+        if glb is not None and png is not None:
+            meshes.put_preview(session, mesh.id, glb, png)
         job.status = JobStatus.succeeded.value
         job.error_code = job.error_detail = None
         mesh.status = MeshStatus.ready.value

@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, selectinload
 
-from ..models import Descriptor, Job, Mesh
+from ..models import Descriptor, Job, Mesh, Preview
 
 
 def get(session: Session, mesh_id: int) -> Mesh | None:
@@ -80,6 +80,20 @@ def upsert_descriptor(session: Session, descriptor: Descriptor) -> Descriptor:
     session.add(descriptor)
     session.flush()
     return descriptor
+
+
+def get_preview(session: Session, mesh_id: int) -> Preview | None:
+    return session.get(Preview, mesh_id)
+
+
+def put_preview(session: Session, mesh_id: int, glb: bytes, png: bytes) -> None:
+    """Store (or replace) a mesh's preview and thumbnail."""
+    existing = session.get(Preview, mesh_id)
+    if existing is None:
+        session.add(Preview(mesh_id=mesh_id, glb=glb, png=png))
+    else:
+        existing.glb, existing.png = glb, png
+    session.flush()
 
 
 def descriptor_mesh_ids(session: Session, preset: str, version: int) -> set[int]:

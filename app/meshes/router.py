@@ -14,6 +14,9 @@ from ..schemas import ERROR_RESPONSES, UNAUTHORIZED_RESPONSE
 from . import service
 from .schemas import DescriptorInfo, Links, MeshOut, MeshPage
 
+# A mesh id is never reused and its preview never changes: browsers may keep it.
+CACHE_FOREVER = {"Cache-Control": "private, max-age=86400, immutable"}
+
 router = APIRouter(prefix="/meshes", tags=["meshes"], responses=ERROR_RESPONSES)
 
 Responses = dict[int | str, dict[str, Any]]
@@ -37,6 +40,8 @@ JOB_LINK = {
 MESH_LINKS = {
     "GetMesh": {"operationId": "get_mesh", "parameters": _MESH_ID},
     "GetMeshFile": {"operationId": "get_mesh_file", "parameters": _MESH_ID},
+    "GetMeshPreview": {"operationId": "get_mesh_preview", "parameters": _MESH_ID},
+    "GetMeshThumbnail": {"operationId": "get_mesh_thumbnail", "parameters": _MESH_ID},
     "DeleteMesh": {"operationId": "delete_mesh", "parameters": _MESH_ID},
     "SimilarMeshes": {"operationId": "similar_meshes", "parameters": _MESH_ID},
 } | JOB_LINK
@@ -116,6 +121,8 @@ def mesh_out(mesh: Mesh, descriptor: Descriptor | None) -> MeshOut:
             file=f"/meshes/{mesh.id}/file",
             job=f"/jobs/{job.id}" if job else None,
             similar=f"/meshes/{mesh.id}/similar",
+            preview=f"/meshes/{mesh.id}/preview",
+            thumbnail=f"/meshes/{mesh.id}/thumbnail",
         ),
     )
 
@@ -213,6 +220,30 @@ def get_mesh(mesh_id: RowId, session: SessionDep, state: StateDep) -> MeshOut:
 def get_file(mesh_id: RowId, session: SessionDep, state: StateDep) -> FileResponse:
     mesh, path = service.file_path(session, state, mesh_id)
     return FileResponse(path, media_type="application/octet-stream", filename=mesh.filename)
+
+
+@router.get(
+    "/{mesh_id}/preview",
+    operation_id="get_mesh_preview",
+    summary="A small 3D preview (binary glTF, a few thousand triangles, unit size)",
+    response_class=Response,
+    responses=ERRORS | {200: {"content": {"model/gltf-binary": {}}}},
+)
+def get_preview(mesh_id: RowId, session: SessionDep) -> Response:
+    stored = service.preview(session, mesh_id)
+    return Response(stored.glb, media_type="model/gltf-binary", headers=CACHE_FOREVER)
+
+
+@router.get(
+    "/{mesh_id}/thumbnail",
+    operation_id="get_mesh_thumbnail",
+    summary="A 256 x 256 PNG thumbnail",
+    response_class=Response,
+    responses=ERRORS | {200: {"content": {"image/png": {}}}},
+)
+def get_thumbnail(mesh_id: RowId, session: SessionDep) -> Response:
+    stored = service.preview(session, mesh_id)
+    return Response(stored.png, media_type="image/png", headers=CACHE_FOREVER)
 
 
 @router.delete(

@@ -15,6 +15,8 @@ class Links(BaseModel):
     file: str
     job: str | None = None
     similar: str
+    preview: str = Field(description="3D preview (GLB) once described")
+    thumbnail: str = Field(description="PNG thumbnail once described")
 
 
 class DescriptorInfo(BaseModel):
@@ -57,6 +59,8 @@ class MeshOut(BaseModel):
                         "file": "/meshes/1/file",
                         "job": "/jobs/1",
                         "similar": "/meshes/1/similar",
+                        "preview": "/meshes/1/preview",
+                        "thumbnail": "/meshes/1/thumbnail",
                     },
                 }
             ]

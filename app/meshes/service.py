@@ -16,7 +16,7 @@ from ..db import after_commit
 from ..errors import ConflictError, InvalidInputError, NotFoundError
 from ..jobs import repository as jobs
 from ..jobs.service import enqueue_job, new_job
-from ..models import Descriptor, Mesh, MeshStatus
+from ..models import Descriptor, Mesh, MeshStatus, Preview
 from ..state import AppState
 from ..storage import ReceivedFile
 from . import repository as meshes
@@ -125,6 +125,19 @@ def file_path(session: Session, state: AppState, mesh_id: int) -> tuple[Mesh, Pa
             f"The file of mesh {mesh_id} is missing from storage.", code="file_missing"
         )
     return mesh, path
+
+
+def preview(session: Session, mesh_id: int) -> Preview:
+    """A mesh's preview and thumbnail (404 ``no_preview`` until it is described)."""
+    mesh = get(session, mesh_id)
+    stored = meshes.get_preview(session, mesh_id)
+    if stored is None:
+        raise NotFoundError(
+            f"Mesh {mesh_id} is {mesh.status} and has no preview"
+            + (" yet." if mesh.status in ("queued", "processing") else "."),
+            code="no_preview",
+        )
+    return stored
 
 
 def delete(session: Session, state: AppState, mesh_id: int) -> None:

@@ -1,17 +1,19 @@
-"""The descriptors of recent query uploads, by content, so asking again costs nothing."""
+"""Recent query uploads' descriptors and previews, by content, so asking again costs
+nothing and the web page can show the query beside its matches."""
 
 from __future__ import annotations
 
 import threading
 from collections import OrderedDict
 from collections.abc import Hashable
+from typing import Generic, TypeVar
 
-from worker.engine.pipeline import ShapeDescriptor
+V = TypeVar("V")
 
 
-class RecentDescriptors:
-    """A thread-safe least-recently-used map from a query's content key to its
-    descriptor (a few kilobytes each: 1,024 of them take a few MB).
+class Recent(Generic[V]):
+    """A thread-safe least-recently-used map from a query's content key to what was
+    made of it (a descriptor is a few kilobytes, a preview about 70 kB).
 
     Parameters
     ----------
@@ -20,24 +22,24 @@ class RecentDescriptors:
 
     def __init__(self, size: int) -> None:
         self.size = size
-        self._items: OrderedDict[Hashable, ShapeDescriptor] = OrderedDict()
+        self._items: OrderedDict[Hashable, V] = OrderedDict()
         self._lock = threading.Lock()
 
     def __len__(self) -> int:
         return len(self._items)
 
-    def get(self, key: Hashable) -> ShapeDescriptor | None:
+    def get(self, key: Hashable) -> V | None:
         with self._lock:
-            descriptor = self._items.get(key)
-            if descriptor is not None:
+            value = self._items.get(key)
+            if value is not None:
                 self._items.move_to_end(key)
-            return descriptor
+            return value
 
-    def put(self, key: Hashable, descriptor: ShapeDescriptor) -> None:
+    def put(self, key: Hashable, value: V) -> None:
         if self.size <= 0:
             return
         with self._lock:
-            self._items[key] = descriptor
+            self._items[key] = value
             self._items.move_to_end(key)
             while len(self._items) > self.size:
                 self._items.popitem(last=False)

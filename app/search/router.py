@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, Depends, Request
+from fastapi import APIRouter, Depends, Path, Request, Response
 
 from ..deps import WRITE_ACCESS, MultipartDep, RowId, SessionDep, StateDep, require_file
-from ..errors import InvalidInputError
+from ..errors import InvalidInputError, NotFoundError
 from ..schemas import ERROR_RESPONSES, UNAUTHORIZED_RESPONSE
 from . import service
 from .schemas import MatchOut, QueryOut
@@ -140,6 +140,7 @@ def query_out(result: service.SearchResult) -> QueryOut:
         timings=result.timings,
         query=result.query,
         descriptor_source=result.descriptor_source,
+        preview=result.preview,
     )
 
 
@@ -209,3 +210,26 @@ def similar(
     options: Annotated[service.SearchOptions, Depends(similar_options)],
 ) -> QueryOut:
     return query_out(service.similar_to(session, state, mesh_id, options))
+
+
+@router.get(
+    "/previews/{sha256}",
+    operation_id="get_query_preview",
+    summary="The 3D preview (GLB) of a mesh searched with recently, by its sha256",
+    response_class=Response,
+    responses={
+        200: {"content": {"model/gltf-binary": {}}},
+        404: {"description": "No preview of these bytes (`no_preview`)"},
+    },
+)
+def query_preview(
+    sha256: Annotated[str, Path(pattern="^[0-9a-f]{64}$")], session: SessionDep, state: StateDep
+) -> Response:
+    glb = service.query_preview(session, state, sha256)
+    if glb is None:
+        raise NotFoundError(
+            "There is no preview of these bytes: they were not searched with recently "
+            "(the service keeps the last SHAPES_QUERY_CACHE_SIZE) nor enrolled.",
+            code="no_preview",
+        )
+    return Response(glb, media_type="model/gltf-binary")

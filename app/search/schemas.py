@@ -67,6 +67,9 @@ class QueryOut(BaseModel):
         description="seconds: descriptor stages of the query (if computed), 'search', 'total'"
     )
     query: dict[str, int] = Field(default_factory=dict)
+    preview: str | None = Field(
+        None, description="where the query mesh's 3D preview (GLB) can be fetched"
+    )
     far: float | None = Field(None, description="the false acceptance rate asked for")
     threshold: float | None = Field(
         None, description="with far: the score threshold at that FAR (accepted: score <= it)"

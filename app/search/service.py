@@ -90,6 +90,8 @@ class SearchResult:
     descriptor_source: DescriptorSource = "computed"
     #: The score threshold at the options' FAR (None without one).
     threshold: float | None = None
+    #: Where the query's preview (GLB) can be fetched, when there is one.
+    preview: str | None = None
 
     @property
     def fusion(self) -> str:
@@ -294,7 +296,7 @@ def query_by_upload(
     """Rank the gallery against an uploaded mesh (:func:`upload_descriptor`)."""
     state.gallery.check_ready()  # before the worker spends seconds on the query
     descriptor, source, timings = upload_descriptor(session, state, upload, options.preset)
-    return rank(
+    result = rank(
         session,
         state,
         descriptor,
@@ -307,6 +309,19 @@ def query_by_upload(
         },
         descriptor_source=source,
     )
+    if query_preview(session, state, upload.sha256) is not None:
+        result.preview = f"/previews/{upload.sha256}"
+    return result
+
+
+def query_preview(session: Session, state: AppState, sha256: str) -> bytes | None:
+    """The preview (GLB) of recently searched or enrolled bytes, if one was made."""
+    cached = state.recent_previews.get(sha256)
+    if cached is not None:
+        return cached
+    mesh = meshes.get_by_sha256(session, sha256)
+    stored = None if mesh is None else meshes.get_preview(session, mesh.id)
+    return None if stored is None else stored.glb
 
 
 def upload_descriptor(
@@ -325,10 +340,12 @@ def upload_descriptor(
     if descriptor is None:
         descriptor, source = state.recent_queries.get(key), "recent"
     if descriptor is None:
-        descriptor = state.queue.describe_now(
+        descriptor, preview = state.queue.describe_now(
             uuid.uuid4().hex, upload.path, upload.filename, preset.name
         )
         state.recent_queries.put(key, descriptor)
+        if preview is not None:
+            state.recent_previews.put(upload.sha256, preview)
         source = "computed"
         timings = dict(descriptor.timings)
     else:
@@ -354,7 +371,7 @@ def similar_to(
 ) -> SearchResult:
     """Rank the gallery against an enrolled mesh's stored descriptor (itself left out)."""
     descriptor = stored_descriptor(session, mesh_id, options.preset)
-    return rank(
+    result = rank(
         session,
         state,
         descriptor,
@@ -364,6 +381,9 @@ def similar_to(
         query_info={"input_vertices": descriptor.input_vertices, "vertices": descriptor.vertices},
         descriptor_source="stored",
     )
+    if meshes.get_preview(session, mesh_id) is not None:
+        result.preview = f"/meshes/{mesh_id}/preview"
+    return result
 
 
 def stored_descriptor(session: Session, mesh_id: int, preset: Preset) -> ShapeDescriptor:

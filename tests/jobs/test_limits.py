@@ -23,8 +23,8 @@ def _needs_tosca() -> None:
         pytest.skip(f"TOSCA set not found at {TOSCA}")
 
 
-def test_within_the_limits_the_descriptor_comes_back():
-    npz, code, _ = describe_limited(
+def test_within_the_limits_the_descriptor_and_the_previews_come_back():
+    outcome = describe_limited(
         WOLF,
         WOLF.name,
         "smeets2010-shrec",
@@ -32,31 +32,34 @@ def test_within_the_limits_the_descriptor_comes_back():
         time_limit=120,
         memory_limit_bytes=4 * GB,
     )
-    assert code is None and ShapeDescriptor.from_npz_bytes(npz).vertices > 2000
+    assert outcome.code is None and outcome.descriptor is not None
+    assert ShapeDescriptor.from_npz_bytes(outcome.descriptor).vertices > 2000
+    assert outcome.preview is not None and outcome.preview[:4] == b"glTF"
+    assert outcome.thumbnail is not None and outcome.thumbnail[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_over_the_time_limit_the_job_fails_with_a_sentence():
-    npz, code, sentence = describe_limited(
+    outcome = describe_limited(
         WOLF, WOLF.name, "smeets2010-shrec", max_faces=10**6, time_limit=0.5, memory_limit_bytes=0
     )
-    assert npz is None and code == "describe_timeout"
-    assert "longer than this service's limit of 0.5 seconds" in sentence
+    assert outcome.descriptor is None and outcome.code == "describe_timeout"
+    assert "longer than this service's limit of 0.5 seconds" in str(outcome.message)
 
 
 def test_over_the_memory_limit_the_job_fails_with_a_sentence():
-    npz, code, sentence = describe_limited(
+    outcome = describe_limited(
         WOLF, WOLF.name, "smeets2010-shrec", max_faces=10**6, time_limit=120,
         memory_limit_bytes=300 * 1024**2,
     )  # fmt: skip
-    assert npz is None and code == "describe_out_of_memory", (code, sentence)
-    assert "300 MB" in sentence
+    assert outcome.descriptor is None and outcome.code == "describe_out_of_memory", outcome
+    assert "300 MB" in str(outcome.message)
 
 
 def test_a_mesh_error_keeps_its_code_and_a_crash_is_raised_for_a_retry():
-    npz, code, sentence = describe_limited(
+    outcome = describe_limited(
         WOLF, WOLF.name, "smeets2010-shrec", max_faces=10, time_limit=30, memory_limit_bytes=0
     )
-    assert code == "too_many_faces" and "the limit is 10" in sentence
+    assert outcome.code == "too_many_faces" and "the limit is 10" in str(outcome.message)
     with pytest.raises(RuntimeError, match="FileNotFoundError"):
         describe_limited(
             TOSCA / "missing.off.gz", "m.off.gz", "smeets2010-shrec", max_faces=10,

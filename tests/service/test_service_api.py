@@ -254,8 +254,34 @@ def test_health_ready_metrics_and_docs(service: Service, gallery):
     assert {link["operationId"] for link in links.values()} == {
         "get_mesh",
         "get_mesh_file",
+        "get_mesh_preview",
+        "get_mesh_thumbnail",
         "delete_mesh",
         "similar_meshes",
         "get_job",
     }
     assert service.client.get("/docs").status_code == 200
+
+
+def test_previews_of_enrolled_and_searched_meshes(service: Service, gallery):
+    import io
+
+    import trimesh
+    from PIL import Image
+
+    mesh = service.client.get(f"/meshes/{gallery['wolf0']}").json()
+    glb = service.client.get(mesh["links"]["preview"])
+    assert glb.status_code == 200 and glb.headers["content-type"] == "model/gltf-binary"
+    assert "immutable" in glb.headers["cache-control"]
+    scene = trimesh.load(io.BytesIO(glb.content), file_type="glb", force="mesh")
+    assert 0 < len(scene.faces) <= 4000
+    assert np.linalg.norm(scene.vertices, axis=1).max() <= 1.0 + 1e-6
+    png = service.client.get(mesh["links"]["thumbnail"])
+    assert png.status_code == 200 and png.headers["content-type"] == "image/png"
+    assert Image.open(io.BytesIO(png.content)).size == (256, 256)
+
+    body = service.query("wolf2", k=1).json()
+    searched = service.client.get(body["preview"])
+    assert searched.status_code == 200 and searched.content[:4] == b"glTF"
+    unknown = service.client.get("/previews/" + "0" * 64)
+    assert _error(unknown, 404, "no_preview")["detail"].startswith("There is no preview")

@@ -4,22 +4,42 @@ A hostile or huge mesh must cost a job, not the worker: the computation runs
 in a process forked from a small fork server (``multiprocessing`` forkserver,
 with the engine preloaded), whose address space is capped with
 ``RLIMIT_AS``; the parent waits at most ``time_limit`` seconds and kills it
-otherwise. The outcome is the same dict a worker task returns.
+otherwise. Besides the descriptor, the child makes what the web page shows
+(:mod:`.previews`); a preview that cannot be made costs nothing but the preview.
 """
 
 from __future__ import annotations
 
 import functools
+import logging
 import multiprocessing as mp
 import pickle
 import resource
+from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from multiprocessing.context import ForkServerContext
 from pathlib import Path
 
 from worker.engine.errors import MeshError
+from worker.engine.mesh_io import load_mesh
 from worker.engine.pipeline import describe_file
 from worker.engine.presets import get_preset
+
+from .previews import preview_glb, thumbnail_png
+
+log = logging.getLogger("shapes.worker")
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """A job's outcome: the descriptor's npz bytes with the preview (GLB) and thumbnail
+    (PNG), or the refusal's ``code`` and sentence."""
+
+    descriptor: bytes | None = None
+    preview: bytes | None = None
+    thumbnail: bytes | None = None
+    code: str | None = None
+    message: str | None = None
 
 
 @functools.cache
@@ -27,7 +47,7 @@ def _context() -> ForkServerContext:
     """The fork server, set up at the first job rather than at import: importing this
     module (the queue, the tests) must not configure process-wide multiprocessing."""
     context = mp.get_context("forkserver")
-    context.set_forkserver_preload(["worker.engine.pipeline"])
+    context.set_forkserver_preload(["worker.engine.pipeline", "worker.jobs.previews"])
     return context
 
 
@@ -40,7 +60,13 @@ def _child(
         descriptor = describe_file(
             Path(path), get_preset(preset_name), filename, max_faces=max_faces
         )
-        conn.send_bytes(b"D" + descriptor.to_npz_bytes())
+        preview = thumbnail = None
+        try:
+            mesh = load_mesh(Path(path), filename, max_faces=max_faces)
+            preview, thumbnail = preview_glb(mesh), thumbnail_png(mesh)
+        except Exception:  # the descriptor is what matters; the page shows a placeholder
+            log.exception("no preview for %s", filename)
+        conn.send(("ok", descriptor.to_npz_bytes(), preview, thumbnail))
     except MeshError as exc:
         conn.send((exc.code, exc.message))
     except MemoryError:
@@ -59,8 +85,8 @@ def describe_limited(
     max_faces: int,
     time_limit: float,
     memory_limit_bytes: int,
-) -> tuple[bytes | None, str | None, str | None]:
-    """``(descriptor npz bytes, None, None)`` or ``(None, code, sentence)``.
+) -> Outcome:
+    """Describe ``path`` in a child under the limits.
 
     Raises ``RuntimeError`` when the child died for another reason (a crash
     worth a retry).
@@ -85,29 +111,28 @@ def describe_limited(
         child.join()
         receive.close()
     if message is None:
-        return (
-            None,
-            "describe_timeout",
-            (
+        return Outcome(
+            code="describe_timeout",
+            message=(
                 f"Describing this mesh took longer than this service's limit of {time_limit:g} "
                 "seconds; simplify it or upload a smaller mesh."
             ),
         )
-    if message.startswith(b"D"):
-        return message[1:], None, None
     if message:
-        code, sentence = pickle.loads(message)
+        code, *rest = pickle.loads(message)
+        if code == "ok":
+            npz, preview, thumbnail = rest
+            return Outcome(descriptor=npz, preview=preview, thumbnail=thumbnail)
         if code == "crashed":
-            raise RuntimeError(f"describing failed: {sentence}")
+            raise RuntimeError(f"describing failed: {rest[0]}")
         if code != "out_of_memory":
-            return None, code, sentence
+            return Outcome(code=code, message=rest[0])
     # MemoryError under the cap, or a signal (C code failing to allocate, the OOM killer).
     if message or (memory_limit_bytes > 0 and (child.exitcode or 0) < 0):
         mb = memory_limit_bytes / (1024 * 1024)
-        return (
-            None,
-            "describe_out_of_memory",
-            (
+        return Outcome(
+            code="describe_out_of_memory",
+            message=(
                 f"Describing this mesh needed more memory than this service's limit of {mb:g} MB; "
                 "simplify it or upload a smaller mesh."
             ),

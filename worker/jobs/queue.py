@@ -7,7 +7,8 @@ database single-writer (the service) keeps SQLite safe under several workers.
 
 Result of ``describe_upload``::
 
-    {"ok": true, "descriptor": "<base64 of ShapeDescriptor.to_npz_bytes()>"}
+    {"ok": true, "descriptor": "<base64 of ShapeDescriptor.to_npz_bytes()>",
+     "preview": "<base64 GLB>" | null, "thumbnail": "<base64 PNG>" | null}
     {"ok": false, "code": "<MeshError.code>", "message": "<sentence for the user>"}
 
 A :class:`~worker.engine.errors.MeshError` is deterministic (the same file fails the
@@ -48,10 +49,21 @@ def heartbeat_key(task_id: str) -> str:
     return f"heartbeat:{task_id}"
 
 
+def _b64(data: bytes) -> str:
+    return base64.b64encode(data).decode("ascii")
+
+
 def descriptor_npz(result: Mapping[str, Any]) -> bytes:
     """The descriptor of a successful ``describe_upload`` result, as the npz bytes the
     worker made (``ShapeDescriptor.to_npz_bytes``), so they can be stored unchanged."""
     return base64.b64decode(result["descriptor"])
+
+
+def preview_bytes(result: Mapping[str, Any], part: str) -> bytes | None:
+    """The ``preview`` (GLB) or ``thumbnail`` (PNG) of a successful result, or None
+    when the worker could not make it."""
+    text = result.get(part)
+    return None if text is None else base64.b64decode(text)
 
 
 def make_huey(settings: QueueSettings, queue: Queue = "enroll") -> Huey:
@@ -111,7 +123,7 @@ def make_huey(settings: QueueSettings, queue: Queue = "enroll") -> Huey:
         beater.start()
         try:
             path = Path(upload_path)
-            npz, code, message = describe_limited(
+            outcome = describe_limited(
                 path if path.is_absolute() else data_dir / path,
                 filename,
                 preset_name,
@@ -122,9 +134,14 @@ def make_huey(settings: QueueSettings, queue: Queue = "enroll") -> Huey:
         finally:
             done.set()
             beater.join()
-        if npz is None:  # refused or over a limit: deterministic, report, do not retry
-            return {"ok": False, "code": code, "message": message}
-        return {"ok": True, "descriptor": base64.b64encode(npz).decode("ascii")}
+        if outcome.descriptor is None:  # refused or over a limit: deterministic, no retry
+            return {"ok": False, "code": outcome.code, "message": outcome.message}
+        return {
+            "ok": True,
+            "descriptor": _b64(outcome.descriptor),
+            "preview": None if outcome.preview is None else _b64(outcome.preview),
+            "thumbnail": None if outcome.thumbnail is None else _b64(outcome.thumbnail),
+        }
 
     huey.describe_upload = describe_upload  # the service enqueues it by this attribute
     return huey

@@ -1,0 +1,535 @@
+// The service's web page: search by dropping a mesh, enroll, browse the gallery, see
+// the calibration. Plain ES modules, no build step; three.js is vendored (static/vendor).
+import * as THREE from "three";
+import { GLTFLoader } from "three/addons/loaders/GLTFLoader.js";
+import { OrbitControls } from "three/addons/controls/OrbitControls.js";
+
+const $ = (id) => document.getElementById(id);
+const PAGE = 24;
+const KEY = "modalshape-api-key";
+
+// --------------------------------------------------------------------------- API
+class ApiError extends Error {
+  constructor(status, code, detail) {
+    super(detail);
+    this.status = status;
+    this.code = code;
+  }
+}
+
+async function api(path, { method = "GET", body = null, retry = true } = {}) {
+  const headers = {};
+  const key = sessionStorage.getItem(KEY);
+  if (key) headers["X-API-Key"] = key;
+  let response;
+  try {
+    response = await fetch(path, { method, body, headers });
+  } catch (err) {
+    throw new ApiError(0, "unreachable", "The service does not answer; is it running?");
+  }
+  if (response.status === 401 && retry) {
+    await askForKey();
+    return api(path, { method, body, retry: false });
+  }
+  if (response.status === 204) return null;
+  const type = response.headers.get("content-type") || "";
+  const data = type.includes("json") ? await response.json() : null;
+  if (!response.ok) {
+    const detail = (data && data.detail) || `The service answered ${response.status}.`;
+    throw new ApiError(response.status, (data && data.error) || "error", detail);
+  }
+  return data;
+}
+
+function askForKey() {
+  return new Promise((resolve) => {
+    const dialog = $("key-dialog");
+    $("key-form").onsubmit = () => {
+      sessionStorage.setItem(KEY, $("key-input").value);
+      resolve();
+    };
+    dialog.showModal();
+    $("key-input").focus();
+  });
+}
+
+function showError(err) {
+  const alert = $("alert");
+  alert.textContent = err instanceof ApiError ? err.message : String(err.message || err);
+  alert.hidden = false;
+}
+
+function clearError() {
+  $("alert").hidden = true;
+}
+
+// --------------------------------------------------------------------------- tabs
+const TABS = ["search", "enroll", "gallery", "calibration"];
+
+function selectTab(name) {
+  for (const tab of TABS) {
+    const selected = tab === name;
+    $(`tab-${tab}`).setAttribute("aria-selected", String(selected));
+    $(`view-${tab}`).hidden = !selected;
+  }
+  clearError();
+  if (name === "gallery") loadGallery();
+  if (name === "calibration") loadCalibration();
+}
+
+for (const tab of TABS) $(`tab-${tab}`).addEventListener("click", () => selectTab(tab));
+
+// --------------------------------------------------------------------------- 3D views
+const loader = new GLTFLoader();
+
+class Viewer {
+  constructor(canvas) {
+    this.canvas = canvas;
+    this.renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
+    this.renderer.setClearColor(0xeef1f5);
+    this.scene = new THREE.Scene();
+    this.scene.add(new THREE.HemisphereLight(0xffffff, 0x444455, 1.4));
+    const light = new THREE.DirectionalLight(0xffffff, 1.6);
+    light.position.set(2, 3, 4);
+    this.scene.add(light);
+    this.camera = new THREE.PerspectiveCamera(40, 4 / 3, 0.01, 100);
+    this.camera.position.set(1.9, 1.0, 2.4); // three-quarter view, 3.2 from the centre
+    this.controls = new OrbitControls(this.camera, canvas);
+    this.controls.addEventListener("change", () => this.render());
+    this.model = null;
+    this.partner = null;
+    new ResizeObserver(() => this.resize()).observe(canvas);
+  }
+
+  resize() {
+    const { clientWidth: w, clientHeight: h } = this.canvas;
+    if (!w || !h) return;
+    this.renderer.setSize(w, h, false);
+    this.camera.aspect = w / h;
+    this.camera.updateProjectionMatrix();
+    this.render();
+  }
+
+  async show(url) {
+    const gltf = await loader.loadAsync(url);
+    if (this.model) this.scene.remove(this.model);
+    this.model = gltf.scene;
+    // Files do not agree on which way is up: z up (TOSCA, scans) is turned to three's y.
+    this.model.rotation.x = -Math.PI / 2;
+    this.model.traverse((node) => {
+      if (node.isMesh) {
+        node.material = new THREE.MeshStandardMaterial({
+          color: 0x8ca8cc, roughness: 0.6, side: THREE.DoubleSide,
+        });
+        node.geometry.computeVertexNormals();
+      }
+    });
+    this.scene.add(this.model);
+    this.resize();
+  }
+
+  // Two viewers turn together: each copies the other's camera when it moves.
+  link(other) {
+    this.partner = other;
+    other.partner = this;
+    for (const [a, b] of [[this, other], [other, this]]) {
+      a.controls.addEventListener("change", () => {
+        if (a.syncing) return;
+        b.syncing = true;
+        b.camera.position.copy(a.camera.position);
+        b.camera.quaternion.copy(a.camera.quaternion);
+        b.controls.target.copy(a.controls.target);
+        b.controls.update();
+        b.render();
+        b.syncing = false;
+      });
+    }
+  }
+
+  render() {
+    this.renderer.render(this.scene, this.camera);
+  }
+}
+
+let queryViewer, matchViewer, detailViewer;
+function viewers() {
+  if (!queryViewer) {
+    queryViewer = new Viewer($("view-query"));
+    matchViewer = new Viewer($("view-match"));
+    queryViewer.link(matchViewer);
+    detailViewer = new Viewer($("view-detail"));
+  }
+}
+
+// --------------------------------------------------------------------------- cards
+function percent(value) {
+  return `${(100 * value).toFixed(value < 0.1 ? 1 : 0)}%`;
+}
+
+function thumbnail(id, name, ready) {
+  if (!ready) return placeholder("not described yet");
+  const img = document.createElement("img");
+  img.src = `/meshes/${id}/thumbnail`;
+  img.alt = `Thumbnail of ${name}`;
+  img.onerror = () => img.replaceWith(placeholder("no preview"));
+  return img;
+}
+
+function placeholder(text) {
+  const div = document.createElement("div");
+  div.className = "placeholder";
+  div.textContent = text;
+  return div;
+}
+
+function matchCard(match, result) {
+  const card = document.createElement("div");
+  card.className = "card";
+  card.tabIndex = 0;
+  card.setAttribute("role", "button");
+  card.dataset.meshId = match.mesh_id;
+  card.append(thumbnail(match.mesh_id, match.name, true));
+  const title = document.createElement("div");
+  title.className = "title";
+  title.textContent = `${match.rank}. ${match.name}`;
+  const meta = document.createElement("div");
+  meta.className = "meta label";
+  meta.textContent = match.label || "(no label)";
+  const score = document.createElement("div");
+  score.className = "meta";
+  score.textContent = `score ${match.score.toPrecision(3)}`;
+  if (match.confidence !== null) score.textContent += `, confidence ${percent(match.confidence)}`;
+  card.append(title, meta, score);
+  if (match.accepted !== null) {
+    const verdict = document.createElement("div");
+    verdict.className = match.accepted ? "accepted" : "rejected";
+    verdict.textContent = match.accepted ? "accepted" : "not the same object";
+    card.append(verdict);
+  }
+  // Why it matched: each modality's dissimilarity, against the worst of the results.
+  const bars = document.createElement("div");
+  bars.className = "bars";
+  for (const [modality, value] of Object.entries(match.scores)) {
+    const worst = Math.max(...result.matches.map((m) => m.scores[modality]), 1e-12);
+    const name = document.createElement("span");
+    name.textContent = modality.toUpperCase();
+    const bar = document.createElement("div");
+    bar.className = "bar";
+    bar.title = `${modality} dissimilarity ${value.toPrecision(3)} (shorter is closer)`;
+    const fill = document.createElement("span");
+    fill.style.width = `${Math.max(2, (100 * value) / worst)}%`;
+    bar.append(fill);
+    bars.append(name, bar);
+  }
+  card.append(bars);
+  const open = () => compare(match, result, card);
+  card.addEventListener("click", open);
+  card.addEventListener("keydown", (e) => {
+    if (e.key === "Enter" || e.key === " ") {
+      e.preventDefault();
+      open();
+    }
+  });
+  return card;
+}
+
+function showResults(result, target) {
+  const cards = result.matches.map((m) => matchCard(m, result));
+  target.replaceChildren(...cards);
+  $("compare").hidden = true;
+  if (!cards.length) target.replaceChildren(placeholder("The gallery is empty."));
+  else compare(result.matches[0], result, cards[0]); // the best match beside the query
+  status();
+}
+
+async function compare(match, result, card) {
+  for (const other of document.querySelectorAll(".card.selected")) other.classList.remove("selected");
+  card.classList.add("selected");
+  viewers();
+  $("compare").hidden = false;
+  $("caption-query").textContent = result.queryName ? `Query: ${result.queryName}` : "Query";
+  $("caption-match").textContent = `Match ${match.rank}: ${match.name} (${match.label || "no label"})`;
+  try {
+    const jobs = [matchViewer.show(`/meshes/${match.mesh_id}/preview`)];
+    if (result.preview) jobs.push(queryViewer.show(result.preview));
+    await Promise.all(jobs);
+  } catch (err) {
+    showError(err);
+  }
+}
+
+// --------------------------------------------------------------------------- search
+const dropzone = $("drop-search");
+dropzone.addEventListener("click", () => $("file-search").click());
+dropzone.addEventListener("keydown", (e) => {
+  if (e.key === "Enter" || e.key === " ") {
+    e.preventDefault();
+    $("file-search").click();
+  }
+});
+dropzone.addEventListener("dragover", (e) => {
+  e.preventDefault();
+  dropzone.classList.add("over");
+});
+dropzone.addEventListener("dragleave", () => dropzone.classList.remove("over"));
+dropzone.addEventListener("drop", (e) => {
+  e.preventDefault();
+  dropzone.classList.remove("over");
+  if (e.dataTransfer.files.length) search(e.dataTransfer.files[0]);
+});
+$("file-search").addEventListener("change", (e) => {
+  if (e.target.files.length) search(e.target.files[0]);
+});
+
+async function search(file) {
+  clearError();
+  const form = new FormData();
+  form.append("file", file);
+  form.append("k", $("search-k").value || "8");
+  if ($("search-far").value) form.append("far", $("search-far").value);
+  const progress = $("search-progress");
+  const started = performance.now();
+  const tick = setInterval(() => {
+    const seconds = ((performance.now() - started) / 1000).toFixed(0);
+    progress.textContent = `Describing ${file.name}: ${seconds} s (a few seconds for a new mesh)`;
+  }, 250);
+  $("search-results").replaceChildren();
+  $("compare").hidden = true;
+  try {
+    const result = await api("/query", { method: "POST", body: form });
+    result.queryName = file.name;
+    const how = { computed: "described now", enrolled: "enrolled already", recent: "searched recently" };
+    progress.textContent = `${file.name}: ${result.matches.length} matches among ${result.gallery_size} `
+      + `enrolled (${how[result.descriptor_source] || result.descriptor_source}, `
+      + `${((performance.now() - started) / 1000).toFixed(1)} s).`;
+    showResults(result, $("search-results"));
+  } catch (err) {
+    progress.textContent = "";
+    showError(err);
+  } finally {
+    clearInterval(tick);
+  }
+}
+
+// --------------------------------------------------------------------------- enroll
+$("enroll-form").addEventListener("submit", async (e) => {
+  e.preventDefault();
+  clearError();
+  const files = [...$("enroll-files").files];
+  const label = $("enroll-label").value.trim();
+  const table = $("enroll-table");
+  table.hidden = false;
+  const rows = files.map((file) => {
+    const row = document.createElement("tr");
+    row.innerHTML = "<td></td><td></td><td>uploading</td>";
+    row.cells[0].textContent = file.name;
+    table.tBodies[0].append(row);
+    return row;
+  });
+  await Promise.all(files.map(async (file, i) => {
+    const form = new FormData();
+    form.append("file", file);
+    if (label) form.append("label", label);
+    try {
+      const mesh = await api("/meshes", { method: "POST", body: form });
+      rows[i].cells[1].textContent = `#${mesh.id} ${mesh.name}`;
+      follow(mesh.id, rows[i].cells[2]);
+    } catch (err) {
+      rows[i].cells[2].textContent = `failed: ${err.message}`;
+      rows[i].cells[2].className = "rejected";
+    }
+  }));
+});
+
+async function follow(meshId, cell) {
+  for (;;) {
+    let mesh;
+    try {
+      mesh = await api(`/meshes/${meshId}`);
+    } catch (err) {
+      cell.textContent = err.message;
+      return;
+    }
+    cell.textContent = mesh.status === "failed" ? `failed: ${mesh.detail}` : mesh.status;
+    cell.className = { ready: "accepted", failed: "rejected" }[mesh.status] || "";
+    if (mesh.status === "ready" || mesh.status === "failed") return status();
+    await new Promise((resolve) => setTimeout(resolve, 1000));
+  }
+}
+
+// --------------------------------------------------------------------------- gallery
+let galleryOffset = 0;
+
+async function loadGallery() {
+  const params = new URLSearchParams({ offset: galleryOffset, limit: PAGE });
+  if ($("gallery-label").value.trim()) params.set("label", $("gallery-label").value.trim());
+  if ($("gallery-status").value) params.set("status", $("gallery-status").value);
+  try {
+    const page = await api(`/meshes?${params}`);
+    const grid = $("gallery-grid");
+    grid.replaceChildren(...page.items.map(galleryCard));
+    if (!page.items.length) grid.replaceChildren(placeholder("Nothing enrolled matches."));
+    const last = Math.min(page.offset + page.items.length, page.total);
+    $("gallery-page").textContent = page.total ? `${page.offset + 1}-${last} of ${page.total}` : "";
+    $("gallery-prev").disabled = page.offset === 0;
+    $("gallery-next").disabled = last >= page.total;
+  } catch (err) {
+    showError(err);
+  }
+}
+
+function galleryCard(mesh) {
+  const card = document.createElement("div");
+  card.className = "card";
+  card.tabIndex = 0;
+  card.setAttribute("role", "button");
+  card.append(thumbnail(mesh.id, mesh.name, mesh.status === "ready"));
+  const title = document.createElement("div");
+  title.className = "title";
+  title.textContent = mesh.name;
+  const meta = document.createElement("div");
+  meta.className = "meta";
+  meta.textContent = `${mesh.label || "(no label)"}, ${mesh.status}`;
+  card.append(title, meta);
+  const open = () => openDetail(mesh);
+  card.addEventListener("click", open);
+  card.addEventListener("keydown", (e) => {
+    if (e.key === "Enter" || e.key === " ") {
+      e.preventDefault();
+      open();
+    }
+  });
+  return card;
+}
+
+let detailMesh = null;
+
+async function openDetail(mesh) {
+  detailMesh = mesh;
+  $("detail").hidden = false;
+  $("detail-name").textContent = `#${mesh.id} ${mesh.name}`;
+  const facts = {
+    label: mesh.label || "(none)",
+    status: mesh.status === "failed" ? `failed: ${mesh.detail}` : mesh.status,
+    file: `${mesh.filename} (${(mesh.size_bytes / 1024).toFixed(0)} kB)`,
+    vertices: mesh.descriptor ? `${mesh.descriptor.input_vertices} (described at ${mesh.descriptor.vertices})` : "-",
+    described: mesh.descriptor ? `${mesh.descriptor.timings.total.toFixed(2)} s, ${mesh.descriptor.preset} v${mesh.descriptor.preset_version}` : "-",
+    metadata: JSON.stringify(mesh.metadata),
+    enrolled: new Date(mesh.created_at).toLocaleString(),
+  };
+  $("detail-meta").replaceChildren(...Object.entries(facts).flatMap(([k, v]) => {
+    const dt = document.createElement("dt");
+    dt.textContent = k;
+    const dd = document.createElement("dd");
+    dd.textContent = v;
+    return [dt, dd];
+  }));
+  $("detail-similar").disabled = mesh.status !== "ready";
+  viewers();
+  if (mesh.status === "ready") {
+    try {
+      await detailViewer.show(`/meshes/${mesh.id}/preview`);
+    } catch (err) {
+      showError(err);
+    }
+  }
+}
+
+$("detail-similar").addEventListener("click", async () => {
+  if (!detailMesh) return;
+  try {
+    const result = await api(`/meshes/${detailMesh.id}/similar?k=${$("search-k").value || 8}`, { method: "POST" });
+    result.queryName = detailMesh.name;
+    selectTab("search");
+    $("search-progress").textContent = `Most similar to ${detailMesh.name}:`;
+    showResults(result, $("search-results"));
+  } catch (err) {
+    showError(err);
+  }
+});
+
+$("detail-delete").addEventListener("click", async () => {
+  if (!detailMesh) return;
+  if (!window.confirm(`Delete ${detailMesh.name} (#${detailMesh.id}) and its file? This cannot be undone.`)) return;
+  try {
+    await api(`/meshes/${detailMesh.id}`, { method: "DELETE" });
+    $("detail").hidden = true;
+    detailMesh = null;
+    loadGallery();
+  } catch (err) {
+    showError(err);
+  }
+});
+
+$("gallery-filter").addEventListener("submit", (e) => {
+  e.preventDefault();
+  galleryOffset = 0;
+  loadGallery();
+});
+$("gallery-prev").addEventListener("click", () => {
+  galleryOffset = Math.max(0, galleryOffset - PAGE);
+  loadGallery();
+});
+$("gallery-next").addEventListener("click", () => {
+  galleryOffset += PAGE;
+  loadGallery();
+});
+
+// --------------------------------------------------------------------------- calibration
+async function loadCalibration() {
+  const summary = $("calibration-summary");
+  try {
+    const c = await api("/calibration");
+    summary.textContent = `${c.labelled_shapes} labelled meshes (${c.labels} labels): `
+      + `${c.genuine_pairs} pairs of the same label, ${c.impostor_pairs} of different labels. `
+      + `Equal error rate ${percent(c.eer)}. `
+      + (c.trusted ? "Enough pairs to trust these rates." : `Few pairs: the rates are rough (${c.trust_rule}).`);
+    drawRoc(c.roc, c.eer);
+    const body = $("calibration-table").tBodies[0];
+    body.replaceChildren(...c.operating_points.map((p) => {
+      const row = document.createElement("tr");
+      for (const text of [percent(p.far), p.threshold.toPrecision(3), percent(p.estimated_far), percent(p.estimated_frr)]) {
+        const cell = document.createElement("td");
+        cell.textContent = text;
+        row.append(cell);
+      }
+      return row;
+    }));
+    $("calibration-table").hidden = false;
+  } catch (err) {
+    summary.textContent = err.message;
+    $("calibration-roc").hidden = true;
+    $("calibration-table").hidden = true;
+  }
+}
+
+function drawRoc(roc, eer) {
+  const svg = $("calibration-roc");
+  const [x0, y0, w, h] = [50, 20, 350, 240];
+  const minFar = 1e-3;
+  const x = (far) => x0 + (w * (Math.log10(Math.max(far, minFar)) - Math.log10(minFar))) / -Math.log10(minFar);
+  const y = (frr) => y0 + h * (1 - frr);
+  const points = roc.far.map((far, i) => `${x(far).toFixed(1)},${y(roc.frr[i]).toFixed(1)}`).join(" ");
+  const ticks = [0.001, 0.01, 0.1, 1].map((f) => `<text x="${x(f) - 10}" y="${y0 + h + 16}">${percent(f)}</text>`).join("");
+  svg.innerHTML = `
+    <rect x="${x0}" y="${y0}" width="${w}" height="${h}" fill="#fff" stroke="#d5dbe3"/>
+    <polyline points="${points}" fill="none" stroke="#2c5f9e" stroke-width="2"/>
+    <line x1="${x(eer)}" y1="${y0}" x2="${x(eer)}" y2="${y0 + h}" stroke="#a33a2f" stroke-dasharray="4 3"/>
+    ${ticks}
+    <text x="${x0 + w / 2 - 90}" y="${y0 + h + 32}">false acceptance rate (log)</text>
+    <text x="4" y="${y0 + 10}">FRR 100%</text><text x="18" y="${y0 + h}">0%</text>
+    <text x="${x(eer) + 4}" y="${y0 + 14}">EER ${percent(eer)}</text>`;
+  svg.hidden = false;
+}
+
+// --------------------------------------------------------------------------- start
+async function status() {
+  try {
+    const ready = await fetch("/ready").then((r) => r.json());
+    $("service-status").textContent = ready.status === "ready" ? `index: ${ready.checks.index}` : "starting...";
+  } catch {
+    $("service-status").textContent = "service unreachable";
+  }
+}
+status();
+setInterval(status, 15000);

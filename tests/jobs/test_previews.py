@@ -1,0 +1,82 @@
+"""The previews a descriptor job makes: a small unit-size GLB and a PNG thumbnail
+seen along the mesh's axis of least extent."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import trimesh
+from PIL import Image
+
+from worker.engine.mesh_io import Mesh
+from worker.jobs.previews import (
+    PREVIEW_FACES,
+    THUMBNAIL_PIXELS,
+    preview_glb,
+    preview_mesh,
+    thumbnail_png,
+)
+
+
+def _box(extents) -> Mesh:
+    box = trimesh.creation.box(extents=extents).subdivide().subdivide().subdivide()
+    box.apply_translation([5.0, -3.0, 7.0])
+    return Mesh(vertices=np.asarray(box.vertices), faces=np.asarray(box.faces))
+
+
+def _sphere() -> Mesh:
+    sphere = trimesh.creation.icosphere(subdivisions=5, radius=40.0)  # 20480 faces
+    return Mesh(vertices=np.asarray(sphere.vertices), faces=np.asarray(sphere.faces))
+
+
+def test_preview_is_decimated_centred_and_within_the_unit_sphere():
+    sphere = _sphere()
+    small = preview_mesh(sphere)
+    assert len(sphere.faces) > PREVIEW_FACES >= len(small.faces) > 0.9 * PREVIEW_FACES
+    radii = np.linalg.norm(small.vertices, axis=1)
+    assert radii.max() <= 1.0 + 1e-12 and radii.min() > 0.97  # still a sphere, now unit
+
+
+def test_a_small_mesh_is_kept_whole():
+    box = _box((2.0, 0.2, 1.0))
+    assert len(box.faces) <= PREVIEW_FACES
+    small = preview_mesh(box)
+    np.testing.assert_array_equal(small.faces, box.faces)
+    np.testing.assert_allclose(0.5 * (small.vertices.min(0) + small.vertices.max(0)), 0, atol=1e-12)
+
+
+def test_glb_reads_back_as_the_preview_mesh():
+    sphere = _sphere()
+    read = trimesh.load(io.BytesIO(preview_glb(sphere)), file_type="glb", force="mesh")
+    small = preview_mesh(sphere)
+    assert len(read.faces) == len(small.faces)
+    np.testing.assert_allclose(
+        np.sort(np.linalg.norm(read.vertices, axis=1)),
+        np.sort(np.linalg.norm(small.vertices, axis=1)),
+        atol=1e-6,
+    )
+
+
+def _silhouette(png: bytes) -> tuple[int, int]:
+    image = np.asarray(Image.open(io.BytesIO(png)).convert("RGBA"))
+    assert image.shape[:2] == (THUMBNAIL_PIXELS, THUMBNAIL_PIXELS)
+    rows, cols = np.nonzero(image[:, :, 3] > 0)
+    return int(np.ptp(rows)) + 1, int(np.ptp(cols)) + 1
+
+
+def test_thumbnail_shows_the_largest_outline_with_z_up():
+    # 2 (x) by 0.2 (y) by 1 (z): seen along y, x across and z up, twice as wide as tall.
+    height, width = _silhouette(thumbnail_png(_box((2.0, 0.2, 1.0))))
+    assert width > 0.8 * THUMBNAIL_PIXELS
+    assert abs(width / height - 2.0) < 0.15
+    # 0.2 (x) by 1 (y) by 2 (z): seen along x, y across and z up, twice as tall as wide.
+    height, width = _silhouette(thumbnail_png(_box((0.2, 1.0, 2.0))))
+    assert abs(height / width - 2.0) < 0.15
+
+
+def test_thumbnail_is_shaded_not_a_flat_stencil():
+    image = np.asarray(Image.open(io.BytesIO(thumbnail_png(_sphere()))).convert("RGBA"))
+    drawn = image[image[:, :, 3] > 0][:, :3].astype(int)
+    assert len(drawn) > 0.5 * np.pi / 4 * THUMBNAIL_PIXELS**2  # the disc fills the square
+    assert np.ptp(drawn.sum(axis=1)) > 100  # lit and unlit parts differ

@@ -1,0 +1,144 @@
+"""The web page in a real Chromium, as a person uses it (Playwright, Debian's chromium).
+
+Enroll three TOSCA meshes through the page, wait until they are ready, search with
+another pose of one of them: the first card is the right kind of object, and the 3D
+views draw the meshes (non-blank pixels). With ``SHAPES_UI_SCREENSHOTS=docs/ui`` the
+screenshots of the search (with the side-by-side view) and the gallery are saved there.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tests.service.conftest import TOSCA, Service, migrated_service, running
+
+pytestmark = [pytest.mark.slow, pytest.mark.service]
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+# Headless WebGL without a GPU (SwiftShader), and no network calls of Chromium's own.
+ARGS = [
+    "--no-sandbox",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+ENROLL = {"wolf0": "wolf", "centaur0": "centaur", "horse0": "horse"}
+SCREENSHOTS = os.environ.get("SHAPES_UI_SCREENSHOTS")
+# Pixels of a 3D view that differ from its clear colour (#eef1f5) by more than a little.
+DRAWN_PIXELS = """(id) => {
+  const source = document.getElementById(id);
+  const copy = document.createElement("canvas");
+  copy.width = source.width;
+  copy.height = source.height;
+  const g = copy.getContext("2d");
+  g.drawImage(source, 0, 0);
+  const data = g.getImageData(0, 0, copy.width, copy.height).data;
+  let drawn = 0;
+  for (let i = 0; i < data.length; i += 4) {
+    const off = Math.abs(data[i] - 0xee) + Math.abs(data[i + 1] - 0xf1)
+      + Math.abs(data[i + 2] - 0xf5);
+    if (off > 30) drawn++;
+  }
+  return drawn;
+}"""
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory) -> Iterator[Service]:
+    with running(migrated_service(tmp_path_factory, "ui")) as svc:
+        yield svc
+
+
+@pytest.fixture(scope="module")
+def page(site):
+    if CHROMIUM is None:
+        pytest.skip("Chromium is not installed (./scripts/test.sh installs Debian's chromium)")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS, headless=True)
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(site.url + "/")
+        yield page
+        browser.close()
+        assert errors == [], errors
+
+
+def shoot(page, name: str) -> None:
+    if SCREENSHOTS:
+        Path(SCREENSHOTS).mkdir(parents=True, exist_ok=True)
+        page.screenshot(path=str(Path(SCREENSHOTS) / f"{name}.png"), full_page=True)
+
+
+def test_enroll_three_meshes_through_the_page(page, site):
+    page.click("#tab-enroll")
+    for name, label in ENROLL.items():
+        page.set_input_files("#enroll-files", str(TOSCA / f"{name}.off.gz"))
+        page.fill("#enroll-label", label)
+        page.click("#enroll-form button[type=submit]")
+    rows = page.locator("#enroll-table tbody tr")
+    rows.nth(len(ENROLL) - 1).wait_for()
+    for i in range(len(ENROLL)):
+        status = rows.nth(i).locator("td").nth(2)
+        page.wait_for_function(
+            "(cell) => ['ready', 'failed'].includes(cell.textContent) || "
+            "cell.textContent.startsWith('failed')",
+            arg=status.element_handle(),
+            timeout=180_000,
+        )
+        assert status.inner_text() == "ready"
+    listed = site.client.get("/meshes", params={"status": "ready"}).json()
+    assert {(m["name"], m["label"]) for m in listed["items"]} == set(ENROLL.items())
+
+
+def test_search_with_another_pose_shows_the_right_object_in_3d(page):
+    page.click("#tab-search")
+    page.set_input_files("#file-search", str(TOSCA / "wolf1.off.gz"))
+    cards = page.locator("#search-results .card")
+    cards.first.wait_for(timeout=180_000)
+    assert cards.count() == len(ENROLL)
+    assert cards.first.locator(".label").inner_text() == "wolf"
+    assert cards.first.locator("img").evaluate("img => img.complete && img.naturalWidth") == 256
+    # The best match opens beside the query at once; both views draw their mesh.
+    page.locator("#compare").wait_for(state="visible")
+    for view in ("view-query", "view-match"):
+        page.wait_for_function(f"() => ({DRAWN_PIXELS})('{view}') > 2000", timeout=60_000)
+    assert page.locator("#caption-match").inner_text().startswith("Match 1: wolf0")
+    assert "3 shapes" in page.locator("#service-status").inner_text()
+    shoot(page, "search")
+    cards.nth(1).click()  # another card replaces the match
+    page.wait_for_function(
+        "() => document.getElementById('caption-match').textContent.startsWith('Match 2')"
+    )
+
+
+def test_the_gallery_lists_and_opens_a_mesh_in_3d(page):
+    page.click("#tab-gallery")
+    cards = page.locator("#gallery-grid .card")
+    cards.first.wait_for()
+    assert cards.count() == len(ENROLL)
+    cards.nth(1).press("Enter")  # keyboard reachable
+    page.locator("#detail").wait_for(state="visible")
+    page.wait_for_function(f"() => ({DRAWN_PIXELS})('view-detail') > 2000", timeout=60_000)
+    assert "ready" in page.locator("#detail-meta").inner_text()
+    shoot(page, "gallery")
+
+
+def test_an_error_shows_the_services_sentence(page, tmp_path):
+    bad = tmp_path / "broken.off"
+    bad.write_text("OFF\n3 1 0\n0 0 0\n")
+    page.click("#tab-search")
+    page.set_input_files("#file-search", str(bad))
+    alert = page.locator("#alert")
+    alert.wait_for(state="visible", timeout=120_000)
+    assert "Traceback" not in alert.inner_text() and len(alert.inner_text()) > 20
