@@ -57,8 +57,11 @@ def test_a_variant_that_drifts_towards_another_class_fails(collection):
 def test_pose_invariance_counts_poses_closer_to_the_collection(collection):
     originals, labels = collection
     poses = _descriptors(np.array([[8.0, 8.0], [8.0, 8.2], [1.02, 1.0]]))  # one near class a
-    scores = pose_invariance(poses, originals, labels, PRESET)
+    names = [f"m{i}" for i in range(len(labels))]
+    scores = pose_invariance(poses, originals, labels, PRESET, ["p0", "p1", "p2"], names)
     assert scores["gdm"]["foreign_nearest"] == 1 and scores["gdm"]["poses"] == 3
+    nearest_a = names[int(np.argmin(np.abs(originals["gdm"] - [1.02, 1.0]).sum(axis=1)))]
+    assert scores["gdm"]["foreign"] == [["p2", nearest_a]]
     assert 0 < scores[PRESET_ROW]["ratio"] < 10
 
 

@@ -268,6 +268,13 @@ def render_robustness_markdown(report: Mapping) -> str:
                 lines.append(
                     f"| {title} | {poses[key]['ratio']:.3f} | {poses[key]['foreign_nearest']} |"
                 )
+        strays = [
+            f"- {titles[key]}: " + ", ".join(f"`{pose}` (nearest `{near}`)" for pose, near in found)
+            for key in titles
+            if key in poses and (found := poses[key].get("foreign"))
+        ]
+        if strays:
+            lines += ["", "Poses nearest a mesh of the collection:", "", *strays]
     if report["failures"]:
         lines += ["", "## Meshes that could not be described", ""]
         for name, why in report["failures"].items():

@@ -151,6 +151,8 @@ def pose_invariance(
     collection: Mapping[str, np.ndarray],
     labels: Sequence[str],
     preset: Preset,
+    pose_names: Sequence[str],
+    names: Sequence[str],
 ) -> dict[str, dict]:
     """Poses of one object against a labelled collection, in one gallery.
 
@@ -160,12 +162,14 @@ def pose_invariance(
     collection : modality -> (n, M) float [and ``BASELINE``].
     labels : (n,) classes of the collection.
     preset : the dissimilarity, fusion rule and weights.
+    pose_names : (p,) names of the poses; names : (n,) of the collection's meshes.
 
     Returns
     -------
     row key -> {"ratio": median pose-pose distance / median between-class distance
     of the collection, "foreign_nearest": poses whose nearest neighbour in the
-    combined gallery is not another pose, "poses"}.
+    combined gallery is not another pose, "foreign": [pose, its nearest mesh] for
+    each of them, "poses"}.
     """
     keys = [k for k in collection if k in poses]
     combined = {k: np.concatenate([poses[k], collection[k]]) for k in keys}
@@ -181,10 +185,12 @@ def pose_invariance(
         coll = d[p:, p:][np.triu_indices(len(labels_arr), 1)]
         coll_between = coll[between[np.triu_indices(len(labels_arr), 1)]]
         np.fill_diagonal(d, np.inf)
-        foreign = int(np.count_nonzero(np.argmin(d[:p], axis=1) >= p))
+        nearest = np.argmin(d[:p], axis=1)
+        foreign = [[pose_names[i], names[j - p]] for i, j in enumerate(nearest.tolist()) if j >= p]
         out[row] = {
             "ratio": float(np.median(within) / np.median(coll_between)),
-            "foreign_nearest": foreign,
+            "foreign_nearest": len(foreign),
+            "foreign": foreign,
             "poses": p,
         }
     return out

@@ -133,7 +133,14 @@ def run_robustness(
             failures[name] = {"original": why}
         report["poses"] = {
             "dataset": str(poses_dir),
-            "scores": pose_invariance(descriptor_vectors(posed), originals, labels, preset),
+            "scores": pose_invariance(
+                descriptor_vectors(posed),
+                originals,
+                labels,
+                preset,
+                [m.name for m in posed.meshes],
+                [m.name for m in computed.meshes],
+            ),
         }
     report["seconds"] = time.perf_counter() - start
     out = Path(out_dir)
