@@ -8,9 +8,10 @@ starts.
 [--concurrency N] [--wait]`` enrolls every mesh file with a progress bar and an
 ETA. It is resumable: a file whose content the service already holds answers 200
 with the existing mesh (the service deduplicates by sha256), so a rerun skips what
-is enrolled. With ``--wait`` it follows the descriptions until every mesh is ready
-or failed. It ends with a table of the failures and their reasons, and exits
-non-zero when any file failed.
+is enrolled; Ctrl-C lets the uploads under way finish, starts no other and says so.
+With ``--wait`` it follows the descriptions until every mesh is ready or failed. It
+ends with a table of the failures and their reasons, and exits non-zero when any
+file failed.
 
 ``shapes query FILE [--url URL] [-k K] [--json]`` prints the ranked matches as a
 table (rank, name, label, score, per-modality scores, confidence).
@@ -40,6 +41,10 @@ TIMEOUT = httpx.Timeout(300.0, connect=10.0)
 
 class ClientError(RuntimeError):
     """The service could not be reached or refused the request; the message says why."""
+
+
+class Interrupted(ClientError):
+    """Ctrl-C during an import: the uploads under way finished, no new one started."""
 
 
 def mesh_files(paths: Iterable[str]) -> list[Path]:
@@ -177,12 +182,31 @@ def import_files(
                 getattr(result, outcome[0])[path] = outcome[1]
             progress.step()
 
-        with ThreadPoolExecutor(max(1, concurrency)) as pool:
+        pool = ThreadPoolExecutor(max(1, concurrency))
+        try:
             for future in as_completed([pool.submit(upload, p) for p in files]):
                 future.result()
+        except KeyboardInterrupt:
+            # Let the uploads under way finish (each is stored whole or not at all)
+            # and start no other: a rerun then skips exactly what was enrolled.
+            pool.shutdown(wait=True, cancel_futures=True)
+            progress.close()
+            raise Interrupted(
+                f"interrupted after {len(result.enrolled) + len(result.existing)} of "
+                f"{len(files)} files; run the same command again to enroll the rest "
+                "(files already enrolled are skipped)"
+            ) from None
+        pool.shutdown()
         progress.close()
         if wait:
-            _wait_described(client, result, poll_seconds, stream)
+            try:
+                _wait_described(client, result, poll_seconds, stream)
+            except KeyboardInterrupt:
+                progress.close()
+                raise Interrupted(
+                    "interrupted while waiting: every file is enrolled and will be "
+                    "described; GET /meshes?status=ready shows which are done"
+                ) from None
     return result
 
 
@@ -317,6 +341,9 @@ def _import_command(args: argparse.Namespace) -> int:
             concurrency=args.concurrency,
             wait=args.wait,
         )
+    except Interrupted as exc:
+        print(f"shapes import: {exc}", file=sys.stderr)
+        return 130  # the shell's code for SIGINT
     except ClientError as exc:
         print(f"shapes import: {exc}", file=sys.stderr)
         return 2

@@ -29,6 +29,19 @@ ERROR_RESPONSES: dict[int | str, dict] = {
 }
 """Responses every router declares, replacing FastAPI's default validation-error schema."""
 
+FILE_RESPONSES: dict[int | str, dict] = {
+    413: {
+        "model": ErrorOut,
+        "description": "File over the size limit (`too_large`) or with more faces than "
+        "the limit (`too_many_faces`)",
+    },
+    415: {
+        "model": ErrorOut,
+        "description": "Not a mesh file type (`unsupported_format`) or not multipart",
+    },
+}
+"""Declared by every request that can carry a mesh file."""
+
 UNAUTHORIZED_RESPONSE: dict[int | str, dict] = {
     401: {"model": ErrorOut, "description": "API key missing or wrong (`unauthorized`)"},
 }

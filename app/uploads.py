@@ -48,7 +48,7 @@ def safe_filename(raw: str) -> str:
 
 
 def _mb(n: int) -> str:
-    return f"{n / (1024 * 1024):g} MB"
+    return f"{n / (1024 * 1024):.3g} MB"
 
 
 class _Receiver:

@@ -12,7 +12,7 @@ from worker.evaluation.calibration import Calibration
 from ..deps import WRITE_ACCESS, MultipartDep, SessionDep, StateDep, require_file
 from ..errors import InvalidInputError
 from ..gallery.calibration import FUSED
-from ..schemas import ERROR_RESPONSES, UNAUTHORIZED_RESPONSE
+from ..schemas import ERROR_RESPONSES, FILE_RESPONSES, UNAUTHORIZED_RESPONSE
 from ..search.service import parse_far
 from . import service
 from .schemas import (
@@ -153,8 +153,12 @@ def _optional_id(fields: dict[str, str], name: str) -> int | None:
         "http://127.0.0.1:8000/verify`"
     ),
     responses=NOT_CALIBRATED
+    | FILE_RESPONSES
     | UNAUTHORIZED_RESPONSE
-    | {404: {"description": "No such claimed mesh or label in the gallery"}},
+    | {
+        404: {"description": "No such claimed mesh or label in the gallery"},
+        503: {"description": "Index loading, or no worker answered in time"},
+    },
     openapi_extra=VERIFY_BODY,
 )
 def verify(upload: MultipartDep, session: SessionDep, state: StateDep) -> VerificationOut:

@@ -10,7 +10,7 @@ from fastapi.responses import FileResponse
 from ..deps import WRITE_ACCESS, MultipartDep, RowId, SessionDep, StateDep, require_file
 from ..errors import InvalidInputError
 from ..models import Descriptor, Mesh, MeshStatus
-from ..schemas import ERROR_RESPONSES, UNAUTHORIZED_RESPONSE
+from ..schemas import ERROR_RESPONSES, FILE_RESPONSES, UNAUTHORIZED_RESPONSE
 from . import service
 from .schemas import DescriptorInfo, Links, MeshOut, MeshPage
 
@@ -23,10 +23,12 @@ Responses = dict[int | str, dict[str, Any]]
 ERRORS: Responses = {
     404: {"description": 'Unknown id: `{"error": "not_found", "detail": ...}`'},
 }
-UPLOAD_ERRORS: Responses = {
-    413: {"description": "File over the size limit (`too_large`)"},
+PREVIEW_ERRORS: Responses = {
+    404: {"description": "Unknown id, or no preview (`no_preview`: the mesh failed)"},
+    409: {"description": "Queued or being described (`mesh_not_ready`)"},
+}
+UPLOAD_ERRORS: Responses = FILE_RESPONSES | {
     409: {"description": "Same bytes enrolled as another format (`same_bytes_other_format`)"},
-    415: {"description": "Not a mesh file type (`unsupported_format`) or not multipart"},
     422: {"description": "No file, empty file, or bad metadata"},
 }
 
@@ -227,7 +229,7 @@ def get_file(mesh_id: RowId, session: SessionDep, state: StateDep) -> FileRespon
     operation_id="get_mesh_preview",
     summary="A small 3D preview (binary glTF, a few thousand triangles, unit size)",
     response_class=Response,
-    responses=ERRORS | {200: {"content": {"model/gltf-binary": {}}}},
+    responses=PREVIEW_ERRORS | {200: {"content": {"model/gltf-binary": {}}}},
 )
 def get_preview(mesh_id: RowId, session: SessionDep) -> Response:
     stored = service.preview(session, mesh_id)
@@ -239,7 +241,7 @@ def get_preview(mesh_id: RowId, session: SessionDep) -> Response:
     operation_id="get_mesh_thumbnail",
     summary="A 256 x 256 PNG thumbnail",
     response_class=Response,
-    responses=ERRORS | {200: {"content": {"image/png": {}}}},
+    responses=PREVIEW_ERRORS | {200: {"content": {"image/png": {}}}},
 )
 def get_thumbnail(mesh_id: RowId, session: SessionDep) -> Response:
     stored = service.preview(session, mesh_id)

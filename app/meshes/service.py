@@ -128,16 +128,26 @@ def file_path(session: Session, state: AppState, mesh_id: int) -> tuple[Mesh, Pa
 
 
 def preview(session: Session, mesh_id: int) -> Preview:
-    """A mesh's preview and thumbnail (404 ``no_preview`` until it is described)."""
+    """A mesh's preview and thumbnail.
+
+    Raises
+    ------
+    NotFoundError
+        No such mesh, or ``no_preview``: it failed, or was described before the
+        service made previews.
+    ConflictError
+        ``mesh_not_ready``: it is queued or being described; the preview comes with it.
+    """
     mesh = get(session, mesh_id)
     stored = meshes.get_preview(session, mesh_id)
-    if stored is None:
-        raise NotFoundError(
-            f"Mesh {mesh_id} is {mesh.status} and has no preview"
-            + (" yet." if mesh.status in ("queued", "processing") else "."),
-            code="no_preview",
+    if stored is not None:
+        return stored
+    if mesh.status in (MeshStatus.queued.value, MeshStatus.processing.value):
+        raise ConflictError(
+            f"Mesh {mesh_id} is {mesh.status}; its preview is made when it is described.",
+            code="mesh_not_ready",
         )
-    return stored
+    raise NotFoundError(f"Mesh {mesh_id} is {mesh.status} and has no preview.", code="no_preview")
 
 
 def delete(session: Session, state: AppState, mesh_id: int) -> None:

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Depends, Path, Request, Response
 
 from ..deps import WRITE_ACCESS, MultipartDep, RowId, SessionDep, StateDep, require_file
 from ..errors import InvalidInputError, NotFoundError
-from ..schemas import ERROR_RESPONSES, UNAUTHORIZED_RESPONSE
+from ..schemas import ERROR_RESPONSES, FILE_RESPONSES, UNAUTHORIZED_RESPONSE
 from . import service
 from .schemas import MatchOut, QueryOut
 
@@ -79,9 +79,7 @@ SIMILAR_PARAMETERS = {
     ]
 }
 
-QUERY_ERRORS: dict[int | str, dict[str, Any]] = {
-    413: {"description": "File over the size limit, or too many faces"},
-    415: {"description": "Not a mesh file type"},
+QUERY_ERRORS: dict[int | str, dict[str, Any]] = FILE_RESPONSES | {
     409: {"description": "far given but the gallery is not calibrated (`not_calibrated`)"},
     422: {"description": "Unreadable mesh, bad k/preset/fusion/modalities/far"},
     503: {"description": "Index loading, or no worker answered in time"},

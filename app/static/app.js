@@ -75,6 +75,7 @@ function selectTab(name) {
   clearError();
   if (name === "gallery") loadGallery();
   if (name === "calibration") loadCalibration();
+  status();
 }
 
 for (const tab of TABS) $(`tab-${tab}`).addEventListener("click", () => selectTab(tab));
@@ -483,7 +484,9 @@ async function loadCalibration() {
     summary.textContent = `${c.labelled_shapes} labelled meshes (${c.labels} labels): `
       + `${c.genuine_pairs} pairs of the same label, ${c.impostor_pairs} of different labels. `
       + `Equal error rate ${percent(c.eer)}. `
-      + (c.trusted ? "Enough pairs to trust these rates." : `Few pairs: the rates are rough (${c.trust_rule}).`);
+      + (c.trusted
+        ? "Enough pairs to trust these rates."
+        : `Few pairs, so these are rough estimates; trusted rates need ${c.trust_rule.split(";")[0]}.`);
     drawRoc(c.roc, c.eer);
     const body = $("calibration-table").tBodies[0];
     body.replaceChildren(...c.operating_points.map((p) => {
@@ -498,19 +501,19 @@ async function loadCalibration() {
     $("calibration-table").hidden = false;
   } catch (err) {
     summary.textContent = err.message;
-    $("calibration-roc").hidden = true;
+    $("calibration-roc").toggleAttribute("hidden", true); // an SVG element has no .hidden
     $("calibration-table").hidden = true;
   }
 }
 
 function drawRoc(roc, eer) {
   const svg = $("calibration-roc");
-  const [x0, y0, w, h] = [50, 20, 350, 240];
+  const [x0, y0, w, h] = [62, 20, 340, 240];
   const minFar = 1e-3;
   const x = (far) => x0 + (w * (Math.log10(Math.max(far, minFar)) - Math.log10(minFar))) / -Math.log10(minFar);
   const y = (frr) => y0 + h * (1 - frr);
   const points = roc.far.map((far, i) => `${x(far).toFixed(1)},${y(roc.frr[i]).toFixed(1)}`).join(" ");
-  const ticks = [0.001, 0.01, 0.1, 1].map((f) => `<text x="${x(f) - 10}" y="${y0 + h + 16}">${percent(f)}</text>`).join("");
+  const ticks = [0.001, 0.01, 0.1, 1].map((f) => `<text x="${x(f)}" y="${y0 + h + 16}" text-anchor="middle">${percent(f)}</text>`).join("");
   svg.innerHTML = `
     <rect x="${x0}" y="${y0}" width="${w}" height="${h}" fill="#fff" stroke="#d5dbe3"/>
     <polyline points="${points}" fill="none" stroke="#2c5f9e" stroke-width="2"/>
@@ -519,7 +522,7 @@ function drawRoc(roc, eer) {
     <text x="${x0 + w / 2 - 90}" y="${y0 + h + 32}">false acceptance rate (log)</text>
     <text x="4" y="${y0 + 10}">FRR 100%</text><text x="18" y="${y0 + h}">0%</text>
     <text x="${x(eer) + 4}" y="${y0 + 14}">EER ${percent(eer)}</text>`;
-  svg.hidden = false;
+  svg.toggleAttribute("hidden", false);
 }
 
 // --------------------------------------------------------------------------- start

@@ -25,7 +25,7 @@ def limited(tmp_path_factory) -> Iterator[Service]:
 
 
 def test_a_job_over_its_limit_fails_and_the_worker_lives_on(limited: Service):
-    worker = limited.workers[0]
+    worker = limited.workers["enroll"][0]
     created = limited.upload("wolf0", "wolf")
     mesh = limited.wait_mesh(created.json()["id"])
     assert mesh["status"] == "failed" and mesh["error"] == "describe_timeout", mesh

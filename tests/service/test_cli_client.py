@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import json
 import shutil
+import signal
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 
 import pytest
@@ -55,6 +57,45 @@ def test_import_reports_the_broken_file_and_resumes(served: Service, folder):
     # Nothing uploaded twice; the file that failed before is reported again.
     assert "3 files: 0 enrolled, 2 already enrolled, 1 failed" in again.stdout
     assert again.returncode == 1
+
+
+def test_an_interrupted_import_resumes_and_enrolls_nothing_twice(tmp_path_factory):
+    # No descriptor worker: uploads only queue jobs, and all of TOSCA takes seconds.
+    svc = migrated_service(tmp_path_factory, "interrupt", SHAPES_MAX_UPLOAD_BYTES=str(8 << 20))
+    with running(svc, workers=0):
+        files = sorted(TOSCA.glob("*.off.gz"))
+        command = [sys.executable, "-m", "worker.cli", "import", str(TOSCA), "--url", svc.url]
+        first = subprocess.Popen(
+            [*command, "--concurrency", "1"],
+            cwd=REPO,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        deadline = time.monotonic() + 120
+        while svc.client.get("/meshes").json()["total"] < 3 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        first.send_signal(signal.SIGINT)
+        _, err = first.communicate(timeout=120)
+        assert first.returncode == 130, err
+        assert f"of {len(files)} files; run the same command again" in err
+        stored = svc.client.get("/meshes", params={"limit": 100}).json()["total"]
+        assert 3 <= stored < len(files)
+
+        again = subprocess.run(command, cwd=REPO, capture_output=True, text=True, timeout=600)
+        assert again.returncode == 0, again.stdout
+        assert (
+            f"{len(files)} files: {len(files) - stored} enrolled, {stored} already enrolled, "
+            "0 failed" in again.stdout
+        )
+        names = [
+            m["name"] for m in svc.client.get("/meshes", params={"limit": 100}).json()["items"]
+        ]
+        assert sorted(names) == sorted(f.name.removesuffix(".off.gz") for f in files)
+        # Queued (no worker here): its preview comes when it is described.
+        queued = svc.client.get("/meshes", params={"limit": 1}).json()["items"][0]
+        waiting = svc.client.get(queued["links"]["preview"])
+        assert waiting.status_code == 409 and waiting.json()["error"] == "mesh_not_ready"
 
 
 def test_query_prints_the_ranked_matches(served: Service, folder):

@@ -170,6 +170,7 @@ def test_unreadable_mesh_query_is_422_and_enrollment_fails_with_the_sentence(ser
     assert failed["detail"] == body["detail"]
     job = service.client.get(failed["links"]["job"]).json()
     assert job["status"] == "failed" and job["enqueues"] == 1  # not retried
+    _error(service.client.get(failed["links"]["preview"]), 404, "no_preview")
 
 
 def test_bad_fields_are_422(service: Service, gallery):

@@ -142,3 +142,23 @@ def test_an_error_shows_the_services_sentence(page, tmp_path):
     alert = page.locator("#alert")
     alert.wait_for(state="visible", timeout=120_000)
     assert "Traceback" not in alert.inner_text() and len(alert.inner_text()) > 20
+
+
+def test_calibration_says_what_it_needs_then_draws_the_roc(page, site):
+    page.click("#tab-calibration")
+    summary = page.locator("#calibration-summary")
+    page.wait_for_function(
+        "() => document.getElementById('calibration-summary').textContent.length > 0"
+    )
+    assert "enroll more meshes with labels" in summary.inner_text()  # the service's sentence
+    # Five cats and two dogs: 11 genuine and 10 impostor pairs at least, enough.
+    named = [(f"cat{i}", "cat") for i in range(5)] + [("dog0", "dog"), ("dog1", "dog")]
+    ids = [site.upload(name, label).json()["id"] for name, label in named]
+    for mesh_id in ids:
+        assert site.wait_mesh(mesh_id)["status"] == "ready"
+    page.click("#tab-search")
+    page.click("#tab-calibration")
+    page.locator("#calibration-roc").wait_for(state="visible", timeout=60_000)
+    assert "Equal error rate" in summary.inner_text()
+    assert page.locator("#calibration-table tbody tr").count() >= 3
+    shoot(page, "calibration")
