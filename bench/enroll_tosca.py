@@ -7,12 +7,14 @@ Uploads every mesh (with its class label), polls ``GET /meshes`` until all are
 ready or failed, and prints the total wall time (first upload to last ready),
 the upload time, and per-mesh medians of the queue-to-ready time and of the
 worker's descriptor time. Then it runs every mesh's ``/similar`` (top-1
-nearest-neighbour accuracy by class) as a sanity check.
+nearest-neighbour accuracy by class) as a sanity check, and compares
+``GET /calibration``'s EER with the recorded ``shapes evaluate`` report.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import signal
 import statistics
 import subprocess
@@ -108,6 +110,26 @@ def run(url: str) -> None:
     print(f"throughput: {len(ids) / total * 60:.1f} meshes/min")
     print(f"/similar top-1 class accuracy: {correct}/{len(ids)}")
     print(f"/similar search step, median: {statistics.median(search) * 1000:.2f} ms")
+    compare_calibration(client)
+
+
+def compare_calibration(client: httpx.Client) -> None:
+    """``GET /calibration``'s EER beside ``shapes evaluate``'s recorded report for the
+    same preset (issue 11: the live endpoint and the offline report agree)."""
+    live = client.get("/calibration").json()
+    report_path = REPO / "docs" / "evaluation" / live["preset"] / "report.json"
+    if not report_path.is_file():
+        print(f"no recorded report at {report_path}: EER not compared")
+        return
+    rows = json.loads(report_path.read_text())["rows"]
+    print(f"\n/calibration ({live['genuine_pairs']} genuine, {live['impostor_pairs']} impostor")
+    print(f"pairs) against {report_path.relative_to(REPO)}:\n")
+    print("| score | /calibration EER | report EER | difference (points) |")
+    print("|---|---:|---:|---:|")
+    live_eers = {live["score"]: live["eer"]} | {m: c["eer"] for m, c in live["modalities"].items()}
+    for name, eer in live_eers.items():
+        recorded = rows[name]["eer"]
+        print(f"| {name} | {eer:.2%} | {recorded:.2%} | {100 * (eer - recorded):+.2f} |")
 
 
 def main() -> None:
