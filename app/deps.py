@@ -40,6 +40,20 @@ def get_session(request: Request, state: StateDep) -> Iterator[Session]:
 SessionDep = Annotated[Session, Depends(get_session, scope="function")]
 
 
+def get_read_session(state: StateDep) -> Iterator[Session]:
+    """A read-only unit of work for a POST that changes nothing (searches, verification).
+
+    A write session holds SQLite's write lock from its first statement to the end
+    of the request; a search that waits seconds for its descriptor must not hold it,
+    or every enrollment and every other search waits behind it.
+    """
+    with unit_of_work(state.read_sessions) as session:
+        yield session
+
+
+ReadSessionDep = Annotated[Session, Depends(get_read_session, scope="function")]
+
+
 API_KEY_HEADER = APIKeyHeader(
     name="X-API-Key",
     auto_error=False,

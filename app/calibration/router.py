@@ -9,7 +9,7 @@ from fastapi import APIRouter
 
 from worker.evaluation.calibration import Calibration
 
-from ..deps import WRITE_ACCESS, MultipartDep, SessionDep, StateDep, require_file
+from ..deps import WRITE_ACCESS, MultipartDep, ReadSessionDep, SessionDep, StateDep, require_file
 from ..errors import InvalidInputError
 from ..gallery.calibration import FUSED
 from ..schemas import ERROR_RESPONSES, FILE_RESPONSES, UNAUTHORIZED_RESPONSE
@@ -161,7 +161,7 @@ def _optional_id(fields: dict[str, str], name: str) -> int | None:
     },
     openapi_extra=VERIFY_BODY,
 )
-def verify(upload: MultipartDep, session: SessionDep, state: StateDep) -> VerificationOut:
+def verify(upload: MultipartDep, session: ReadSessionDep, state: StateDep) -> VerificationOut:
     fields = upload.fields
     unknown = set(fields) - set(VERIFY_FIELDS)
     if unknown:

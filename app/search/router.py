@@ -6,7 +6,15 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Path, Request, Response
 
-from ..deps import WRITE_ACCESS, MultipartDep, RowId, SessionDep, StateDep, require_file
+from ..deps import (
+    WRITE_ACCESS,
+    MultipartDep,
+    ReadSessionDep,
+    RowId,
+    SessionDep,
+    StateDep,
+    require_file,
+)
 from ..errors import InvalidInputError, NotFoundError
 from ..schemas import ERROR_RESPONSES, FILE_RESPONSES, UNAUTHORIZED_RESPONSE
 from . import service
@@ -157,7 +165,7 @@ def query_out(result: service.SearchResult) -> QueryOut:
     responses=QUERY_ERRORS | UNAUTHORIZED_RESPONSE,
     openapi_extra=QUERY_BODY,
 )
-def query(upload: MultipartDep, session: SessionDep, state: StateDep) -> QueryOut:
+def query(upload: MultipartDep, session: ReadSessionDep, state: StateDep) -> QueryOut:
     file = require_file(upload)
     fields = upload.fields
     unknown = set(fields) - set(service.OPTION_NAMES)
@@ -203,7 +211,7 @@ def similar_options(request: Request, state: StateDep) -> service.SearchOptions:
 )
 def similar(
     mesh_id: RowId,
-    session: SessionDep,
+    session: ReadSessionDep,
     state: StateDep,
     options: Annotated[service.SearchOptions, Depends(similar_options)],
 ) -> QueryOut:
