@@ -4,9 +4,11 @@ crash is raised so that the queue retries it."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
-from worker.engine.pipeline import ShapeDescriptor
+from worker.engine.pipeline import ShapeDescriptor, describe_file
+from worker.engine.presets import get_preset
 from worker.evaluation.datasets import shared_dataset
 from worker.jobs.limits import describe_limited
 
@@ -36,6 +38,18 @@ def test_within_the_limits_the_descriptor_and_the_previews_come_back():
     assert ShapeDescriptor.from_npz_bytes(outcome.descriptor).vertices > 2000
     assert outcome.preview is not None and outcome.preview[:4] == b"glTF"
     assert outcome.thumbnail is not None and outcome.thumbnail[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_query_gets_the_same_descriptor_and_its_preview_but_no_thumbnail():
+    outcome = describe_limited(
+        WOLF, WOLF.name, "smeets2010-shrec", max_faces=10**6, time_limit=120,
+        memory_limit_bytes=4 * GB, thumbnail=False,
+    )  # fmt: skip
+    assert outcome.preview is not None and outcome.thumbnail is None
+    described = ShapeDescriptor.from_npz_bytes(outcome.descriptor)
+    direct = describe_file(WOLF, get_preset("smeets2010-shrec"))
+    for modality in ("gdm", "ddt", "spectrum"):
+        np.testing.assert_array_equal(getattr(described, modality), getattr(direct, modality))
 
 
 def test_over_the_time_limit_the_job_fails_with_a_sentence():

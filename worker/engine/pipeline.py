@@ -185,10 +185,22 @@ def describe_file(
     worker.engine.errors.MeshError
         When the file cannot be described; its ``message`` is for the user.
     """
+    return load_and_describe(source, preset, filename, max_faces=max_faces)[1]
+
+
+def load_and_describe(
+    source: str | Path | bytes,
+    preset: Preset,
+    filename: str | None = None,
+    *,
+    max_faces: int = DEFAULT_MAX_FACES,
+) -> tuple[Mesh, ShapeDescriptor]:
+    """:func:`describe_file`, also returning the cleaned mesh (for what else is made
+    of it, such as previews, without reading the file twice)."""
     start = time.perf_counter()
     mesh = load_mesh(source, filename, max_faces=max_faces)
     load_seconds = time.perf_counter() - start
     descriptor = describe_mesh(mesh, preset)
     descriptor.timings = {"load": load_seconds, **descriptor.timings}
     descriptor.timings["total"] = sum(descriptor.timings.values())
-    return descriptor
+    return mesh, descriptor

@@ -5,7 +5,8 @@ in a process forked from a small fork server (``multiprocessing`` forkserver,
 with the engine preloaded), whose address space is capped with
 ``RLIMIT_AS``; the parent waits at most ``time_limit`` seconds and kills it
 otherwise. Besides the descriptor, the child makes what the web page shows
-(:mod:`.previews`); a preview that cannot be made costs nothing but the preview.
+(:mod:`.previews`: the 3D preview, and for an enrolled mesh its thumbnail) from
+the mesh it loaded; a preview that cannot be made costs nothing but the preview.
 """
 
 from __future__ import annotations
@@ -21,8 +22,7 @@ from multiprocessing.context import ForkServerContext
 from pathlib import Path
 
 from worker.engine.errors import MeshError
-from worker.engine.mesh_io import load_mesh
-from worker.engine.pipeline import describe_file
+from worker.engine.pipeline import load_and_describe
 from worker.engine.presets import get_preset
 
 from .previews import preview_glb, thumbnail_png
@@ -52,18 +52,24 @@ def _context() -> ForkServerContext:
 
 
 def _child(
-    conn: Connection, path: str, filename: str, preset_name: str, max_faces: int, memory: int
+    conn: Connection,
+    path: str,
+    filename: str,
+    preset_name: str,
+    max_faces: int,
+    memory: int,
+    thumbnail_wanted: bool,
 ) -> None:
     if memory > 0:
         resource.setrlimit(resource.RLIMIT_AS, (memory, memory))
     try:
-        descriptor = describe_file(
+        mesh, descriptor = load_and_describe(
             Path(path), get_preset(preset_name), filename, max_faces=max_faces
         )
         preview = thumbnail = None
         try:
-            mesh = load_mesh(Path(path), filename, max_faces=max_faces)
-            preview, thumbnail = preview_glb(mesh), thumbnail_png(mesh)
+            preview = preview_glb(mesh)
+            thumbnail = thumbnail_png(mesh) if thumbnail_wanted else None
         except Exception:  # the descriptor is what matters; the page shows a placeholder
             log.exception("no preview for %s", filename)
         conn.send(("ok", descriptor.to_npz_bytes(), preview, thumbnail))
@@ -85,8 +91,10 @@ def describe_limited(
     max_faces: int,
     time_limit: float,
     memory_limit_bytes: int,
+    thumbnail: bool = True,
 ) -> Outcome:
-    """Describe ``path`` in a child under the limits.
+    """Describe ``path`` in a child under the limits (and make its previews: the
+    thumbnail only when ``thumbnail``; a query's is never shown).
 
     Raises ``RuntimeError`` when the child died for another reason (a crash
     worth a retry).
@@ -95,7 +103,7 @@ def describe_limited(
     receive, send = context.Pipe(duplex=False)
     child = context.Process(
         target=_child,
-        args=(send, str(path), filename, preset_name, max_faces, memory_limit_bytes),
+        args=(send, str(path), filename, preset_name, max_faces, memory_limit_bytes, thumbnail),
         daemon=True,
     )
     child.start()
