@@ -124,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
         "--workers", type=int, help="enrollment consumers (default SHAPES_WORKERS or 2)"
     )
     parser.add_argument(
-        "--query-workers", type=int, help="query consumers (default SHAPES_QUERY_WORKERS or 1)"
+        "--query-workers", type=int, help="query consumers (default SHAPES_QUERY_WORKERS or 2)"
     )
     parser.add_argument("--data-dir", help="default SHAPES_DATA_DIR or ./data")
     args = parser.parse_args(argv)

@@ -31,7 +31,7 @@ class Settings(QueueSettings):
         default=2, ge=0, description="enrollment consumer processes started by serve"
     )
     query_workers: int = Field(
-        default=1, ge=0, description="query consumer processes started by serve"
+        default=2, ge=0, description="query consumer processes started by serve"
     )
 
     # Access

@@ -2,20 +2,23 @@
 
     python bench/query_under_load.py [--gallery 20] [--bulk 332] [--clients 4] [--queries 12]
 
-Starts ``python -m app`` (its default consumers: two enrollment workers and one
-query worker) on a fresh data directory, enrolls a small TOSCA gallery and waits
+Starts ``python -m app`` (its default consumers: two enrollment workers and two
+query workers) on a fresh data directory, enrolls a small TOSCA gallery and waits
 for it, then:
 
-1. idle: ``--queries`` queries one after the other;
-2. under load: uploads ``--bulk`` enrollments (TOSCA files re-gzipped with other
+1. idle, one client: ``--queries`` queries one after the other;
+2. idle, ``--clients`` concurrent clients sending ``--queries`` queries each;
+3. under load: uploads ``--bulk`` enrollments (TOSCA files re-gzipped with other
    header bytes, so every upload is new work) and, while they are being described,
-   ``--clients`` concurrent clients send ``--queries`` queries each.
+   the same concurrent clients again.
 
 Every query sends bytes the service has not seen (a fresh gzip of a TOSCA file
 that is not enrolled), so each one is described by a worker, none answered from a
-stored or recent descriptor. Prints the latency table (median, p95, max) and the
-ratio of the loaded p95 to the idle median, and how many enrollments were still
-queued when the last query answered (the load was real throughout).
+stored or recent descriptor. Prints the latency table (median, p95, max; the
+median time waiting for a worker and describing), the ratio of each p95 to the
+one-client idle median, the ratio of the loaded p95 to the same clients' idle p95
+(what enrollment adds), and how many enrollments were still queued when the last
+query answered (the load was real throughout).
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import httpx
 
@@ -46,14 +50,24 @@ def fresh_bytes(name: str) -> bytes:
     return gzip.compress(gzip.decompress((TOSCA / name).read_bytes()), mtime=next(_variant))
 
 
-def timed_query(client: httpx.Client, name: str) -> float:
+class Timing(NamedTuple):
+    """One query, in seconds: the client's wall time, and the parts of it."""
+
+    total: float  # request sent -> answer read, at the client
+    waiting: float  # queued, the worker's sandbox and preview, the result's way back
+    describing: float  # load, resample and descriptor, in the worker
+
+
+def timed_query(client: httpx.Client, name: str) -> Timing:
+    data = fresh_bytes(name)
     start = time.perf_counter()
-    response = client.post("/query", files={"file": (name, fresh_bytes(name))}, data={"k": "5"})
+    response = client.post("/query", files={"file": (name, data)}, data={"k": "5"})
     elapsed = time.perf_counter() - start
     body = response.json()
     if response.status_code != 200 or body["descriptor_source"] != "computed":
         raise RuntimeError(f"query of {name}: {response.status_code} {response.text[:200]}")
-    return elapsed
+    timings = body["timings"]
+    return Timing(elapsed, timings["describe_wall"] - timings["total"], timings["total"])
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -92,6 +106,19 @@ def main() -> None:
 
             idle = [timed_query(client, probes[i % len(probes)]) for i in range(args.queries)]
 
+            def one_client(c: int) -> list[Timing]:
+                with httpx.Client(base_url=url, timeout=300) as own:
+                    return [
+                        timed_query(own, probes[(c * args.queries + i) % len(probes)])
+                        for i in range(args.queries)
+                    ]
+
+            def concurrent_clients() -> list[Timing]:
+                with concurrent.futures.ThreadPoolExecutor(args.clients) as pool:
+                    return [t for ts in pool.map(one_client, range(args.clients)) for t in ts]
+
+            idle_concurrent = concurrent_clients()
+
             stop = threading.Event()
 
             def enroll_bulk() -> None:
@@ -112,35 +139,44 @@ def main() -> None:
             while client.get("/meshes", params={"status": "queued"}).json()["total"] < 20:
                 time.sleep(0.5)
 
-            def one_client(c: int) -> list[float]:
-                with httpx.Client(base_url=url, timeout=300) as own:
-                    return [
-                        timed_query(own, probes[(c * args.queries + i) % len(probes)])
-                        for i in range(args.queries)
-                    ]
-
-            with concurrent.futures.ThreadPoolExecutor(args.clients) as pool:
-                loaded = [t for ts in pool.map(one_client, range(args.clients)) for t in ts]
+            loaded = concurrent_clients()
             queued = client.get("/meshes", params={"status": "queued"}).json()["total"]
             processing = client.get("/meshes", params={"status": "processing"}).json()["total"]
             stop.set()
+            uploader.join()
         finally:
             stop_service(service)
 
-    base = statistics.median(idle)
+    base = statistics.median(t.total for t in idle)
     print(
         f"{args.gallery} meshes enrolled; queries of fresh bytes (k=5); bulk enrollment "
         f"of {args.bulk} uploads; {args.clients} concurrent query clients\n"
     )
-    print("| | queries | median s | p95 s | max s | p95 / idle median |")
-    print("|---|---:|---:|---:|---:|---:|")
-    for title, values in (("idle, one client", idle), ("during bulk enrollment", loaded)):
+    print(
+        "| | queries | median s | p95 s | max s | p95 / idle median "
+        "| median waiting s | median describing s |"
+    )
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    rows = (
+        ("idle, one client", idle),
+        (f"idle, {args.clients} clients", idle_concurrent),
+        (f"during bulk enrollment, {args.clients} clients", loaded),
+    )
+    for title, timings in rows:
+        values = [t.total for t in timings]
         print(
             f"| {title} | {len(values)} | {statistics.median(values):.2f} | "
             f"{percentile(values, 0.95):.2f} | {max(values):.2f} | "
-            f"{percentile(values, 0.95) / base:.2f} |"
+            f"{percentile(values, 0.95) / base:.2f} | "
+            f"{statistics.median(t.waiting for t in timings):.2f} | "
+            f"{statistics.median(t.describing for t in timings):.2f} |"
         )
+    added = percentile([t.total for t in loaded], 0.95) / percentile(
+        [t.total for t in idle_concurrent], 0.95
+    )
     print(
+        f"\nduring bulk enrollment, p95 over the same clients' p95 on the idle service: "
+        f"{added:.2f}"
         f"\nwhen the last query answered: {queued} enrollments still queued, "
         f"{processing} being described"
     )

@@ -34,7 +34,7 @@ class QueueSettings(BaseSettings):
     queue_name: str = "shapes"
     # Enrollment consumers lower their CPU priority by this much (os.nice), so a query
     # consumer on the same cores is never slowed down by a bulk import.
-    enroll_nice: int = 10
+    enroll_nice: int = 19
     heartbeat_seconds: float = 2.0
     # Per job, in a child process; a job over either fails with a sentence (0: no limit).
     job_time_limit_seconds: float = 600.0
