@@ -43,7 +43,7 @@ def test_within_the_limits_the_descriptor_and_the_previews_come_back():
 def test_a_query_gets_the_same_descriptor_and_its_preview_but_no_thumbnail():
     outcome = describe_limited(
         WOLF, WOLF.name, "smeets2010-shrec", max_faces=10**6, time_limit=120,
-        memory_limit_bytes=4 * GB, thumbnail=False,
+        memory_limit_bytes=4 * GB, with_thumbnail=False,
     )  # fmt: skip
     assert outcome.preview is not None and outcome.thumbnail is None
     described = ShapeDescriptor.from_npz_bytes(outcome.descriptor)

@@ -58,7 +58,7 @@ def _child(
     preset_name: str,
     max_faces: int,
     memory: int,
-    thumbnail_wanted: bool,
+    with_thumbnail: bool,
 ) -> None:
     if memory > 0:
         resource.setrlimit(resource.RLIMIT_AS, (memory, memory))
@@ -69,7 +69,7 @@ def _child(
         preview = thumbnail = None
         try:
             preview = preview_glb(mesh)
-            thumbnail = thumbnail_png(mesh) if thumbnail_wanted else None
+            thumbnail = thumbnail_png(mesh) if with_thumbnail else None
         except Exception:  # the descriptor is what matters; the page shows a placeholder
             log.exception("no preview for %s", filename)
         conn.send(("ok", descriptor.to_npz_bytes(), preview, thumbnail))
@@ -91,10 +91,10 @@ def describe_limited(
     max_faces: int,
     time_limit: float,
     memory_limit_bytes: int,
-    thumbnail: bool = True,
+    with_thumbnail: bool = True,
 ) -> Outcome:
     """Describe ``path`` in a child under the limits (and make its previews: the
-    thumbnail only when ``thumbnail``; a query's is never shown).
+    thumbnail only when ``with_thumbnail``; a query's is never shown).
 
     Raises ``RuntimeError`` when the child died for another reason (a crash
     worth a retry).
@@ -103,7 +103,15 @@ def describe_limited(
     receive, send = context.Pipe(duplex=False)
     child = context.Process(
         target=_child,
-        args=(send, str(path), filename, preset_name, max_faces, memory_limit_bytes, thumbnail),
+        args=(
+            send,
+            str(path),
+            filename,
+            preset_name,
+            max_faces,
+            memory_limit_bytes,
+            with_thumbnail,
+        ),
         daemon=True,
     )
     child.start()

@@ -130,7 +130,7 @@ def make_huey(settings: QueueSettings, queue: Queue = "enroll") -> Huey:
                 max_faces=max_faces,
                 time_limit=time_limit,
                 memory_limit_bytes=memory_limit,
-                thumbnail=queue == "enroll",
+                with_thumbnail=queue == "enroll",
             )
         finally:
             done.set()
