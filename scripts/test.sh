@@ -9,18 +9,26 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install --quiet --upgrade pip
 .venv/bin/python -m pip install --quiet -e ".[test]"
-# The web page's tests drive a real browser: Debian's Chromium (Playwright's own
-# download is not reachable from every machine). Installed once, as root or via sudo.
-if ! command -v chromium >/dev/null && ! command -v chromium-browser >/dev/null; then
-    if command -v apt-get >/dev/null; then
-        sudo_cmd=""
-        if [ "$(id -u)" != 0 ] && command -v sudo >/dev/null; then sudo_cmd="sudo"; fi
-        $sudo_cmd apt-get update -qq && $sudo_cmd apt-get install -y -qq chromium >/dev/null \
-            || echo "could not install chromium: the web page's tests will be skipped" >&2
-    else
-        echo "no chromium and no apt-get: the web page's tests will be skipped" >&2
+# Servers some tests run for real, from Debian's packages (Playwright's own browser
+# download is not reachable from every machine): Chromium for the web page's tests,
+# PostgreSQL and Redis for the scale-out tests. Installed once, as root or via sudo.
+apt_install() {  # apt_install PACKAGE...
+    if ! command -v apt-get >/dev/null; then
+        echo "no apt-get to install $*: the tests that need it will fail or be skipped" >&2
+        return
     fi
+    local sudo_cmd=""
+    if [ "$(id -u)" != 0 ] && command -v sudo >/dev/null; then sudo_cmd="sudo"; fi
+    $sudo_cmd apt-get update -qq && $sudo_cmd apt-get install -y -qq "$@" >/dev/null \
+        || echo "could not install $*: the tests that need it will fail or be skipped" >&2
+}
+missing=()
+if ! command -v chromium >/dev/null && ! command -v chromium-browser >/dev/null; then
+    missing+=(chromium)
 fi
+if ! compgen -G "/usr/lib/postgresql/*/bin/pg_ctl" >/dev/null; then missing+=(postgresql); fi
+if ! command -v redis-server >/dev/null; then missing+=(redis-server); fi
+if [ ${#missing[@]} -gt 0 ]; then apt_install "${missing[@]}"; fi
 .venv/bin/python -m ruff check .
 .venv/bin/python -m ruff format --check .
 .venv/bin/python -m mypy
