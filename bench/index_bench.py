@@ -2,16 +2,20 @@
 
     python bench/index_bench.py                       # TOSCA + 1k/10k/100k synthetic
     python bench/index_bench.py --sizes 1000 10000    # fewer sizes
+    python bench/index_bench.py --tosca-presets --sizes 1000000 --queries 100
 
 * TOSCA: every mesh is a query against the other 82 (leave-one-out), under the
-  default preset (D2, product rule) and under the TOSCA preset (D1, sum rule).
+  default preset and any other ``--tosca-presets``.
 * Synthetic: descriptors shaped like real ones (below), N enrolled, 200 fresh
   queries from the same classes.
 
 The reference ranking is the exhaustive one computed with ``worker.engine.compare``
 alone (``gallery_sigma`` over the whole gallery, eq. 8/9, ``fuse``), not with
 the index's code. Latency is the search step alone (``GalleryIndex.search``),
-one query at a time, after one warm-up query.
+one query at a time, after one warm-up query. "index MB" is the growth of the
+process's resident memory while the index was built (vectors, transformed rows,
+faiss); "build s" adds every shape and fits once, "refit s" is one more refit
+(what searches wait for after 5 % churn).
 
 Synthetic descriptors: every modality is modelled in log space from the real
 TOSCA descriptors. A synthetic class centre is the real mean plus a random
@@ -37,7 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from app.gallery.index import GalleryIndex, SearchStats  # noqa: E402
 from bench._tosca import tosca_descriptors, tosca_labels  # noqa: E402
 from worker.engine.compare import dissimilarity, fuse, gallery_sigma  # noqa: E402
-from worker.engine.presets import MODALITIES, get_preset  # noqa: E402
+from worker.engine.presets import DEFAULT_PRESET, MODALITIES, get_preset  # noqa: E402
 
 K = 10
 
@@ -61,15 +65,25 @@ def build(preset, gallery: dict, ids: np.ndarray) -> GalleryIndex:
     return index
 
 
+def resident_mb() -> float:
+    """The process's resident memory now (Linux)."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
 def measure(
     preset, gallery: dict, queries: list[dict], exclude: list[tuple[int, ...]] | None = None
 ):
     """recall@K, latency percentiles (ms), mean candidates and certified fraction."""
     n = len(next(iter(gallery.values())))
     ids = np.arange(n, dtype=np.int64)
+    before = resident_mb()
     started = time.perf_counter()
     index = build(preset, gallery, ids)
     build_seconds = time.perf_counter() - started
+    index_mb = resident_mb() - before
     started = time.perf_counter()
     index.refit()  # what a refit after 5 % churn costs (searches wait for it)
     refit_seconds = time.perf_counter() - started
@@ -115,6 +129,7 @@ def measure(
         "certified": certified / len(queries),
         "build": build_seconds,
         "refit": refit_seconds,
+        "index_mb": index_mb,
     }
 
 
@@ -199,8 +214,8 @@ def synthetic_rows(preset_name: str, sizes: list[int], n_queries: int, seed: int
 
 HEADER = (
     "| data | enrolled | recall@10 | search p50 ms | p95 ms | max ms | "
-    "faiss candidates | DDT scored exactly | certified exact | build s | refit s |\n"
-    "|---|---|---|---|---|---|---|---|---|---|---|"
+    "faiss candidates | scored exactly | certified exact | build s | refit s | index MB |\n"
+    "|---|---|---|---|---|---|---|---|---|---|---|---|"
 )
 
 
@@ -208,7 +223,8 @@ def _format(row: dict) -> str:
     return (
         f"| {row['data']} | {row['n']:,} | {row['recall']:.4f} | {row['p50']:.2f} | "
         f"{row['p95']:.2f} | {row['max']:.2f} | {row['candidates']:.0f} | {row['scored']:.0f} | "
-        f"{row['certified']:.0%} | {row['build']:.1f} | {row['refit']:.1f} |"
+        f"{row['certified']:.0%} | {row['build']:.1f} | {row['refit']:.1f} | "
+        f"{row['index_mb']:.0f} |"
     )
 
 
@@ -217,8 +233,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--sizes", type=int, nargs="*", default=[1000, 10_000, 100_000])
     parser.add_argument("--queries", type=int, default=200)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--preset", default="smeets2010-shrec")
-    parser.add_argument("--tosca-presets", nargs="*", default=["smeets2010-shrec"])
+    parser.add_argument("--preset", default=DEFAULT_PRESET)
+    parser.add_argument("--tosca-presets", nargs="*", default=[DEFAULT_PRESET])
     args = parser.parse_args(argv)
     print(HEADER, flush=True)
     for name in args.tosca_presets:

@@ -3,6 +3,15 @@
 D2: ``t(x) = P^T (x / sigma_fit - mu)``; D1: ``t(x) = P^T (log max(x, floor) - mu)``
 (eq. 8's terms are ``2 tanh(|log a - log b| / 2)``). ``P`` is orthonormal, so a
 projected D2 distance never exceeds the whitened one: it is a lower bound.
+
+faiss index: an exact scan (``IndexFlatL2``) below ``IVF_MIN_SHAPES``; above, an
+inverted file (``IndexIVFFlat``: k-means cells, the query's ``IVF_PROBES`` nearest
+cells scanned), trained on the transformed gallery at every refit. IVF rather than
+HNSW: it supports deletion (a gallery shrinks) and builds in seconds, not minutes,
+at a million shapes (``bench/index_bench.py``, ``docs/benchmarks.md``). Its
+candidate distances are exact L2 of the transformed vectors, but a shape in an
+unprobed cell is missed, so certificates (:mod:`.index`) hold only for what was
+scanned; recall@10 at a million shapes is measured instead.
 """
 
 from __future__ import annotations
@@ -15,6 +24,11 @@ import numpy as np
 MAX_DIMS = 64  # columns of the candidate projection per modality
 FIT_SAMPLE = 5_000  # rows used to fit a projection (any orthonormal P keeps the bound)
 _CHUNK = 8192  # rows transformed at once: bounded temporary memory
+IVF_MIN_SHAPES = 200_000  # from here on an inverted file beats the exact scan
+IVF_SHAPES_PER_CELL = 4_000  # cells = gallery size / this (256 at a million shapes)
+IVF_PROBES = 16  # cells scanned per search
+IVF_TRAIN_PER_CELL = 64  # k-means training rows per cell
+IVF_TRAIN_ITERATIONS = 10
 
 
 @dataclass
@@ -39,8 +53,11 @@ class CandidateTransform:
     index: faiss.Index = field(repr=False)
 
     @classmethod
-    def fit(cls, rows: np.ndarray, *, log: bool, max_dims: int = MAX_DIMS) -> CandidateTransform:
-        """Fit on ``rows`` ((n, M) float, a sample of the gallery); the faiss index is empty."""
+    def fit(
+        cls, rows: np.ndarray, *, log: bool, max_dims: int = MAX_DIMS, gallery_size: int = 0
+    ) -> CandidateTransform:
+        """Fit on ``rows`` ((n, M) float, a sample of the gallery); the faiss index is empty
+        (an inverted file, untrained, when ``gallery_size`` reaches ``IVF_MIN_SHAPES``)."""
         dim = rows.shape[1]
         if not log:
             floor = np.zeros(dim)
@@ -68,7 +85,7 @@ class CandidateTransform:
                 )
                 basis = q[:, :r]
             projection = basis
-        index = faiss.IndexIDMap2(faiss.IndexFlatL2(projection.shape[1]))
+        index = _empty_index(projection.shape[1], gallery_size)
         return cls(log=log, mu=mu, scale=scale, floor=floor, projection=projection, index=index)
 
     def transform(self, x: np.ndarray) -> np.ndarray:
@@ -78,13 +95,41 @@ class CandidateTransform:
         return np.ascontiguousarray((t - self.mu) @ self.projection, dtype=np.float32)
 
     def transform_into(self, out: np.ndarray, rows: np.ndarray, ids: np.ndarray) -> None:
-        """Transform every row into ``out[:len(rows)]`` and add them to faiss under ``ids``."""
-        if not len(rows):
+        """Transform every row into ``out[:len(rows)]`` and add them to faiss under ``ids``
+        (training an inverted file on them first)."""
+        n = len(rows)
+        if not n:
             return
-        for start in range(0, len(rows), _CHUNK):
-            stop = min(start + _CHUNK, len(rows))
+        for start in range(0, n, _CHUNK):
+            stop = min(start + _CHUNK, n)
             out[start:stop] = self.transform(rows[start:stop])
-        self.index.add_with_ids(out[: len(rows)], ids[: len(rows)])
+        if not self.index.is_trained:
+            cells = faiss.extract_index_ivf(self.index).nlist
+            size = min(n, IVF_TRAIN_PER_CELL * cells)
+            sample = np.sort(np.random.default_rng(0).choice(n, size, replace=False))
+            self.index.train(out[sample])
+        self.index.add_with_ids(out[:n], ids[:n])
+
+
+def _empty_index(dim: int, gallery_size: int) -> faiss.Index:
+    """An exact scan for ordinary galleries; an (untrained) inverted file for large ones."""
+    if gallery_size < IVF_MIN_SHAPES:
+        return faiss.IndexIDMap2(faiss.IndexFlatL2(dim))
+    cells = max(1, gallery_size // IVF_SHAPES_PER_CELL)
+    index = faiss.IndexIVFFlat(faiss.IndexFlatL2(dim), dim, cells)
+    index.cp.niter = IVF_TRAIN_ITERATIONS
+    # Deletions look ids up in a hash table instead of scanning every cell.
+    # attr-defined: faiss's stubs lack the DirectMap enum its module has.
+    index.set_direct_map_type(faiss.DirectMap.Hashtable)  # type: ignore[attr-defined]
+    return searchable(index)
+
+
+def searchable(index: faiss.Index) -> faiss.Index:
+    """Set the search parameters a faiss file does not keep (an inverted file's probes)."""
+    ivf = faiss.try_extract_index_ivf(index)
+    if ivf is not None:
+        ivf.nprobe = IVF_PROBES
+    return index
 
 
 def principal_directions(centred: np.ndarray, r: int, oversample: int = 16) -> np.ndarray:

@@ -228,6 +228,7 @@ class GalleryIndex:
                     x if sample is None else x[sample],
                     log=self.preset.dissimilarity != "D2",
                     max_dims=self.max_dims,
+                    gallery_size=n,
                 )
                 reduced = np.empty((self.store.capacity, fit.projection.shape[1]), np.float32)
                 fit.transform_into(reduced, x, self.store.ids)

@@ -18,7 +18,7 @@ import numpy as np
 
 from worker.engine.presets import Preset
 
-from .candidates import CandidateTransform
+from .candidates import CandidateTransform, searchable
 from .index import GalleryIndex
 from .vectors import ids_fingerprint
 
@@ -121,7 +121,7 @@ def _read(directory: Path, preset: Preset, **options: Any) -> GalleryIndex:
         reduced = arrays[f"{m}.reduced"].astype(np.float32)
         index.reduced[m] = np.empty((store.capacity, reduced.shape[1]), np.float32)
         index.reduced[m][:n] = reduced
-        faiss_index = faiss.read_index(str(directory / f"{m}.faiss"))
+        faiss_index = searchable(faiss.read_index(str(directory / f"{m}.faiss")))
         if faiss_index.ntotal != n:
             raise ValueError(f"faiss index of {m} has {faiss_index.ntotal} rows, not {n}")
         fits[m] = CandidateTransform(

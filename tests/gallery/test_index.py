@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import faiss
 import numpy as np
 import pytest
 
@@ -14,10 +15,10 @@ SHREC = get_preset("smeets2010-shrec")  # D2, product rule
 TOSCA = get_preset("smeets2010-tosca")  # D1, sum rule
 
 
-def _gallery(n: int, seed: int = 0) -> dict[str, np.ndarray]:
+def _gallery(n: int, seed: int = 0, preset=SHREC) -> dict[str, np.ndarray]:
     """Positive descriptors with class structure, shaped like the real ones."""
     rng = np.random.default_rng(seed)
-    dims = SHREC.modality_sizes()
+    dims = preset.modality_sizes()
     classes = rng.integers(0, max(n // 8, 1), size=n)
     out = {}
     for m, d in dims.items():
@@ -119,3 +120,42 @@ def test_empty_and_tiny_galleries():
     (only,) = index.search(query, 5)
     assert only.id == 42 and only.score == 0.0
     assert index.search(query, 5, exclude=(42,)) == []
+
+
+def test_large_galleries_use_an_inverted_file_that_finds_deletes_and_reloads(tmp_path, monkeypatch):
+    from app.gallery import candidates
+
+    # A "large" gallery of 2,000 shapes: 20 cells, 8 probed per search.
+    monkeypatch.setattr(candidates, "IVF_MIN_SHAPES", 1_000)
+    monkeypatch.setattr(candidates, "IVF_SHAPES_PER_CELL", 100)
+    monkeypatch.setattr(candidates, "IVF_PROBES", 8)
+    preset = get_preset("smeets2010-surface")  # the default: D1, product rule
+    gallery = _gallery(2_000, preset=preset)
+    index = _index(preset, gallery, candidates=200)
+    ivf = faiss.try_extract_index_ivf(index.fits["gdm"].index)
+    assert ivf is not None and ivf.nlist == 20 and ivf.nprobe == 8
+
+    rng = np.random.default_rng(2)
+    queries = []
+    for i in rng.choice(2_000, size=20, replace=False):
+        noise = {m: np.exp(0.05 * rng.normal(size=gallery[m].shape[1])) for m in MODALITIES}
+        queries.append({m: gallery[m][i] * noise[m] for m in MODALITIES})
+    hits = 0
+    for query in queries:
+        expected, fused = _exhaustive(preset, gallery, query, 10)
+        found = index.search(query, 10)
+        hits += len({m.id for m in found} & set(expected))
+        for match in found:  # whatever is returned carries its exact fused score
+            assert match.score == pytest.approx(fused[match.id], rel=1e-9)
+    assert hits / (10 * len(queries)) >= 0.95
+
+    removed = [m.id for m in index.search(queries[0], 5)]
+    for i in removed:
+        assert index.remove(i)
+    assert not {m.id for m in index.search(queries[0], 10)} & set(removed)
+
+    save_index(index, tmp_path / "idx")
+    loaded = load_index(tmp_path / "idx", preset)
+    assert faiss.try_extract_index_ivf(loaded.fits["gdm"].index).nprobe == 8
+    for query in queries[:5]:
+        assert [m.id for m in loaded.search(query, 10)] == [m.id for m in index.search(query, 10)]
