@@ -81,6 +81,11 @@ class Settings(QueueSettings):
         default=0.05, gt=0, description="refit sigma and projections after this fraction changed"
     )
     index_save_interval_seconds: float = Field(default=30.0, gt=0)
+    index_dir: Path | None = Field(
+        default=None,
+        description="where this API process saves its index; default <data_dir>/index "
+        "(API replicas sharing a data directory each need their own)",
+    )
 
     @property
     def sqlalchemy_url(self) -> str:
@@ -95,8 +100,8 @@ class Settings(QueueSettings):
         return self.data_dir / "tmp"
 
     @property
-    def index_dir(self) -> Path:
-        return self.data_dir / "index"
+    def index_directory(self) -> Path:
+        return self.index_dir or self.data_dir / "index"
 
 
 @lru_cache

@@ -86,7 +86,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             metrics=metrics,
             gallery=Gallery(
                 preset,
-                settings.index_dir / f"{preset.name}-v{preset.version}",
+                settings.index_directory / f"{preset.name}-v{preset.version}",
                 refit_fraction=settings.index_refit_fraction,
                 metrics=metrics,
             ),

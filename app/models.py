@@ -127,3 +127,17 @@ class Preview(Base):
     png: Mapped[bytes] = mapped_column(LargeBinary)
 
     mesh: Mapped[Mesh] = relationship(back_populates="preview")
+
+
+class GalleryChange(Base):
+    """One shape entering or leaving the gallery, in commit order: every API process
+    follows this log to keep its in-memory index equal to the database
+    (``app/gallery/changes.py``)."""
+
+    __tablename__ = "gallery_changes"
+    __table_args__ = {"sqlite_autoincrement": True}  # sequence numbers are never reused
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    mesh_id: Mapped[int]  # no foreign key: a removal outlives its mesh
+    action: Mapped[str] = mapped_column(String(8))  # "add" or "remove"
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)

@@ -3,7 +3,8 @@
 The collector adds described shapes, the mesh service removes deleted ones, the
 search service searches; all of them through :class:`Gallery`, which also loads
 the index and reconciles it with the database (the source of truth) at start,
-saves it, and publishes its size.
+follows the database's change log after that (what other API processes on the
+same database changed, :mod:`.changes`), saves it, and publishes its size.
 """
 
 from __future__ import annotations
@@ -24,11 +25,14 @@ from worker.engine.presets import MODALITIES, Preset
 from ..errors import UnavailableError
 from ..meshes import repository as meshes
 from ..metrics import Metrics
+from . import changes
 from .calibration import GalleryCalibration, fit_calibration
 from .index import GalleryIndex, Match, SearchStats
 from .persistence import load_index, save_index
 
 log = logging.getLogger("shapes.gallery")
+
+FOLLOW_BATCH = 1000  # changes applied per round of following the log
 
 
 def descriptor_vectors(descriptor: ShapeDescriptor) -> dict[str, np.ndarray]:
@@ -68,6 +72,8 @@ class Gallery:
         self._version = 0
         self._calibration: GalleryCalibration | None = None
         self._calibration_lock = threading.Lock()
+        # The position in the change log this index reflects (see follow).
+        self._followed = 0
 
     # ------------------------------------------------------------- state
     @property
@@ -207,6 +213,9 @@ class Gallery:
         preset, directory = self.preset, self.directory
         started = time.perf_counter()
         with read_sessions() as session:
+            # Read first: a change committed while loading is applied again by follow
+            # (adds and removes are idempotent), never missed.
+            followed = changes.latest(session)
             db_ids = meshes.descriptor_mesh_ids(session, preset.name, preset.version)
             try:
                 index = load_index(directory, preset, refit_fraction=self.refit_fraction)
@@ -233,8 +242,36 @@ class Gallery:
         )
         with self._lock:
             self._index = index
+            self._followed = followed
             self._publish_size()
         self.save()
+
+    def follow(self, read_sessions: sessionmaker[Session]) -> int:
+        """Apply the change log's new entries to the index: shapes that another API
+        process on the same database stored or deleted (this process's own are in
+        the index already). Returns how many entries were read."""
+        if self._index is None:
+            return 0
+        with read_sessions() as session:
+            log_rows = changes.since(session, self._followed, FOLLOW_BATCH)
+            if not log_rows:
+                return 0
+            added = {row.mesh_id for row in log_rows if row.action == "add"} - set(
+                self._index.store.pos
+            )
+            p = self.preset
+            stored = dict(_decoded(meshes.iter_descriptors(session, p.name, p.version, added)))
+        with self._lock:
+            for row in log_rows:
+                if row.action == "add" and row.mesh_id in stored:
+                    self._index.add(row.mesh_id, stored.pop(row.mesh_id))
+                    self._version += 1
+                elif row.action == "remove" and self._index.remove(row.mesh_id):
+                    self._version += 1
+                # An add whose descriptor is gone was deleted since: its removal follows.
+            self._followed = log_rows[-1].id
+            self._publish_size()
+        return len(log_rows)
 
     def _reconcile(self, index: GalleryIndex, db_ids: set[int], session: Session) -> None:
         have = {int(i) for i in index.ids()}

@@ -15,6 +15,12 @@ heartbeats of unfinished jobs from the queue's key-value store and
 Results are read without removing them and deleted only after the commit, so
 a crash in between makes the collector store the same result again (at least
 once, idempotent), never lose it.
+
+Several API processes on one database each run a collector. They are safe
+together: a round locks the unfinished jobs it reads (``FOR UPDATE SKIP LOCKED``
+on PostgreSQL; SQLite has one writer anyway), so each result is stored by one of
+them, and every stored descriptor and deletion is logged (:mod:`app.gallery.changes`)
+for the others' indexes, which each collector applies after its round.
 """
 
 from __future__ import annotations
@@ -32,6 +38,7 @@ from worker.engine.pipeline import ShapeDescriptor
 from worker.jobs.queue import descriptor_npz, preview_bytes
 
 from ..db import unit_of_work
+from ..gallery import changes
 from ..meshes import repository as meshes
 from ..models import Descriptor, Job, JobStatus, MeshStatus, utcnow
 from ..state import AppState
@@ -107,6 +114,7 @@ class JobCollector:
         while not self._stop.is_set():
             try:
                 self.run_once()
+                self.state.gallery.follow(self.state.read_sessions)
                 self._maybe_save()
             except SQLAlchemyError as exc:  # e.g. a mesh deleted meanwhile: next round
                 log.warning("collector round rolled back: %s", exc)
@@ -130,7 +138,9 @@ class JobCollector:
         changed = 0
         with state.gallery.changing():
             with unit_of_work(state.sessions) as session:
-                unfinished = jobs.unfinished(session, limit=BATCH)
+                # Locked (PostgreSQL): the collectors of other API processes skip
+                # these jobs until this round commits, so no result is stored twice.
+                unfinished = jobs.unfinished(session, limit=BATCH, lock=True)
                 state.metrics.jobs_unfinished.set(len(unfinished))
                 if not unfinished:
                     return 0
@@ -183,6 +193,7 @@ class JobCollector:
             _fail(job, "preset_mismatch", "The worker runs another version of the method.")
             state.metrics.jobs.labels("crashed").inc()
             return None
+        changes.record(session, mesh.id, "add")
         meshes.upsert_descriptor(
             session,
             Descriptor(

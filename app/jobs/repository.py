@@ -18,7 +18,10 @@ def add(session: Session, job: Job) -> Job:
     return job
 
 
-def unfinished(session: Session, limit: int | None = None) -> list[Job]:
+def unfinished(session: Session, limit: int | None = None, *, lock: bool = False) -> list[Job]:
+    """Queued and processing jobs, oldest first; with ``lock``, locked until the
+    transaction ends, skipping those another transaction holds (PostgreSQL;
+    SQLite, whose writers are serialized anyway, ignores the clause)."""
     query = (
         select(Job)
         .where(Job.status.in_(UNFINISHED_JOB))
@@ -27,4 +30,6 @@ def unfinished(session: Session, limit: int | None = None) -> list[Job]:
     )
     if limit is not None:
         query = query.limit(limit)
+    if lock:
+        query = query.with_for_update(skip_locked=True, of=Job)
     return list(session.scalars(query))

@@ -14,6 +14,7 @@ from worker.engine.mesh_io import mesh_format
 
 from ..db import after_commit
 from ..errors import ConflictError, InvalidInputError, NotFoundError
+from ..gallery import changes
 from ..jobs import repository as jobs
 from ..jobs.service import enqueue_job, new_job
 from ..models import Descriptor, Mesh, MeshStatus, Preview
@@ -156,6 +157,7 @@ def delete(session: Session, state: AppState, mesh_id: int) -> None:
     task_ids = [j.task_id for j in mesh.jobs if j.status in ("queued", "processing")]
     storage_path = mesh.storage_path
     meshes.delete(session, mesh)
+    changes.record(session, mesh_id, "remove")
 
     def _after() -> None:
         # Waits for a collector round that may have just stored this mesh's

@@ -20,7 +20,7 @@ from .servers import Postgres, Redis
 
 pytestmark = [pytest.mark.scaleout, pytest.mark.service, pytest.mark.slow]
 
-TABLES = {"meshes", "descriptors", "jobs", "previews"}
+TABLES = {"meshes", "descriptors", "jobs", "previews", "gallery_changes"}
 
 
 @pytest.fixture(scope="module")
@@ -49,13 +49,18 @@ def _tables(url: str) -> set[str]:
         engine.dispose()
 
 
-def test_the_migrations_upgrade_and_downgrade_on_postgresql(postgres: Postgres):
-    upgrade_head(postgres.url)
-    assert TABLES <= _tables(postgres.url)
-    command.downgrade(alembic_config(postgres.url), "base")
-    assert not TABLES & _tables(postgres.url)
-    upgrade_head(postgres.url)
-    assert TABLES <= _tables(postgres.url)
+@pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
+def test_the_migrations_upgrade_and_downgrade(backend: str, request, tmp_path):
+    if backend == "sqlite":
+        url = f"sqlite:///{tmp_path / 'shapes.sqlite3'}"
+    else:
+        url = request.getfixturevalue("postgres").url
+    upgrade_head(url)
+    assert TABLES <= _tables(url)
+    command.downgrade(alembic_config(url), "base")
+    assert not TABLES & _tables(url)
+    upgrade_head(url)
+    assert TABLES <= _tables(url)
 
 
 def _descriptor_rows(url: str) -> int:
@@ -125,3 +130,45 @@ def test_the_service_on_postgresql_and_redis_survives_kill_9(
         assert _descriptor_rows(postgres.url) == len(ids) - 1
     finally:
         service.close()
+
+
+def _index_size(service: Service) -> int:
+    check = service.client.get("/ready").json()["checks"]["index"]
+    return int(check.removeprefix("ok (").split()[0])
+
+
+def _wait_index_size(service: Service, size: int) -> None:
+    deadline = time.monotonic() + TIMEOUT
+    while _index_size(service) != size:
+        assert time.monotonic() < deadline, f"index stuck at {_index_size(service)}, not {size}"
+        time.sleep(0.1)
+
+
+def test_two_api_replicas_on_one_database_serve_the_same_gallery(
+    postgres: Postgres, redis_server: Redis, tmp_path
+):
+    upgrade_head(postgres.url)
+    shared = {"SHAPES_DATABASE_URL": postgres.url, "SHAPES_REDIS_URL": redis_server.url}
+    a, b = Service(tmp_path / "data"), Service(tmp_path / "data")  # uploads on one volume
+    a.env.update(shared, SHAPES_INDEX_DIR=str(tmp_path / "index-a"))
+    b.env.update(shared, SHAPES_INDEX_DIR=str(tmp_path / "index-b"))
+    try:
+        a.start_worker()
+        a.start_worker("query")
+        a.start_api()
+        b.start_api()
+        start = _descriptor_rows(postgres.url)  # what the other tests left
+        ids = [a.upload(n, n[:-1]).json()["id"] for n in ("centaur0", "centaur1", "gorilla1")]
+        assert all(body["status"] == "ready" for body in _wait_all(a, ids).values())
+        _wait_index_size(b, start + 3)  # stored by A's collector, followed by B
+        matches = b.query("centaur2", k=2).json()["matches"]
+        assert {m["mesh_id"] for m in matches} == set(ids[:2])
+
+        assert b.client.delete(f"/meshes/{ids[0]}").status_code == 204
+        _wait_index_size(a, start + 2)
+        assert ids[0] not in [m["mesh_id"] for m in a.query("centaur2", k=5).json()["matches"]]
+        rows = _descriptor_rows(postgres.url)
+        assert _index_size(a) == _index_size(b) == rows == start + 2
+    finally:
+        b.close()
+        a.close()
