@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 from pathlib import Path
+from typing import Literal
 
 from pydantic import Field, SecretStr
 
@@ -19,9 +20,12 @@ class Settings(QueueSettings):
     ``heartbeat_seconds``) so the API and the workers agree on the queue.
     """
 
-    # Storage
-    database_url: str | None = Field(
-        default=None, description="SQLAlchemy URL; default sqlite:///<data_dir>/shapes.sqlite3"
+    # Storage (database_url is the queue settings': workers may need it too)
+    uploads: Literal["directory", "database"] = Field(
+        default="directory",
+        description="where uploaded files are kept: <data_dir>/uploads, which every worker "
+        "must reach (the embedded default), or the database, so that workers on other hosts "
+        "need only the database and Redis URLs",
     )
 
     # Serving (python -m app)

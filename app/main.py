@@ -32,7 +32,7 @@ from .search.recent import Recent
 from .search.router import document_limits
 from .search.router import router as search_router
 from .state import AppState
-from .storage import UploadStore
+from .storage import DatabaseStore, DirectoryStore
 from .system.router import router as system_router
 
 log = logging.getLogger("shapes")
@@ -82,7 +82,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             sessions=make_session_factory(engine),
             read_sessions=make_session_factory(engine, read_only=True),
             queue=DescriptorQueue(settings),
-            store=UploadStore(settings.uploads_dir),
+            store=(
+                DatabaseStore()
+                if settings.uploads == "database"
+                else DirectoryStore(settings.uploads_dir)
+            ),
             metrics=metrics,
             gallery=Gallery(
                 preset,

@@ -141,3 +141,13 @@ class GalleryChange(Base):
     mesh_id: Mapped[int]  # no foreign key: a removal outlives its mesh
     action: Mapped[str] = mapped_column(String(8))  # "add" or "remove"
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Upload(Base):
+    """An uploaded file's bytes, when the service keeps uploads in the database
+    (``SHAPES_UPLOADS=database``; :class:`app.storage.DatabaseStore`)."""
+
+    __tablename__ = "uploads"
+
+    sha256: Mapped[str] = mapped_column(String(64), primary_key=True)
+    data: Mapped[bytes] = mapped_column(LargeBinary)

@@ -12,7 +12,13 @@ from huey.utils import Error
 
 from worker.engine.errors import MeshError
 from worker.engine.pipeline import ShapeDescriptor
-from worker.jobs.queue import descriptor_npz, heartbeat_key, make_huey, preview_bytes
+from worker.jobs.queue import (
+    descriptor_npz,
+    heartbeat_key,
+    make_huey,
+    preview_bytes,
+    to_base64,
+)
 
 from .config import Settings
 from .errors import UnavailableError
@@ -43,17 +49,31 @@ class DescriptorQueue:
         except ValueError:
             return str(path.resolve())
 
-    def _enqueue(self, huey: Huey, task_id: str, path: Path, filename: str, preset: str) -> None:
+    def _enqueue(
+        self,
+        huey: Huey,
+        task_id: str,
+        source: str | Path,
+        filename: str,
+        preset: str,
+        data: str | None = None,
+    ) -> None:
         huey.delete(heartbeat_key(task_id))
+        if isinstance(source, Path):
+            source = self.task_path(source)
         huey.enqueue(
             huey.describe_upload.s(
-                self.task_path(path), filename, preset, self.settings.max_faces, id=task_id
+                source, filename, preset, self.settings.max_faces, data, id=task_id
             )
         )
 
-    def enqueue_describe(self, task_id: str, path: Path, filename: str, preset: str) -> None:
-        """Queue the description of an enrolled mesh (the collector stores the result)."""
-        self._enqueue(self.huey, task_id, path, filename, preset)
+    def enqueue_describe(
+        self, task_id: str, source: str | Path, filename: str, preset: str
+    ) -> None:
+        """Queue the description of an enrolled mesh, whose file is at ``source`` (a
+        path, or a database reference: :mod:`worker.jobs.sources`); the collector
+        stores the result."""
+        self._enqueue(self.huey, task_id, source, filename, preset)
 
     def describe_now(
         self, task_id: str, path: Path, filename: str, preset: str
@@ -69,7 +89,10 @@ class DescriptorQueue:
             No query worker answered in time, or the task crashed on every try.
         """
         huey = self.query_huey
-        self._enqueue(huey, task_id, path, filename, preset)
+        # Under database storage a worker may be on another host: the query's bytes
+        # travel with the task (queries are never stored).
+        data = to_base64(path.read_bytes()) if self.settings.uploads == "database" else None
+        self._enqueue(huey, task_id, path, filename, preset, data)
         try:
             result = huey.result(
                 task_id,

@@ -30,7 +30,7 @@ def enqueue_job(state: AppState, job: Job) -> None:
     mesh = job.mesh
     state.queue.enqueue_describe(
         job.task_id,
-        state.store.path(mesh.storage_path),
+        state.store.task_source(mesh.storage_path),
         mesh.filename,
         job.preset,
     )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from typing import Annotated, Any
+from urllib.parse import quote
 
 from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import FileResponse
@@ -212,6 +213,14 @@ def get_mesh(mesh_id: RowId, session: SessionDep, state: StateDep) -> MeshOut:
     return mesh_out(mesh, service.descriptor_of(session, state, mesh))
 
 
+def _attachment(filename: str) -> str:
+    """The Content-Disposition of a download, as Starlette's FileResponse writes it."""
+    quoted = quote(filename)
+    if quoted != filename:
+        return f"attachment; filename*=utf-8''{quoted}"
+    return f'attachment; filename="{filename}"'
+
+
 @router.get(
     "/{mesh_id}/file",
     operation_id="get_mesh_file",
@@ -219,9 +228,15 @@ def get_mesh(mesh_id: RowId, session: SessionDep, state: StateDep) -> MeshOut:
     response_class=FileResponse,
     responses=ERRORS,
 )
-def get_file(mesh_id: RowId, session: SessionDep, state: StateDep) -> FileResponse:
-    mesh, path = service.file_path(session, state, mesh_id)
-    return FileResponse(path, media_type="application/octet-stream", filename=mesh.filename)
+def get_file(mesh_id: RowId, session: SessionDep, state: StateDep) -> Response:
+    mesh, file = service.original_file(session, state, mesh_id)
+    if isinstance(file, bytes):  # kept in the database
+        return Response(
+            file,
+            media_type="application/octet-stream",
+            headers={"Content-Disposition": _attachment(mesh.filename)},
+        )
+    return FileResponse(file, media_type="application/octet-stream", filename=mesh.filename)
 
 
 @router.get(

@@ -74,7 +74,7 @@ def enroll(
     if existing is not None:
         _same_format(existing, upload)
         return existing, False
-    relative = state.store.put(upload.path, upload.sha256)
+    reference = state.store.put(session, upload)
     mesh = Mesh(
         sha256=upload.sha256,
         name=name,
@@ -82,7 +82,7 @@ def enroll(
         meta=meta,
         filename=upload.filename,
         size_bytes=upload.size,
-        storage_path=relative,
+        storage_path=reference,
         status=MeshStatus.queued.value,
     )
     try:
@@ -118,14 +118,15 @@ def get(session: Session, mesh_id: int) -> Mesh:
     return mesh
 
 
-def file_path(session: Session, state: AppState, mesh_id: int) -> tuple[Mesh, Path]:
+def original_file(session: Session, state: AppState, mesh_id: int) -> tuple[Mesh, Path | bytes]:
+    """The mesh and its uploaded file (a local path, or the bytes from the database)."""
     mesh = get(session, mesh_id)
-    path = state.store.path(mesh.storage_path)
-    if not path.is_file():
+    file = state.store.read(session, mesh.storage_path)
+    if file is None:
         raise NotFoundError(
             f"The file of mesh {mesh_id} is missing from storage.", code="file_missing"
         )
-    return mesh, path
+    return mesh, file
 
 
 def preview(session: Session, mesh_id: int) -> Preview:
@@ -155,7 +156,7 @@ def delete(session: Session, state: AppState, mesh_id: int) -> None:
     """Delete a mesh, its descriptors and jobs; it leaves the index at once (after commit)."""
     mesh = get(session, mesh_id)
     task_ids = [j.task_id for j in mesh.jobs if j.status in ("queued", "processing")]
-    storage_path = mesh.storage_path
+    state.store.remove(session, mesh.storage_path)
     meshes.delete(session, mesh)
     changes.record(session, mesh_id, "remove")
 
@@ -165,7 +166,6 @@ def delete(session: Session, state: AppState, mesh_id: int) -> None:
         state.gallery.remove(mesh_id)
         for task_id in task_ids:
             state.queue.cancel(task_id)
-        state.store.remove(storage_path)
 
     after_commit(session, _after)
 

@@ -15,12 +15,12 @@ from sqlalchemy import create_engine, inspect, text
 
 from app.migrations import alembic_config, upgrade_head
 
-from .conftest import TIMEOUT, Service
+from .conftest import TIMEOUT, TOSCA, Service
 from .servers import Postgres, Redis
 
 pytestmark = [pytest.mark.scaleout, pytest.mark.service, pytest.mark.slow]
 
-TABLES = {"meshes", "descriptors", "jobs", "previews", "gallery_changes"}
+TABLES = {"meshes", "descriptors", "jobs", "previews", "gallery_changes", "uploads"}
 
 
 @pytest.fixture(scope="module")
@@ -144,31 +144,44 @@ def _wait_index_size(service: Service, size: int) -> None:
         time.sleep(0.1)
 
 
-def test_two_api_replicas_on_one_database_serve_the_same_gallery(
+def test_two_api_replicas_and_two_workers_share_nothing_but_the_servers(
     postgres: Postgres, redis_server: Redis, tmp_path
 ):
+    """Every process has its own data directory: uploads live in the database, and a
+    shape enrolled through one replica is searched, downloaded and deleted through
+    the other."""
     upgrade_head(postgres.url)
-    shared = {"SHAPES_DATABASE_URL": postgres.url, "SHAPES_REDIS_URL": redis_server.url}
-    a, b = Service(tmp_path / "data"), Service(tmp_path / "data")  # uploads on one volume
-    a.env.update(shared, SHAPES_INDEX_DIR=str(tmp_path / "index-a"))
-    b.env.update(shared, SHAPES_INDEX_DIR=str(tmp_path / "index-b"))
+    shared = {
+        "SHAPES_DATABASE_URL": postgres.url,
+        "SHAPES_REDIS_URL": redis_server.url,
+        "SHAPES_UPLOADS": "database",
+    }
+    a, b = Service(tmp_path / "api-a"), Service(tmp_path / "api-b")
+    enroller, searcher = Service(tmp_path / "worker-1"), Service(tmp_path / "worker-2")
+    for process in (a, b, enroller, searcher):
+        process.env.update(shared)
     try:
-        a.start_worker()
-        a.start_worker("query")
+        enroller.start_worker()
+        searcher.start_worker("query")
         a.start_api()
         b.start_api()
         start = _descriptor_rows(postgres.url)  # what the other tests left
-        ids = [a.upload(n, n[:-1]).json()["id"] for n in ("centaur0", "centaur1", "gorilla1")]
+        names = ("centaur0", "centaur1", "gorilla1")
+        ids = [a.upload(n, n[:-1]).json()["id"] for n in names]
         assert all(body["status"] == "ready" for body in _wait_all(a, ids).values())
         _wait_index_size(b, start + 3)  # stored by A's collector, followed by B
         matches = b.query("centaur2", k=2).json()["matches"]
         assert {m["mesh_id"] for m in matches} == set(ids[:2])
+        original = (TOSCA / f"{names[2]}.off.gz").read_bytes()
+        assert b.client.get(f"/meshes/{ids[2]}/file").content == original
 
         assert b.client.delete(f"/meshes/{ids[0]}").status_code == 204
         _wait_index_size(a, start + 2)
         assert ids[0] not in [m["mesh_id"] for m in a.query("centaur2", k=5).json()["matches"]]
+        assert a.client.get(f"/meshes/{ids[0]}/file").status_code == 404
         rows = _descriptor_rows(postgres.url)
         assert _index_size(a) == _index_size(b) == rows == start + 2
+        assert not list((tmp_path / "api-a").glob("uploads/*/*"))  # nothing on a disk
     finally:
-        b.close()
-        a.close()
+        for process in (b, a, enroller, searcher):
+            process.close()

@@ -1,9 +1,11 @@
 """The descriptor job queue (Huey): embedded on SQLite by default, Redis across machines.
 
-This module is the only place that knows about the task queue. It has no
-knowledge of the service's database: a task receives the path of an upload and
-returns a JSON-able result, which the service's collector stores. Keeping the
-database single-writer (the service) keeps SQLite safe under several workers.
+This module is the only place that knows about the task queue. Workers never
+write to the service's database: a task receives where its upload is (a path,
+or a row of the uploads table the worker reads when the service keeps uploads in
+the database, or the bytes themselves; :mod:`.sources`) and returns a JSON-able
+result, which the service's collector stores. Keeping the database
+single-writer (the service) keeps SQLite safe under several workers.
 
 Result of ``describe_upload``::
 
@@ -30,13 +32,13 @@ import socket
 import threading
 import time
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 from huey import Huey, PriorityRedisHuey, SqliteHuey
 
 from .limits import describe_limited
 from .settings import Queue, QueueSettings
+from .sources import local_file
 
 TASK_NAME = "describe_upload"
 TASK_RETRIES = 2
@@ -49,7 +51,8 @@ def heartbeat_key(task_id: str) -> str:
     return f"heartbeat:{task_id}"
 
 
-def _b64(data: bytes) -> str:
+def to_base64(data: bytes) -> str:
+    """Bytes as the ASCII text a task's arguments and results carry."""
     return base64.b64encode(data).decode("ascii")
 
 
@@ -88,6 +91,7 @@ def make_huey(settings: QueueSettings, queue: Queue = "enroll") -> Huey:
         )
     heartbeat_seconds = settings.heartbeat_seconds
     data_dir = settings.data_dir
+    database_url = settings.database_url
     time_limit = settings.job_time_limit_seconds
     memory_limit = settings.job_memory_limit_mb * 1024 * 1024
 
@@ -95,11 +99,17 @@ def make_huey(settings: QueueSettings, queue: Queue = "enroll") -> Huey:
         retries=TASK_RETRIES, retry_delay=TASK_RETRY_DELAY_SECONDS, context=True, name=TASK_NAME
     )
     def describe_upload(
-        upload_path: str, filename: str, preset_name: str, max_faces: int, task=None
+        source: str,
+        filename: str,
+        preset_name: str,
+        max_faces: int,
+        data: str | None = None,
+        task=None,
     ) -> dict:
         """Describe one uploaded mesh file; see the module docstring for the result.
 
-        ``upload_path`` is relative to this worker's data directory (or absolute).
+        ``source``: a path relative to this worker's data directory (or absolute), or
+        ``db:<sha256>``; ``data``: the file itself (base64) instead, for a query.
         """
         key = heartbeat_key(task.id)
         started = time.time()
@@ -122,16 +132,17 @@ def make_huey(settings: QueueSettings, queue: Queue = "enroll") -> Huey:
         beater = threading.Thread(target=beat, name=f"heartbeat-{task.id}", daemon=True)
         beater.start()
         try:
-            path = Path(upload_path)
-            outcome = describe_limited(
-                path if path.is_absolute() else data_dir / path,
-                filename,
-                preset_name,
-                max_faces=max_faces,
-                time_limit=time_limit,
-                memory_limit_bytes=memory_limit,
-                with_thumbnail=queue == "enroll",
-            )
+            inline = None if data is None else base64.b64decode(data)
+            with local_file(source, inline, data_dir=data_dir, database_url=database_url) as path:
+                outcome = describe_limited(
+                    path,
+                    filename,
+                    preset_name,
+                    max_faces=max_faces,
+                    time_limit=time_limit,
+                    memory_limit_bytes=memory_limit,
+                    with_thumbnail=queue == "enroll",
+                )
         finally:
             done.set()
             beater.join()
@@ -139,9 +150,9 @@ def make_huey(settings: QueueSettings, queue: Queue = "enroll") -> Huey:
             return {"ok": False, "code": outcome.code, "message": outcome.message}
         return {
             "ok": True,
-            "descriptor": _b64(outcome.descriptor),
-            "preview": None if outcome.preview is None else _b64(outcome.preview),
-            "thumbnail": None if outcome.thumbnail is None else _b64(outcome.thumbnail),
+            "descriptor": to_base64(outcome.descriptor),
+            "preview": None if outcome.preview is None else to_base64(outcome.preview),
+            "thumbnail": None if outcome.thumbnail is None else to_base64(outcome.thumbnail),
         }
 
     huey.describe_upload = describe_upload  # the service enqueues it by this attribute

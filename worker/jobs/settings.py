@@ -29,6 +29,9 @@ class QueueSettings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="SHAPES_", extra="ignore")
 
     data_dir: Path = Path("data")
+    # SQLAlchemy URL; the service's default is sqlite:///<data_dir>/shapes.sqlite3. A
+    # worker reads it only when uploads are kept in the database (worker.jobs.sources).
+    database_url: str | None = None
     redis_url: str | None = None
     # Enrollments go to this queue, queries to "<queue_name>-queries" (see QUEUES).
     queue_name: str = "shapes"
