@@ -21,7 +21,8 @@ COPY app ./app
 COPY alembic ./alembic
 COPY alembic.ini ./
 # Editable install: the service finds alembic.ini and alembic/ next to app/.
-RUN pip install -e . && python -c "import app.main, worker.jobs.queue"
+# The postgres and redis extras: the same image serves docker-compose.scale.yml.
+RUN pip install -e ".[postgres,redis]" && python -c "import app.main, worker.jobs.queue, psycopg, redis"
 
 USER shapes
 VOLUME ["/data"]
@@ -30,5 +31,6 @@ EXPOSE 8000
 HEALTHCHECK --interval=30s --timeout=5s --start-period=60s --retries=3 \
     CMD ["python", "-c", "import os, urllib.request; urllib.request.urlopen(f\"http://127.0.0.1:{os.environ.get('SHAPES_PORT', '8000')}/health\", timeout=4)"]
 
-# Migrations, the API and SHAPES_WORKERS (default 1) queue consumers.
+# Migrations, the API, SHAPES_WORKERS (default 2) enrollment and SHAPES_QUERY_WORKERS
+# (default 2) query consumers.
 CMD ["python", "-m", "app"]

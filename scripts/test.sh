@@ -11,7 +11,8 @@ fi
 .venv/bin/python -m pip install --quiet -e ".[test]"
 # Servers some tests run for real, from Debian's packages (Playwright's own browser
 # download is not reachable from every machine): Chromium for the web page's tests,
-# PostgreSQL and Redis for the scale-out tests. Installed once, as root or via sudo.
+# PostgreSQL and Redis for the scale-out tests, docker-compose to validate the compose
+# files (no container engine runs here). Installed once, as root or via sudo.
 apt_install() {  # apt_install PACKAGE...
     if ! command -v apt-get >/dev/null; then
         echo "no apt-get to install $*: the tests that need it will fail or be skipped" >&2
@@ -28,6 +29,7 @@ if ! command -v chromium >/dev/null && ! command -v chromium-browser >/dev/null;
 fi
 if ! compgen -G "/usr/lib/postgresql/*/bin/pg_ctl" >/dev/null; then missing+=(postgresql); fi
 if ! command -v redis-server >/dev/null; then missing+=(redis-server); fi
+if ! command -v docker-compose >/dev/null; then missing+=(docker-compose); fi
 if [ ${#missing[@]} -gt 0 ]; then apt_install "${missing[@]}"; fi
 .venv/bin/python -m ruff check .
 .venv/bin/python -m ruff format --check .
