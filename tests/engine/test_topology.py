@@ -1,16 +1,12 @@
-"""Index-array helpers: unique rows, edge keys, Euler characteristic, boundary edges."""
+"""Index-array helpers: unique rows, used vertices, edge keys, Euler characteristic and
+boundary edges."""
 
 from __future__ import annotations
 
 import numpy as np
 import trimesh
 
-from worker.engine.topology import (
-    boundary_edge_count,
-    edge_keys,
-    euler_characteristic,
-    unique_rows,
-)
+from worker.engine.topology import edge_keys, euler_and_boundary, unique_rows, used_vertices
 
 
 def open_tube(sections: int = 24, rings: int = 5) -> np.ndarray:
@@ -36,6 +32,13 @@ def test_unique_rows_agrees_with_numpy_unique():
     np.testing.assert_array_equal(rows[first][inverse], rows)
 
 
+def test_used_vertices_agrees_with_numpy_unique():
+    faces = np.random.default_rng(1).integers(0, 1000, size=(400, 3))  # some vertices unused
+    used = used_vertices(faces, 1000)
+    np.testing.assert_array_equal(used, np.unique(faces))
+    assert len(used) < 1000
+
+
 def test_edge_keys_name_the_edge_opposite_each_corner():
     faces = np.array([[0, 1, 2], [2, 1, 3]])
     n = 4
@@ -48,17 +51,10 @@ def test_edge_keys_name_the_edge_opposite_each_corner():
     assert edge_keys(faces, n)[0, 0] == edge_keys(faces, n)[1, 2]
 
 
-def test_euler_characteristic_of_a_sphere_and_a_torus():
+def test_euler_characteristic_and_boundary_of_a_sphere_a_torus_and_a_tube():
     sphere = trimesh.creation.icosphere(subdivisions=2)
     torus = trimesh.creation.torus(major_radius=2.0, minor_radius=0.5)
-    assert euler_characteristic(sphere.faces, len(sphere.vertices)) == 2
-    assert euler_characteristic(torus.faces, len(torus.vertices)) == 0
-    tube = open_tube()
-    assert euler_characteristic(tube, tube.max() + 1) == 0  # an annulus
-
-
-def test_boundary_edges_of_an_open_cylinder_are_its_two_rims():
+    assert euler_and_boundary(sphere.faces, len(sphere.vertices)) == (2, 0)
+    assert euler_and_boundary(torus.faces, len(torus.vertices)) == (0, 0)
     tube = open_tube(sections=24)
-    assert boundary_edge_count(tube, tube.max() + 1) == 2 * 24
-    sphere = trimesh.creation.icosphere(subdivisions=1)
-    assert boundary_edge_count(sphere.faces, len(sphere.vertices)) == 0
+    assert euler_and_boundary(tube, tube.max() + 1) == (0, 2 * 24)  # an annulus: two rims

@@ -31,7 +31,7 @@ from .errors import (
     UnsupportedFormatError,
 )
 from .tol import TOL
-from .topology import edge_keys, unique_rows
+from .topology import edge_keys, unique_rows, used_vertices
 
 MESH_FORMATS = ("obj", "ply", "off", "stl", "glb", "gltf")
 DEFAULT_MAX_FACES = 2_000_000
@@ -218,7 +218,7 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
     largest = np.bincount(face_component).argmax()
     faces = faces[face_component == largest]
 
-    used = np.unique(faces)
+    used = used_vertices(faces, n)
     renumber = np.full(n, -1, dtype=np.int64)
     renumber[used] = np.arange(len(used))
     return Mesh(vertices=merged[used], faces=renumber[faces])
@@ -327,7 +327,7 @@ def load_mesh(
         )
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise UnreadableMeshError("Some triangles refer to vertices that do not exist.")
-    used = vertices[np.unique(faces)]
+    used = vertices[used_vertices(faces, len(vertices))]
     if not np.all(np.isfinite(used)) or np.abs(used).max() > TOL.max_abs_coordinate:
         raise NonFiniteCoordinatesError(
             "Some vertex coordinates are not finite numbers (NaN, infinity or too large)."

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from .mesh_io import Mesh, clean_mesh
-from .topology import boundary_edge_count, euler_characteristic, unique_rows
+from .topology import euler_and_boundary, unique_rows
 
 
 def _subdivide(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -66,8 +66,7 @@ def resample_mesh(mesh: Mesh, n_vertices: int) -> Mesh:
 
     # Euler: F = 2V - 2chi for a closed surface, so aim at the face count that
     # gives n_vertices for this surface's own characteristic and boundary.
-    euler = euler_characteristic(faces, len(vertices))
-    boundary = boundary_edge_count(faces, len(vertices))
+    euler, boundary = euler_and_boundary(faces, len(vertices))
     target_faces = max(2 * n_vertices - 2 * euler - boundary, 4)
     reduced_vertices, reduced_faces = fast_simplification.simplify(
         vertices, faces.astype(np.int32), target_count=int(target_faces)

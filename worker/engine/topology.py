@@ -30,6 +30,14 @@ def unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return first, inverse
 
 
+def used_vertices(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Sorted indices of the vertices ``faces`` refers to (``np.unique(faces)``, by a
+    mask instead of a sort: tens of milliseconds less on a 100k-face upload)."""
+    used = np.zeros(n_vertices, dtype=bool)
+    used[np.asarray(faces).ravel()] = True
+    return np.flatnonzero(used)
+
+
 def edge_keys(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """Undirected edge of every face corner as one int64 key ``min * n + max``.
 
@@ -47,13 +55,8 @@ def edge_keys(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     return np.minimum(a, b) * n_vertices + np.maximum(a, b)
 
 
-def euler_characteristic(faces: np.ndarray, n_vertices: int) -> int:
-    """V - E + F of the complex spanned by ``faces``."""
-    n_edges = len(np.unique(edge_keys(faces, n_vertices)))
-    return n_vertices - n_edges + len(faces)
-
-
-def boundary_edge_count(faces: np.ndarray, n_vertices: int) -> int:
-    """Number of edges used by exactly one face."""
+def euler_and_boundary(faces: np.ndarray, n_vertices: int) -> tuple[int, int]:
+    """``V - E + F`` of the complex spanned by ``faces``, and its number of boundary
+    edges (used by exactly one face), from one pass over the edges."""
     _, counts = np.unique(edge_keys(faces, n_vertices), return_counts=True)
-    return int(np.count_nonzero(counts == 1))
+    return n_vertices - len(counts) + len(faces), int(np.count_nonzero(counts == 1))
