@@ -1,13 +1,15 @@
 """The container deployments, checked without a container engine (none runs on these
 machines): both compose files are valid for ``docker-compose config`` (Debian's
-package), every ``SHAPES_*`` variable they set is a setting the service reads, and
-the scale-out file shares nothing through a filesystem."""
+package), every ``SHAPES_*`` variable they set is a setting the service reads, the
+scale-out file shares nothing through a filesystem, and the Dockerfile's install
+steps work in a fresh venv."""
 
 from __future__ import annotations
 
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -39,6 +41,31 @@ def test_compose_files_are_valid_and_set_only_real_settings(path: Path):
         for variable in service.get("environment", {}):
             if variable.startswith("SHAPES_"):
                 assert variable in fields, f"{path.name}: {name} sets unknown {variable}"
+
+
+@pytest.mark.slow  # a fresh venv and an install (from pip's cache after scripts/test.sh)
+def test_the_dockerfile_installs_and_imports_in_a_fresh_venv(tmp_path):
+    """Replays the image's steps without an engine: the files it COPYs, into a fresh
+    venv, its pip install and its import check (a module the service imports but the
+    package does not declare fails here, not in production)."""
+    lines = (REPO / "Dockerfile").read_text().splitlines()
+    root = tmp_path / "srv"
+    root.mkdir()
+    for line in lines:
+        if line.startswith("COPY "):
+            *sources, _ = line.split()[1:]
+            for pattern in sources:
+                for source in REPO.glob(pattern):
+                    copy = shutil.copytree if source.is_dir() else shutil.copy2
+                    copy(source, root / source.name)
+    run = next(line for line in lines if line.startswith("RUN pip install"))
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
+    env = {"PATH": f"{venv / 'bin'}:/usr/bin:/bin", "PIP_DISABLE_PIP_VERSION_CHECK": "1"}
+    done = subprocess.run(
+        ["bash", "-c", run.removeprefix("RUN ")], cwd=root, env=env, capture_output=True, text=True
+    )
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
 
 
 def test_the_scale_deployment_shares_nothing_but_its_servers():
