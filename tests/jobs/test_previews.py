@@ -80,3 +80,11 @@ def test_thumbnail_is_shaded_not_a_flat_stencil():
     drawn = image[image[:, :, 3] > 0][:, :3].astype(int)
     assert len(drawn) > 0.5 * np.pi / 4 * THUMBNAIL_PIXELS**2  # the disc fills the square
     assert np.ptp(drawn.sum(axis=1)) > 100  # lit and unlit parts differ
+
+
+def test_previews_of_the_preview_mesh_are_the_same_bytes():
+    """What lets a job decimate once for both (worker/jobs/limits.py)."""
+    sphere = _sphere()
+    small = preview_mesh(sphere)
+    assert preview_glb(small) == preview_glb(sphere)
+    assert thumbnail_png(small) == thumbnail_png(sphere)

@@ -25,7 +25,7 @@ from worker.engine.errors import MeshError
 from worker.engine.pipeline import load_and_describe
 from worker.engine.presets import get_preset
 
-from .previews import preview_glb, thumbnail_png
+from .previews import preview_glb, preview_mesh, thumbnail_png
 
 log = logging.getLogger("shapes.worker")
 
@@ -68,8 +68,9 @@ def _child(
         )
         preview = thumbnail = None
         try:
-            preview = preview_glb(mesh)
-            thumbnail = thumbnail_png(mesh) if with_thumbnail else None
+            small = preview_mesh(mesh)  # decimated once for both (the same bytes as twice)
+            preview = preview_glb(small)
+            thumbnail = thumbnail_png(small) if with_thumbnail else None
         except Exception:  # the descriptor is what matters; the page shows a placeholder
             log.exception("no preview for %s", filename)
         conn.send(("ok", descriptor.to_npz_bytes(), preview, thumbnail))

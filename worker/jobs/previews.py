@@ -11,6 +11,9 @@ without ever sending the original files (which can be 50 MB).
   coordinate axis of least extent (its largest outline), with +z up when z is in the
   picture and +y otherwise, drawn back to front (painter's algorithm, matplotlib's Agg
   canvas; no GPU, no display).
+
+Both start from :func:`preview_mesh`, which leaves a preview mesh as it is: a caller
+that makes both decimates once and passes the result (the same bytes come out).
 """
 
 from __future__ import annotations
