@@ -1,9 +1,10 @@
-"""Response models shared by every resource: the error body and UTC timestamps."""
+"""Shared by every resource: the error body, UTC timestamps, and the OpenAPI description
+of a multipart request body."""
 
 from __future__ import annotations
 
 from datetime import UTC, datetime
-from typing import Annotated
+from typing import Annotated, Any
 
 from pydantic import AfterValidator, BaseModel, Field
 
@@ -46,3 +47,21 @@ UNAUTHORIZED_RESPONSE: dict[int | str, dict] = {
     401: {"model": ErrorOut, "description": "API key missing or wrong (`unauthorized`)"},
 }
 """Declared by every POST and DELETE (they need the API key when one is configured)."""
+
+
+def multipart_body(
+    properties: dict[str, Any],
+    *,
+    required: tuple[str, ...] = (),
+    encoding: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """``openapi_extra`` of a route that reads its multipart form itself (streaming):
+    the form's fields as OpenAPI describes them."""
+    schema: dict[str, Any] = {"type": "object"}
+    if required:
+        schema["required"] = list(required)
+    schema["properties"] = properties
+    form: dict[str, Any] = {"schema": schema}
+    if encoding is not None:
+        form["encoding"] = encoding
+    return {"requestBody": {"required": True, "content": {"multipart/form-data": form}}}

@@ -28,20 +28,10 @@ from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.evaluation import metrics
 from worker.evaluation.compute import compute_descriptors, descriptor_vectors
 from worker.evaluation.datasets import DEFAULT_CACHE, read_labels, shared_dataset
-from worker.evaluation.scoring import modality_dissimilarity
+from worker.evaluation.scoring import modality_dissimilarity, stratified_folds
 
 GRID = (0.0, 0.125, 0.25, 0.5, 1.0)
 FOLDS = 5
-
-
-def stratified_folds(labels: np.ndarray, k: int, seed: int = 0) -> np.ndarray:
-    """Fold of each object: every class spread evenly over the ``k`` folds."""
-    rng = np.random.default_rng(seed)
-    fold = np.empty(len(labels), dtype=int)
-    for c in np.unique(labels):
-        idx = rng.permutation(np.flatnonzero(labels == c))
-        fold[idx] = (np.arange(len(idx)) + rng.integers(k)) % k
-    return fold
 
 
 def scores(d: np.ndarray, labels: np.ndarray, held_out: np.ndarray | None = None) -> dict:

@@ -142,6 +142,30 @@ def _robustness(args: argparse.Namespace) -> int:
     return 1 if report["failures"] else 0
 
 
+def _add_collection_arguments(parser: argparse.ArgumentParser) -> None:
+    """What ``evaluate`` and ``robustness`` both take: a labelled collection, the preset,
+    the worker processes, the descriptor cache and a per-class limit."""
+    parser.add_argument("dataset_dir", help="directory holding the mesh files")
+    parser.add_argument(
+        "--labels", help="CSV with columns file,class (default: DATASET_DIR/labels.csv)"
+    )
+    parser.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=os.cpu_count() or 1,
+        help="worker processes, one BLAS thread each (default: CPUs)",
+    )
+    parser.add_argument(
+        "--cache", default=str(DEFAULT_CACHE), help=f"descriptor cache (default: {DEFAULT_CACHE})"
+    )
+    parser.add_argument(
+        "--limit",
+        type=int,
+        help="use only the first N meshes (natural file-name order) of each class, N >= 2",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="shapes", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -160,26 +184,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Describe every mesh of labels.csv, compare all to all per modality and "
         "fused, next to lapy's ShapeDNA, and write report.json, report.md, cmc.png, roc.png.",
     )
-    evaluate.add_argument("dataset_dir", help="directory holding the mesh files")
-    evaluate.add_argument(
-        "--labels", help="CSV with columns file,class (default: DATASET_DIR/labels.csv)"
-    )
-    evaluate.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
-    evaluate.add_argument(
-        "--jobs",
-        type=int,
-        default=os.cpu_count() or 1,
-        help="worker processes, one BLAS thread each (default: CPUs)",
-    )
-    evaluate.add_argument(
-        "--cache", default=str(DEFAULT_CACHE), help=f"descriptor cache (default: {DEFAULT_CACHE})"
-    )
+    _add_collection_arguments(evaluate)
     evaluate.add_argument("--out", help="report directory (default: evaluation-out/PRESET)")
-    evaluate.add_argument(
-        "--limit",
-        type=int,
-        help="use only the first N meshes (natural file-name order) of each class, N >= 2",
-    )
     evaluate.set_defaults(run=_evaluate)
 
     robustness = sub.add_parser(
@@ -192,11 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--poses the pose invariance of a set of poses of one object. Writes "
         "robustness.json and robustness.md.",
     )
-    robustness.add_argument("dataset_dir", help="directory holding the mesh files")
-    robustness.add_argument(
-        "--labels", help="CSV with columns file,class (default: DATASET_DIR/labels.csv)"
-    )
-    robustness.add_argument("--preset", default=DEFAULT_PRESET, choices=sorted(PRESETS))
+    _add_collection_arguments(robustness)
     robustness.add_argument(
         "--poses", help="directory of poses of one object (e.g. SCAPE) to measure pose invariance"
     )
@@ -204,18 +206,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--variants", help="comma-separated subset of the variants (default: all seven)"
     )
     robustness.add_argument(
-        "--jobs", type=int, default=os.cpu_count() or 1, help="worker processes (default: CPUs)"
-    )
-    robustness.add_argument(
-        "--cache", default=str(DEFAULT_CACHE), help=f"descriptor cache (default: {DEFAULT_CACHE})"
-    )
-    robustness.add_argument(
         "--out", help="report directory (default: evaluation-out/robustness/PRESET)"
-    )
-    robustness.add_argument(
-        "--limit",
-        type=int,
-        help="use only the first N meshes (natural file-name order) of each class, N >= 2",
     )
     robustness.set_defaults(run=_robustness)
 

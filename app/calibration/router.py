@@ -12,7 +12,7 @@ from worker.evaluation.calibration import Calibration
 from ..deps import WRITE_ACCESS, MultipartDep, ReadSessionDep, SessionDep, StateDep, require_file
 from ..errors import InvalidInputError
 from ..gallery.calibration import FUSED
-from ..schemas import ERROR_RESPONSES, FILE_RESPONSES, UNAUTHORIZED_RESPONSE
+from ..schemas import ERROR_RESPONSES, FILE_RESPONSES, UNAUTHORIZED_RESPONSE, multipart_body
 from ..search.service import parse_far
 from . import service
 from .schemas import (
@@ -32,47 +32,37 @@ VERIFY_FIELDS = ("mesh_id", "claim_id", "claim_label", "far")
 NOT_CALIBRATED: dict[int | str, dict[str, Any]] = {
     409: {"description": "Too few labelled pairs to calibrate (`not_calibrated`)"},
 }
-VERIFY_BODY = {
-    "requestBody": {
-        "required": True,
-        "content": {
-            "multipart/form-data": {
-                "schema": {
-                    "type": "object",
-                    "properties": {
-                        "file": {
-                            "type": "string",
-                            "format": "binary",
-                            "description": "the mesh to verify (or mesh_id)",
-                        },
-                        "mesh_id": {
-                            "type": "integer",
-                            "minimum": 1,
-                            "description": "an enrolled mesh to verify (or file)",
-                        },
-                        "claim_id": {
-                            "type": "integer",
-                            "minimum": 1,
-                            "description": "the enrolled mesh it is claimed to be",
-                        },
-                        "claim_label": {
-                            "type": "string",
-                            "description": "the label it is claimed to have (the closest "
-                            "enrolled mesh of that label decides)",
-                        },
-                        "far": {
-                            "type": "number",
-                            "exclusiveMinimum": 0,
-                            "exclusiveMaximum": 1,
-                            "default": DEFAULT_FAR,
-                            "description": "false acceptance rate of the decision",
-                        },
-                    },
-                }
-            }
+VERIFY_BODY = multipart_body(
+    {
+        "file": {
+            "type": "string",
+            "format": "binary",
+            "description": "the mesh to verify (or mesh_id)",
+        },
+        "mesh_id": {
+            "type": "integer",
+            "minimum": 1,
+            "description": "an enrolled mesh to verify (or file)",
+        },
+        "claim_id": {
+            "type": "integer",
+            "minimum": 1,
+            "description": "the enrolled mesh it is claimed to be",
+        },
+        "claim_label": {
+            "type": "string",
+            "description": "the label it is claimed to have (the closest "
+            "enrolled mesh of that label decides)",
+        },
+        "far": {
+            "type": "number",
+            "exclusiveMinimum": 0,
+            "exclusiveMaximum": 1,
+            "default": DEFAULT_FAR,
+            "description": "false acceptance rate of the decision",
         },
     }
-}
+)
 
 
 def _operating_points(row: Calibration) -> list[OperatingPoint]:

@@ -256,9 +256,8 @@ class Gallery:
             log_rows = changes.since(session, self._followed, FOLLOW_BATCH)
             if not log_rows:
                 return 0
-            added = {row.mesh_id for row in log_rows if row.action == "add"} - set(
-                self._index.store.pos
-            )
+            index = self._index
+            added = {r.mesh_id for r in log_rows if r.action == "add" and r.mesh_id not in index}
             p = self.preset
             stored = dict(_decoded(meshes.iter_descriptors(session, p.name, p.version, added)))
         with self._lock:

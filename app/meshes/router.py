@@ -11,7 +11,7 @@ from fastapi.responses import FileResponse
 from ..deps import WRITE_ACCESS, MultipartDep, RowId, SessionDep, StateDep, require_file
 from ..errors import InvalidInputError
 from ..models import Descriptor, Mesh, MeshStatus
-from ..schemas import ERROR_RESPONSES, FILE_RESPONSES, UNAUTHORIZED_RESPONSE
+from ..schemas import ERROR_RESPONSES, FILE_RESPONSES, UNAUTHORIZED_RESPONSE, multipart_body
 from . import service
 from .schemas import DescriptorInfo, Links, MeshOut, MeshPage
 
@@ -49,47 +49,37 @@ MESH_LINKS = {
     "SimilarMeshes": {"operationId": "similar_meshes", "parameters": _MESH_ID},
 } | JOB_LINK
 
-UPLOAD_BODY = {
-    "requestBody": {
-        "required": True,
-        "content": {
-            "multipart/form-data": {
-                "schema": {
-                    "type": "object",
-                    "required": ["file"],
-                    "properties": {
-                        "file": {
-                            "type": "string",
-                            "format": "binary",
-                            "description": ".obj .ply .off .stl .glb .gltf, optionally .gz",
-                        },
-                        "name": {"type": "string", "description": "default: the file name"},
-                        "label": {"type": "string", "description": "class, e.g. 'wolf'"},
-                        "metadata": {
-                            "type": "string",
-                            "description": "a JSON object",
-                            "example": '{"source": "TOSCA"}',
-                        },
-                    },
-                },
-                "encoding": {
-                    "file": {
-                        "contentType": "application/octet-stream",
-                        "headers": {
-                            "Content-Disposition": {
-                                "description": "the file name's extension tells the format",
-                                "schema": {
-                                    "type": "string",
-                                    "example": 'form-data; name="file"; filename="wolf0.off"',
-                                },
-                            }
-                        },
-                    }
-                },
-            }
+UPLOAD_BODY = multipart_body(
+    {
+        "file": {
+            "type": "string",
+            "format": "binary",
+            "description": ".obj .ply .off .stl .glb .gltf, optionally .gz",
         },
-    }
-}
+        "name": {"type": "string", "description": "default: the file name"},
+        "label": {"type": "string", "description": "class, e.g. 'wolf'"},
+        "metadata": {
+            "type": "string",
+            "description": "a JSON object",
+            "example": '{"source": "TOSCA"}',
+        },
+    },
+    required=("file",),
+    encoding={
+        "file": {
+            "contentType": "application/octet-stream",
+            "headers": {
+                "Content-Disposition": {
+                    "description": "the file name's extension tells the format",
+                    "schema": {
+                        "type": "string",
+                        "example": 'form-data; name="file"; filename="wolf0.off"',
+                    },
+                }
+            },
+        }
+    },
+)
 
 
 def mesh_out(mesh: Mesh, descriptor: Descriptor | None) -> MeshOut:

@@ -16,7 +16,7 @@ from ..deps import (
     require_file,
 )
 from ..errors import InvalidInputError, NotFoundError
-from ..schemas import ERROR_RESPONSES, FILE_RESPONSES, UNAUTHORIZED_RESPONSE
+from ..schemas import ERROR_RESPONSES, FILE_RESPONSES, UNAUTHORIZED_RESPONSE, multipart_body
 from . import service
 from .schemas import MatchOut, QueryOut
 
@@ -58,20 +58,9 @@ OPTION_SCHEMAS: dict[str, dict[str, Any]] = {
     },
 }
 
-QUERY_BODY = {
-    "requestBody": {
-        "required": True,
-        "content": {
-            "multipart/form-data": {
-                "schema": {
-                    "type": "object",
-                    "required": ["file"],
-                    "properties": {"file": {"type": "string", "format": "binary"}} | OPTION_SCHEMAS,
-                }
-            }
-        },
-    }
-}
+QUERY_BODY = multipart_body(
+    {"file": {"type": "string", "format": "binary"}} | OPTION_SCHEMAS, required=("file",)
+)
 
 SIMILAR_PARAMETERS = {
     "parameters": [

@@ -5,6 +5,17 @@ import { GLTFLoader } from "three/addons/loaders/GLTFLoader.js";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
 
 const $ = (id) => document.getElementById(id);
+
+// A clickable element that the keyboard reaches too: Enter or Space does what a click does.
+function onActivate(element, action) {
+  element.addEventListener("click", action);
+  element.addEventListener("keydown", (e) => {
+    if (e.key === "Enter" || e.key === " ") {
+      e.preventDefault();
+      action();
+    }
+  });
+}
 const PAGE = 24;
 const KEY = "modalshape-api-key";
 
@@ -223,14 +234,7 @@ function matchCard(match, result) {
     bars.append(name, bar);
   }
   card.append(bars);
-  const open = () => compare(match, result, card);
-  card.addEventListener("click", open);
-  card.addEventListener("keydown", (e) => {
-    if (e.key === "Enter" || e.key === " ") {
-      e.preventDefault();
-      open();
-    }
-  });
+  onActivate(card, () => compare(match, result, card));
   return card;
 }
 
@@ -261,13 +265,7 @@ async function compare(match, result, card) {
 
 // --------------------------------------------------------------------------- search
 const dropzone = $("drop-search");
-dropzone.addEventListener("click", () => $("file-search").click());
-dropzone.addEventListener("keydown", (e) => {
-  if (e.key === "Enter" || e.key === " ") {
-    e.preventDefault();
-    $("file-search").click();
-  }
-});
+onActivate(dropzone, () => $("file-search").click());
 dropzone.addEventListener("dragover", (e) => {
   e.preventDefault();
   dropzone.classList.add("over");
@@ -392,14 +390,7 @@ function galleryCard(mesh) {
   meta.className = "meta";
   meta.textContent = `${mesh.label || "(no label)"}, ${mesh.status}`;
   card.append(title, meta);
-  const open = () => openDetail(mesh);
-  card.addEventListener("click", open);
-  card.addEventListener("keydown", (e) => {
-    if (e.key === "Enter" || e.key === " ") {
-      e.preventDefault();
-      open();
-    }
-  });
+  onActivate(card, () => openDetail(mesh));
   return card;
 }
 

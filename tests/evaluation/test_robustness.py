@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 
@@ -66,7 +67,7 @@ def test_pose_invariance_counts_poses_closer_to_the_collection(collection):
 
 
 @pytest.mark.slow  # describes 4 meshes, 2 variants each, and 2 poses
-def test_run_writes_the_report_and_rotation_costs_nothing(tmp_path):
+def test_run_writes_the_report_and_rotation_costs_nothing(tmp_path, surface_preset):
     tosca = shared_dataset("tosca")
     if not tosca.is_dir():
         pytest.skip(f"TOSCA set not found at {tosca}")
@@ -79,15 +80,10 @@ def test_run_writes_the_report_and_rotation_costs_nothing(tmp_path):
     poses.mkdir()
     for name in ("wolf2.off.gz", "wolf0.off.gz"):
         shutil.copy(tosca / name, poses / name)
-    preset = Preset(
+    preset = dataclasses.replace(
+        surface_preset,
         name="test-robust-run",
-        version=0,
         n_vertices=500,
-        n_eigenpairs=100,
-        measure="surface",
-        heat_time_factor=12.0,
-        ddt_elements="diagonal",
-        dissimilarity="D1",
         fused_modalities=("gdm", "ddt", "spectrum"),
     )
     report = run_robustness(
