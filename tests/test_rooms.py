@@ -76,7 +76,7 @@ def test_settings_load_neither_the_queue_nor_the_engines_pipeline(settings):
 
 def test_the_calibration_the_service_imports_is_pure_numpy():
     loaded = modules_loaded_by("import worker.evaluation.calibration")
-    assert {m.split(".")[0] for m in loaded} & {"lapy", "matplotlib", "tqdm", "gpytoolbox"} == set()
+    assert {m.split(".")[0] for m in loaded} & {"lapy", "matplotlib", "tqdm", "pymeshlab"} == set()
 
 
 def test_the_cli_client_loads_nothing_of_the_server():
