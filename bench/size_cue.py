@@ -19,6 +19,7 @@ cue, it does not propose one: a descriptor that uses size fails every rescaled c
 from __future__ import annotations
 
 import argparse
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +49,16 @@ def row(d: np.ndarray, labels: np.ndarray, names: list[str]) -> str:
         metrics.mean_average_precision(d, labels),
     )
     return " | ".join(f"{100 * v:.2f}" for v in values)
+
+
+def false_accepts_at_eer(d: np.ndarray, labels: np.ndarray) -> Counter[tuple[str, str]]:
+    """Impostor pairs accepted at the ROC point nearest FAR = FRR, by pair of classes."""
+    far, frr, thresholds = metrics.roc_curve(d, labels)
+    threshold = thresholds[np.argmin(np.abs(far - frr))]
+    i, j = np.triu_indices(len(d), 1)
+    accepted = (labels[i] != labels[j]) & (d[i, j] <= threshold)
+    first, second = labels[i][accepted], labels[j][accepted]
+    return Counter((min(a, b), max(a, b)) for a, b in zip(first, second, strict=True))
 
 
 def main() -> None:
@@ -85,6 +96,10 @@ def main() -> None:
             else:
                 d = mats[key]
             print(f"| {title} | {scale} | {row(d, labels, names)} |")
+    fused = fuse({m: free[m] for m in preset.fused_modalities}, preset.fusion, weights)
+    accepts = false_accepts_at_eer(0.5 * (fused + fused.T), labels)
+    pairs = ", ".join(f"{a}-{b} {n}" for (a, b), n in accepts.most_common())
+    print(f"\nthe preset's score, scale-free: false accepts at its EER point: {pairs}")
 
 
 if __name__ == "__main__":
