@@ -21,32 +21,29 @@ preset's fused score), on the TOSCA descriptors of the evaluation cache:
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from worker.engine.compare import fuse
-from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.evaluation.calibration import calibrate
-from worker.evaluation.compute import compute_descriptors, descriptor_vectors
-from worker.evaluation.datasets import DEFAULT_CACHE, read_labels, shared_dataset
+from worker.evaluation.compute import descriptor_vectors
 from worker.evaluation.scoring import modality_dissimilarity, stratified_folds
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench._tosca import add_evaluation_cache_arguments, evaluated_tosca  # noqa: E402
 
 FOLDS = 5
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--preset", default=DEFAULT_PRESET)
-    parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
+    add_evaluation_cache_arguments(parser)
     parser.add_argument("--far", type=float, default=0.01)
-    parser.add_argument("--jobs", type=int, default=2)
     args = parser.parse_args()
-    preset = get_preset(args.preset)
-    tosca = shared_dataset("tosca")
-    computed = compute_descriptors(
-        read_labels(tosca / "labels.csv", tosca), preset, args.cache, jobs=args.jobs
-    )
+    preset, computed = evaluated_tosca(args)
     labels = np.array([m.label for m in computed.meshes])
     vectors = descriptor_vectors(computed)
     per = {m: modality_dissimilarity(vectors[m], preset.dissimilarity)[0] for m in vectors}

@@ -19,16 +19,19 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from worker.engine.compare import fuse
-from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.evaluation import metrics
-from worker.evaluation.compute import compute_descriptors, descriptor_vectors
-from worker.evaluation.datasets import DEFAULT_CACHE, read_labels, shared_dataset
+from worker.evaluation.compute import descriptor_vectors
 from worker.evaluation.scoring import modality_dissimilarity, stratified_folds
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench._tosca import add_evaluation_cache_arguments, evaluated_tosca  # noqa: E402
 
 GRID = (0.0, 0.125, 0.25, 0.5, 1.0)
 FOLDS = 5
@@ -69,14 +72,8 @@ def choose(mats: dict[str, np.ndarray], labels: np.ndarray, rule: str) -> dict[s
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--preset", default=DEFAULT_PRESET)
-    parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
-    parser.add_argument("--jobs", type=int, default=2)
-    args = parser.parse_args()
-    preset = get_preset(args.preset)
-    tosca = shared_dataset("tosca")
-    meshes = read_labels(tosca / "labels.csv", tosca)
-    computed = compute_descriptors(meshes, preset, args.cache, jobs=args.jobs)
+    add_evaluation_cache_arguments(parser)
+    preset, computed = evaluated_tosca(parser.parse_args())
     labels = np.array([m.label for m in computed.meshes])
     vectors = descriptor_vectors(computed)
     mats = {

@@ -19,24 +19,27 @@ cue, it does not propose one: a descriptor that uses size fails every rescaled c
 from __future__ import annotations
 
 import argparse
+import sys
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
+from lapy import TriaMesh
 
 from worker.engine.compare import dissimilarity, fuse
 from worker.engine.mesh_io import load_mesh
-from worker.engine.presets import DEFAULT_PRESET, MODALITIES, get_preset
+from worker.engine.presets import MODALITIES, get_preset
 from worker.evaluation import metrics
-from worker.evaluation.compute import compute_descriptors, descriptor_vectors
-from worker.evaluation.datasets import DEFAULT_CACHE, read_labels, shared_dataset
+from worker.evaluation.compute import descriptor_vectors
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench._tosca import add_evaluation_cache_arguments, evaluated_tosca  # noqa: E402
 
 
 def surface_area(path: Path) -> float:
     mesh = load_mesh(path)
-    corners = mesh.vertices[mesh.faces]
-    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    return float(0.5 * np.linalg.norm(cross, axis=1).sum())
+    return float(TriaMesh(mesh.vertices, mesh.faces).area())
 
 
 def row(d: np.ndarray, labels: np.ndarray, names: list[str]) -> str:
@@ -63,16 +66,11 @@ def false_accepts_at_eer(d: np.ndarray, labels: np.ndarray) -> Counter[tuple[str
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--preset", default=DEFAULT_PRESET)
-    parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE)
-    parser.add_argument("--jobs", type=int, default=2)
+    add_evaluation_cache_arguments(parser)
     args = parser.parse_args()
-    preset = get_preset(args.preset)
-    if preset.measure != "surface":
+    if get_preset(args.preset).measure != "surface":
         parser.error("the size is restored from the surface measure's normalization")
-    tosca = shared_dataset("tosca")
-    meshes = read_labels(tosca / "labels.csv", tosca)
-    computed = compute_descriptors(meshes, preset, args.cache, jobs=args.jobs)
+    preset, computed = evaluated_tosca(args)
     labels = np.array([m.label for m in computed.meshes])
     names = [m.name for m in computed.meshes]
     area = np.array([surface_area(m.path) for m in computed.meshes])
