@@ -150,4 +150,5 @@ class Upload(Base):
     __tablename__ = "uploads"
 
     sha256: Mapped[str] = mapped_column(String(64), primary_key=True)
-    data: Mapped[bytes] = mapped_column(LargeBinary)
+    # Deferred: checking that an upload exists, or deleting it, never loads its bytes.
+    data: Mapped[bytes] = mapped_column(LargeBinary, deferred=True)

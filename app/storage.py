@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
 
+from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from worker.jobs.sources import DATABASE_PREFIX, database_source
@@ -98,8 +99,9 @@ class DatabaseStore:
         return reference
 
     def read(self, session: Session, reference: str) -> bytes | None:
-        upload = session.get(Upload, reference.removeprefix(DATABASE_PREFIX))
-        return None if upload is None else upload.data
+        sha256 = reference.removeprefix(DATABASE_PREFIX)
+        data: bytes | None = session.scalar(select(Upload.data).where(Upload.sha256 == sha256))
+        return data
 
     def remove(self, session: Session, reference: str) -> None:
         upload = session.get(Upload, reference.removeprefix(DATABASE_PREFIX))
