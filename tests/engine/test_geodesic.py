@@ -12,9 +12,11 @@ from conftest import swept_tube
 
 from worker.engine.geodesic import (
     HeatMethod,
+    farthest_point_samples,
     geodesic_distance_matrix,
     geodesic_distances_reference,
     heat_time,
+    sample_distances,
 )
 from worker.engine.intrinsic import (
     IntrinsicMesh,
@@ -101,3 +103,41 @@ def test_heat_time_in_surface_units_ignores_the_triangulation():
         mesh_times.append(heat_time(mesh, ops, 12.0))
     assert times[0] == pytest.approx(times[1], rel=0.01)
     assert abs(mesh_times[0] / mesh_times[1] - 1) > 0.1
+
+
+def test_sample_distances_are_the_gdms_columns():
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    noisy = sphere.vertices * (1 + 0.05 * np.random.default_rng(2).random((642, 1)))
+    mesh, ops = surface_operators(noisy, sphere.faces)
+    samples = farthest_point_samples(noisy, 50, ops.vertex_areas)
+    columns = sample_distances(mesh, ops, samples, 12.0, 2500)
+    assert columns.shape == (642, 50)
+    np.testing.assert_array_equal(columns[samples, np.arange(50)], 0.0)
+    # The plain solver (SuperLU, double precision), one source at a time.
+    plain = HeatMethod(mesh, ops, 12.0, 2500, reference=True)
+    reference = np.column_stack([plain.distances_from(np.array([c]))[:, 0] for c in samples])
+    np.testing.assert_allclose(columns, reference, rtol=1e-5, atol=1e-6 * reference.max())
+
+
+def test_farthest_point_samples_cover_the_surface_whatever_the_vertex_order():
+    sphere = trimesh.creation.uv_sphere(count=[48, 64])  # vertices crowd at the poles
+    mesh, ops = surface_operators(sphere.vertices, sphere.faces)
+    samples = farthest_point_samples(sphere.vertices, 200, ops.vertex_areas)
+    assert len(np.unique(samples)) == 200
+    # Evenly spread: every vertex is near a sample, at about the spacing of 200 points
+    # on the unit sphere (sqrt(4 pi / 200) = 0.25), and so are the crowded poles.
+    unit = sphere.vertices / np.linalg.norm(sphere.vertices, axis=1, keepdims=True)
+    gaps = np.arccos(np.clip(unit @ unit[samples].T, -1.0, 1.0)).min(axis=1)
+    assert gaps.max() < 0.25
+    # A surface without symmetries (a sphere's points tie for the farthest): the same
+    # samples whatever the vertex order.
+    rng = np.random.default_rng(3)
+    bumpy = sphere.vertices * (1 + 0.05 * rng.random((len(sphere.vertices), 1)))
+    first = farthest_point_samples(bumpy, 200, ops.vertex_areas)
+    order = rng.permutation(len(bumpy))
+    moved = farthest_point_samples(bumpy[order], 200, ops.vertex_areas[order])
+    np.testing.assert_array_equal(order[moved], first)
+    assert np.array_equal(
+        farthest_point_samples(sphere.vertices, 10**6, ops.vertex_areas),
+        np.arange(len(sphere.vertices)),
+    )

@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 import tensorly as tl
 import trimesh
+from scipy.integrate import quad
+from scipy.special import eval_legendre
 from tensorly.decomposition import tucker
 
 from worker.engine.diffusion import (
@@ -14,6 +16,7 @@ from worker.engine.diffusion import (
     laplace_beltrami_eigenpairs,
     surface_eigenpairs,
 )
+from worker.engine.geodesic import farthest_point_samples, sample_distances
 from worker.engine.intrinsic import (
     IntrinsicMesh,
     fem_operators,
@@ -28,6 +31,7 @@ from worker.engine.modal import (
     modal_gdm_reference,
     normalize_slices,
     orthonormal_basis,
+    voronoi_areas,
 )
 
 TIMES = (100.0, 200.0, 400.0, 800.0, 1500.0)
@@ -81,6 +85,60 @@ def test_modal_gdm_equals_full_svd_and_ignores_order_and_scale():
     assert np.all(np.diff(fast) <= 0)
     perm = rng.permutation(300)
     np.testing.assert_allclose(modal_gdm(7.5 * gdm[perm][:, perm], 19), fast, rtol=1e-9)
+
+
+def test_sampled_gdm_equals_full_svd_and_ignores_order_and_scale():
+    rng = np.random.default_rng(5)
+    points = rng.random((400, 3))
+    samples = rng.choice(400, 60, replace=False)
+    distances = np.linalg.norm(points[:, None] - points[None, samples], axis=2)
+    mass = rng.uniform(0.5, 2.0, 400)
+    areas = voronoi_areas(distances, mass)
+    fast = modal_gdm(distances, 19, mass, areas)
+    np.testing.assert_allclose(fast, modal_gdm_reference(distances, 19, mass, areas), rtol=1e-9)
+    assert np.all(np.diff(fast) <= 0)
+    rows, columns = rng.permutation(400), rng.permutation(60)
+    moved = 3.0 * distances[rows][:, columns]
+    np.testing.assert_allclose(
+        modal_gdm(moved, 19, 9.0 * mass[rows], 9.0 * areas[columns]), fast, rtol=1e-9
+    )
+
+
+def test_voronoi_areas_give_each_vertex_area_to_its_nearest_sample():
+    distances = np.array([[0.0, 2.0], [1.0, 3.0], [2.5, 0.5], [4.0, 0.0]])
+    np.testing.assert_allclose(voronoi_areas(distances, np.array([1.0, 2.0, 3.0, 4.0])), [3.0, 7.0])
+
+
+def _funk_hecke_singular_values(k):
+    """The geodesic distance operator of the unit sphere, ``arccos(x . y)``, divided by
+    area^(3/2): a zonal kernel, so its eigenvalues are ``2 pi int arccos(t) P_l(t) dt``
+    with multiplicity ``2 l + 1`` (Funk-Hecke)."""
+    values = []
+    for degree in range(12):
+        integral, _ = quad(
+            lambda t, n=degree: np.arccos(t) * eval_legendre(n, t), -1.0, 1.0, limit=200
+        )
+        values += [abs(2.0 * np.pi * integral)] * (2 * degree + 1)
+    return np.sort(values)[::-1][:k] / (4.0 * np.pi) ** 1.5
+
+
+@pytest.mark.parametrize(
+    "sphere",
+    [trimesh.creation.icosphere(subdivisions=4), trimesh.creation.uv_sphere(count=[48, 64])],
+    ids=["icosphere", "uv-sphere"],
+)
+def test_sampled_gdm_is_the_spheres_distance_operator_whatever_its_triangles(sphere):
+    # The icosphere's triangles are all alike; the UV sphere's crowd at the poles
+    # (5,890 vertices). Both give the surface's operator within the quadrature error
+    # of 500 samples.
+    mesh, ops = surface_operators(sphere.vertices, sphere.faces)
+    samples = farthest_point_samples(sphere.vertices, 500, ops.vertex_areas)
+    distances = sample_distances(mesh, ops, samples, 12.0, 2500)
+    areas = voronoi_areas(distances, ops.vertex_areas)
+    np.testing.assert_allclose(areas.sum(), ops.vertex_areas.sum())
+    values = modal_gdm(distances, 19, ops.vertex_areas, areas)
+    exact = _funk_hecke_singular_values(19)
+    assert np.abs(values / exact - 1).max() < 0.03
 
 
 def test_normalization_divides_each_slice_by_its_sum_times_n():

@@ -16,6 +16,10 @@ def test_inconsistent_presets_are_refused():
         Preset(name="x", version=1, spectrum_size=150, n_eigenpairs=150)
     with pytest.raises(ValueError, match=r"unknown modalities \['colour'\]"):
         Preset(name="x", version=1, fused_modalities=("gdm", "colour"))
+    with pytest.raises(ValueError, match="gdm_samples needs the surface measure"):
+        Preset(name="x", version=1, gdm_samples=500)  # the paper's vertex matrices
+    with pytest.raises(ValueError, match="at least gdm_singular_values samples"):
+        Preset(name="x", version=1, measure="surface", gdm_samples=10)
 
 
 def test_unknown_preset_names_the_known_ones():

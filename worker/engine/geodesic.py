@@ -13,6 +13,11 @@ Both systems are factored once per mesh (banded Cholesky, :mod:`worker.engine.li
 and solved for a whole block of sources at once; the result is symmetrized, since
 the exact GDM is symmetric. :func:`geodesic_distances_reference` is the plain
 per-source version with SuperLU that the fast path is tested against.
+
+The surface presets need distances only from a few hundred sources spread evenly
+over the surface (:func:`farthest_point_samples`, :func:`sample_distances`): the
+modal representation of the surface's distance operator integrates over them with
+their Voronoi areas as weights (:mod:`worker.engine.modal`).
 """
 
 from __future__ import annotations
@@ -162,6 +167,16 @@ class HeatMethod:
         return distances
 
 
+def _distance_columns(solver: HeatMethod, sources: np.ndarray) -> np.ndarray:
+    """``solver.distances_from(sources)``, one block of ``SOURCE_BLOCK`` sources at a
+    time (a block's right-hand sides stay in cache; all at once is slower)."""
+    columns = np.empty((solver.n, len(sources)), dtype=np.float32)
+    for start in range(0, len(sources), SOURCE_BLOCK):
+        stop = min(start + SOURCE_BLOCK, len(sources))
+        columns[:, start:stop] = solver.distances_from(sources[start:stop])
+    return columns
+
+
 def geodesic_distance_matrix(
     mesh: IntrinsicMesh,
     ops: FEMOperators,
@@ -182,10 +197,7 @@ def geodesic_distance_matrix(
     """
     solver = HeatMethod(mesh, ops, time_factor, n_reference)
     n = mesh.n_vertices
-    gdm = np.empty((n, n), dtype=np.float32)
-    for start in range(0, n, SOURCE_BLOCK):
-        stop = min(start + SOURCE_BLOCK, n)
-        gdm[:, start:stop] = solver.distances_from(np.arange(start, stop))
+    gdm = _distance_columns(solver, np.arange(n))
     # Symmetrize block by block: gdm += gdm.T would copy the whole transpose first.
     for start in range(0, n, SOURCE_BLOCK):
         rows = slice(start, min(start + SOURCE_BLOCK, n))
@@ -194,6 +206,63 @@ def geodesic_distance_matrix(
         gdm[start:, rows] = upper.T
     np.fill_diagonal(gdm, 0.0)
     return gdm
+
+
+def farthest_point_samples(vertices: np.ndarray, count: int, mass: np.ndarray) -> np.ndarray:
+    """``count`` vertices spread evenly over the surface, by farthest-point sampling.
+
+    Each next sample is the vertex farthest (in space) from all samples so far,
+    starting from the vertex farthest from the area-weighted centroid, so the choice
+    follows the surface rather than the vertex order or density. Straight-line
+    distance is enough to spread the samples: the quadrature weights that make them
+    a discretization of the surface are their geodesic Voronoi areas
+    (:func:`worker.engine.modal.voronoi_areas`).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    count : number of samples; all vertices when ``count >= n``.
+    mass : (n,) float, lumped vertex areas (for the centroid).
+
+    Returns
+    -------
+    (min(count, n),) int vertex indices, in the order they were chosen.
+    """
+    n = len(vertices)
+    if count >= n:
+        return np.arange(n)
+    centroid = mass @ vertices / mass.sum()
+    samples = np.empty(count, dtype=np.int64)
+    samples[0] = np.argmax(np.einsum("ij,ij->i", vertices - centroid, vertices - centroid))
+    nearest = np.full(n, np.inf)
+    for i in range(1, count):
+        step = vertices - vertices[samples[i - 1]]
+        np.minimum(nearest, np.einsum("ij,ij->i", step, step), out=nearest)
+        samples[i] = np.argmax(nearest)
+    return samples
+
+
+def sample_distances(
+    mesh: IntrinsicMesh,
+    ops: FEMOperators,
+    samples: np.ndarray,
+    time_factor: float = 1.0,
+    n_reference: int | None = None,
+) -> np.ndarray:
+    """Geodesic distances from a set of sample vertices to every vertex.
+
+    Parameters
+    ----------
+    mesh, ops : intrinsic triangulation and its operators.
+    samples : (m,) int vertex indices (:func:`farthest_point_samples`).
+    time_factor, n_reference : the heat step's time (:func:`heat_time`).
+
+    Returns
+    -------
+    (n, m) float32, column ``c`` holds the distances from ``samples[c]`` (zero there).
+    """
+    solver = HeatMethod(mesh, ops, time_factor, n_reference)
+    return _distance_columns(solver, np.asarray(samples, dtype=np.int64))
 
 
 def geodesic_distances_reference(

@@ -14,7 +14,12 @@ Two discretizations of the same idea:
 * on the surface (``mass`` = lumped vertex areas ``m``): the matrices weighted
   ``M^1/2 D M^1/2``, whose eigenvalues approximate those of the integral operator
   ``f -> integral d(x, y) f(y) dA(y)`` of the surface itself, whatever the
-  sampling, normalized by area so scale cancels.
+  sampling, normalized by area so scale cancels. The same operator's singular
+  values also come from distances to a few hundred samples ``y_c`` spread over the
+  surface, each standing for its geodesic Voronoi cell of area ``w_c``: the
+  quadrature ``integral d(x, y) f(y) dA(y) ~ sum_c d(x, y_c) f(y_c) w_c`` makes
+  it the ``n x m`` matrix ``M^1/2 D W^1/2`` (:func:`modal_gdm` with
+  ``sample_areas``).
 """
 
 from __future__ import annotations
@@ -52,50 +57,93 @@ def normalize_slices(tensor: np.ndarray) -> np.ndarray:
     return normalized
 
 
-def modal_gdm(gdm: np.ndarray, k: int, mass: np.ndarray | None = None) -> np.ndarray:
+def modal_gdm(
+    gdm: np.ndarray,
+    k: int,
+    mass: np.ndarray | None = None,
+    sample_areas: np.ndarray | None = None,
+) -> np.ndarray:
     """The ``k`` largest singular values of the normalized GDM, descending.
 
     The GDM is symmetric, so its singular values are the absolute values of its
     eigenvalues and the largest ones come from Lanczos (``eigsh``) without a full
-    SVD; :func:`modal_gdm_reference` is the plain SVD.
+    SVD; with samples, from the eigenvalues of the small ``m x m`` Gram matrix.
+    :func:`modal_gdm_reference` is the plain SVD.
 
     Parameters
     ----------
-    gdm : (n, n) float, symmetric.
+    gdm : (n, n) float, symmetric; or (n, m), the distances from ``m`` samples
+        (columns) to every vertex, with ``sample_areas``.
     k : number of singular values.
     mass : (n,) float, lumped vertex areas; when given, the singular values are
         those of ``M^1/2 G M^1/2 / A^(3/2)`` (``A`` the total area): the geodesic
         distance operator of the surface, in units that make it scale-free
         (distances scale like ``s``, areas like ``s^2``). Without it, the paper's
         :func:`normalize_slices`.
+    sample_areas : (m,) float, the samples' Voronoi areas (:func:`voronoi_areas`):
+        the singular values of ``M^1/2 G W^1/2 / A^(3/2)``, the same operator
+        integrated over the samples instead of every vertex.
 
     Returns
     -------
     (k,) float
     """
+    weighted = _normalized_gdm(gdm, mass, sample_areas)
+    if sample_areas is not None:
+        # sigma^2 are the Gram matrix's eigenvalues; the k kept ones span about
+        # three decades, far from float64's rounding of the largest.
+        gram = weighted.T @ weighted
+        squares = la.eigvalsh(gram, subset_by_index=[len(gram) - k, len(gram) - 1])
+        return np.sqrt(np.maximum(squares[::-1], 0.0))
     values = sla.eigsh(
-        _normalized_gdm(gdm, mass),
-        k=k,
-        which="LM",
-        return_eigenvectors=False,
-        v0=seeded_start(len(gdm)),
+        weighted, k=k, which="LM", return_eigenvectors=False, v0=seeded_start(len(gdm))
     )
     singular_values: np.ndarray = np.sort(np.abs(values))[::-1]
     return singular_values
 
 
-def _normalized_gdm(gdm: np.ndarray, mass: np.ndarray | None) -> np.ndarray:
+def voronoi_areas(distances: np.ndarray, mass: np.ndarray) -> np.ndarray:
+    """Area of each sample's geodesic Voronoi cell: the vertex areas nearest to it.
+
+    Parameters
+    ----------
+    distances : (n, m) float, from the ``m`` samples (columns) to every vertex.
+    mass : (n,) float, lumped vertex areas.
+
+    Returns
+    -------
+    (m,) float, summing to the total area.
+    """
+    nearest = np.argmin(distances, axis=1)
+    areas: np.ndarray = np.bincount(nearest, weights=mass, minlength=distances.shape[1])
+    return areas
+
+
+def _normalized_gdm(
+    gdm: np.ndarray, mass: np.ndarray | None, sample_areas: np.ndarray | None = None
+) -> np.ndarray:
     if mass is None:
         return normalize_slices(gdm)
-    root = (np.sqrt(mass) / float(mass.sum()) ** 0.75).astype(gdm.dtype)
-    weighted: np.ndarray = gdm * root[:, None]
-    weighted *= root[None, :]
+    scale = float(mass.sum()) ** 0.75
+    rows = np.sqrt(mass) / scale
+    columns = rows if sample_areas is None else np.sqrt(sample_areas) / scale
+    if sample_areas is not None:  # the small Gram matrix wants double precision
+        gdm = gdm.astype(np.float64)
+    weighted: np.ndarray = gdm * rows[:, None].astype(gdm.dtype)
+    weighted *= columns[None, :].astype(gdm.dtype)
     return weighted
 
 
-def modal_gdm_reference(gdm: np.ndarray, k: int, mass: np.ndarray | None = None) -> np.ndarray:
+def modal_gdm_reference(
+    gdm: np.ndarray,
+    k: int,
+    mass: np.ndarray | None = None,
+    sample_areas: np.ndarray | None = None,
+) -> np.ndarray:
     """The same descriptor by a full SVD."""
-    singular_values: np.ndarray = np.linalg.svd(_normalized_gdm(gdm, mass), compute_uv=False)
+    singular_values: np.ndarray = np.linalg.svd(
+        _normalized_gdm(gdm, mass, sample_areas), compute_uv=False
+    )
     return singular_values[:k]
 
 

@@ -18,10 +18,10 @@ from .diffusion import (
     normalized_spectrum,
     surface_eigenpairs,
 )
-from .geodesic import geodesic_distance_matrix
+from .geodesic import farthest_point_samples, geodesic_distance_matrix, sample_distances
 from .intrinsic import surface_operators
 from .mesh_io import DEFAULT_MAX_FACES, Mesh, canonical_frame, load_mesh
-from .modal import core_diagonal, ddt_core, modal_gdm
+from .modal import core_diagonal, ddt_core, modal_gdm, voronoi_areas
 from .presets import MODALITIES, Preset
 from .resample import resample_mesh
 
@@ -141,11 +141,16 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
     lap("resample")
     intrinsic, ops = surface_operators(resampled.vertices, resampled.faces)
     on_surface = preset.measure == "surface"
-    gdm = geodesic_distance_matrix(
-        intrinsic, ops, preset.heat_time_factor, preset.n_vertices if on_surface else None
-    )
-    lap("gdm")
     mass = ops.vertex_areas if on_surface else None
+    heat_reference = preset.n_vertices if on_surface else None
+    sample_areas = None
+    if preset.gdm_samples is None:
+        gdm = geodesic_distance_matrix(intrinsic, ops, preset.heat_time_factor, heat_reference)
+    else:
+        samples = farthest_point_samples(resampled.vertices, preset.gdm_samples, ops.vertex_areas)
+        gdm = sample_distances(intrinsic, ops, samples, preset.heat_time_factor, heat_reference)
+        sample_areas = voronoi_areas(gdm, ops.vertex_areas)
+    lap("gdm")
     op = LaplaceBeltrami.from_fem(ops)
     eigenvalues, eigenvectors = laplace_beltrami_eigenpairs(op, preset.n_eigenpairs)
     if mass is None:  # eq. (4) with the paper's A and time unit
@@ -156,7 +161,7 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
     ddt = core_diagonal(core) if preset.ddt_elements == "diagonal" else core
     spectrum = normalized_spectrum(op, eigenvalues, preset.spectrum_size)
     lap("eigen_ddt")
-    singular_values = modal_gdm(gdm, preset.gdm_singular_values, mass)
+    singular_values = modal_gdm(gdm, preset.gdm_singular_values, mass, sample_areas)
     lap("modal")
     return ShapeDescriptor(
         preset=preset.name,

@@ -28,10 +28,16 @@ class Preset:
     gdm_singular_values : k largest singular values of the GDM kept (sec. 4.2: 19).
     ddt_core_shape : HOSVD core size of the DDT (sec. 4.2: 20 x 20 x 5).
     diffusion_times : t_D of eq. (4) (sec. 4.2: 100, 200, 400, 800, 1500).
-    n_eigenpairs : eigenpairs of L phi = lambda A phi kept in eq. (4); chosen so
-        that truncation changes the DDT by < 1e-3 (relative Frobenius) at t_D = 100.
+    n_eigenpairs : eigenpairs of L phi = lambda A phi kept in eq. (4) (its ``k``);
+        for the paper's presets chosen so that truncation changes the DDT by < 1e-3
+        (relative Frobenius) at t_D = 100.
     spectrum_size : non-zero Laplace-Beltrami eigenvalues in the spectrum modality.
     heat_time_factor : heat-method time step in units of the squared mean edge length.
+    gdm_samples : with the "surface" measure, geodesic distances from this many
+        samples spread over the surface (farthest-point sampling) instead of from
+        every vertex; the GDM's singular values are then those of the same surface
+        operator integrated over the samples' Voronoi cells
+        (:func:`worker.engine.modal.modal_gdm`). None: every vertex.
     measure : "vertices", the paper's GDM and DDT as matrices over the vertex set
         (slices divided by their sums); or "surface", both weighted by the lumped
         vertex areas so their modal representations approximate the surface's
@@ -61,6 +67,7 @@ class Preset:
     n_eigenpairs: int = 150
     spectrum_size: int = 50
     heat_time_factor: float = 1.0
+    gdm_samples: int | None = None
     measure: Measure = "vertices"
     ddt_elements: DdtElements = "core"
     dissimilarity: Dissimilarity = "D2"
@@ -73,6 +80,12 @@ class Preset:
             raise ValueError("the DDT core cannot have more slices than diffusion times")
         if self.spectrum_size >= self.n_eigenpairs:
             raise ValueError("spectrum_size must be below n_eigenpairs")
+        if self.gdm_samples is not None and (
+            self.measure != "surface" or self.gdm_samples < self.gdm_singular_values
+        ):
+            raise ValueError(
+                "gdm_samples needs the surface measure and at least gdm_singular_values samples"
+            )
         unknown = set(self.fused_modalities) - set(MODALITIES)
         if unknown:
             raise ValueError(f"unknown modalities {sorted(unknown)}")
