@@ -14,7 +14,7 @@ from .conftest import make_service
 
 @pytest.fixture(scope="module")
 def limited(tmp_path_factory) -> Iterator[Service]:
-    svc = make_service(tmp_path_factory, "limited", SHAPES_JOB_TIME_LIMIT_SECONDS="1")
+    svc = make_service(tmp_path_factory, "limited", SHAPES_JOB_TIME_LIMIT_SECONDS="0.1")
     try:
         svc.start_worker()
         svc.start_worker("query")
@@ -29,7 +29,7 @@ def test_a_job_over_its_limit_fails_and_the_worker_lives_on(limited: Service):
     created = limited.upload("wolf0", "wolf")
     mesh = limited.wait_mesh(created.json()["id"])
     assert mesh["status"] == "failed" and mesh["error"] == "describe_timeout", mesh
-    assert "1 seconds" in mesh["detail"]
+    assert "limit of 0.1 seconds" in mesh["detail"]
     job = limited.client.get(mesh["links"]["job"]).json()
     assert job["enqueues"] == 1  # not retried
     query = limited.query("wolf1")
