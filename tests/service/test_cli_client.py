@@ -58,6 +58,10 @@ def test_import_reports_the_broken_file_and_resumes(served: Service, folder):
     assert again.returncode == 1
 
 
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_an_interrupted_import_resumes_and_enrolls_nothing_twice(tmp_path_factory):
     # No descriptor worker: uploads only queue jobs, and all of TOSCA takes seconds.
     svc = migrated_service(tmp_path_factory, "interrupt", SHAPES_MAX_UPLOAD_BYTES=str(8 << 20))
@@ -70,6 +74,9 @@ def test_an_interrupted_import_resumes_and_enrolls_nothing_twice(tmp_path_factor
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
+            # Ctrl-C as in a terminal: a test run started in the background (`cmd &` in
+            # a script) ignores SIGINT, and its children would inherit that.
+            preexec_fn=_default_sigint,
         )
         # Interrupt right after the third upload, as its progress line says: polling the
         # service instead raced a fast machine, which had sent all 83 before the signal.
