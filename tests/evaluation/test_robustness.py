@@ -106,3 +106,8 @@ def test_run_writes_the_report_and_rotation_costs_nothing(tmp_path, surface_pres
     assert report["poses"]["scores"][PRESET_ROW]["poses"] == 2
     assert [m.name for m in pose_set(poses)] == ["wolf0.off.gz", "wolf2.off.gz"]
     assert report["failures"] == {}
+    # The same meshes rotated; decimated to half the faces, about half the vertices.
+    vertices = report["input_vertices"]
+    assert vertices["rotated-scaled"] == vertices["original"]
+    assert 0.4 < vertices["decimated-50"] / vertices["original"] < 0.6
+    assert f"{vertices['decimated-50']:,}" in (tmp_path / "out" / "robustness.md").read_text()

@@ -249,6 +249,18 @@ def render_robustness_markdown(report: Mapping) -> str:
             for v in (scores[key]["variants"][name] for name in variants)
         ]
         lines.append(f"| {title} | " + " | ".join(cells) + " |")
+    if "input_vertices" in report:
+        totals = report["input_vertices"]
+        lines += [
+            "",
+            f"Input vertices, summed over the meshes (originals: {totals['original']:,}); "
+            "two reports compare only if these agree, i.e. they described the same variant "
+            "meshes:",
+            "",
+            "| " + " | ".join(variants) + " |",
+            "|" + "---:|" * len(variants),
+            "| " + " | ".join(f"{totals[name]:,}" for name in variants) + " |",
+        ]
     if "poses" in report:
         poses = report["poses"]["scores"]
         count = next(iter(poses.values()))["poses"]

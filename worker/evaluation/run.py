@@ -106,10 +106,14 @@ def run_robustness(
     originals = descriptor_vectors(computed)
     failures = {name: {"original": why} for name, why in computed.failures.items()}
     described: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
+    # Vertices of the meshes as described, summed: two runs whose sums agree described
+    # the same variant meshes (MeshLab's remesher once gave others under load).
+    vertices = {"original": sum(d.input_vertices for d in computed.descriptors)}
     for variant in variants:
         done = compute_descriptors(
             computed.meshes, preset, cache_root, jobs=jobs, progress=progress, variant=variant
         )
+        vertices[variant] = sum(d.input_vertices for d in done.descriptors)
         for name, why in done.failures.items():
             failures.setdefault(name, {})[variant] = why
         sources = np.array([index[m.name] for m in done.meshes], dtype=np.int64)
@@ -123,6 +127,7 @@ def run_robustness(
         "gap_bar": GAP_BAR,
         "variants": list(variants),
         "tessellation": tessellation_scores(originals, labels, described, preset),
+        "input_vertices": vertices,
         "failures": failures,
         "environment": {**environment_info(), **(environment or {})},
     }
