@@ -136,6 +136,11 @@ def _robustness(args: argparse.Namespace) -> int:
         for key, title in titles.items():
             row = report["poses"]["scores"][key]
             print(f"{title:{width}}  {row['ratio']:.3f}  {row['foreign_nearest']}/{row['poses']}")
+        first, second = report["poses"]["resolutions"]
+        print(f"\nposes at {first} against {second} and back: rank 1, ratio")
+        for key, title in titles.items():
+            row = report["poses"]["cross_resolution"][key]
+            print(f"{title:{width}}  {100 * row['rank1']:5.1f}%  {row['ratio']:.3f}")
     for name, why in report["failures"].items():
         print(f"could not describe {name}: {why}", file=sys.stderr)
     print(f"report written to {out}/robustness.md", file=sys.stderr)

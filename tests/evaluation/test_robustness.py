@@ -11,7 +11,12 @@ import pytest
 
 from worker.engine.presets import Preset
 from worker.evaluation.datasets import pose_set, shared_dataset
-from worker.evaluation.robustness import PRESET_ROW, pose_invariance, tessellation_scores
+from worker.evaluation.robustness import (
+    PRESET_ROW,
+    cross_resolution,
+    pose_invariance,
+    tessellation_scores,
+)
 from worker.evaluation.run import run_robustness
 from worker.evaluation.shapedna import BASELINE
 
@@ -66,6 +71,23 @@ def test_pose_invariance_counts_poses_closer_to_the_collection(collection):
     assert 0 < scores[PRESET_ROW]["ratio"] < 10
 
 
+def test_cross_resolution_finds_a_pose_unless_the_resolution_moves_it_past_another():
+    poses = np.array([[1.0, 1.0], [1.0, 1.3], [1.0, 2.0]])
+    # Pose 0 at the other resolution moved towards pose 1, past the half-way point.
+    other = poses + [[0.0, 0.2], [0.0, 0.01], [0.0, 0.01]]
+    scores = cross_resolution(_descriptors(poses), _descriptors(other), PRESET)
+    row = scores["gdm"]
+    assert row["poses"] == 3
+    # Wrong: only pose 0 at the second resolution, 0.1 from pose 1 and 0.2 from its
+    # own pose at the first. (Pose 0 at the first is still nearer its own, 0.2 away,
+    # than pose 1 at the second, 0.31 away.)
+    assert row["rank1"] == pytest.approx(5 / 6)
+    assert row["ratio"] < 1  # most poses moved less than the next pose is away
+    same = cross_resolution(_descriptors(poses), _descriptors(poses), PRESET)
+    for key in ("gdm", "ddt", "spectrum", PRESET_ROW, BASELINE):
+        assert same[key]["rank1"] == 1.0 and same[key]["ratio"] == 0.0
+
+
 @pytest.mark.slow  # describes 4 meshes, 2 variants each, and 2 poses
 def test_run_writes_the_report_and_rotation_costs_nothing(tmp_path, surface_preset):
     tosca = shared_dataset("tosca")
@@ -104,6 +126,11 @@ def test_run_writes_the_report_and_rotation_costs_nothing(tmp_path, surface_pres
         assert rotated["gap"] < 1e-4 and rotated["self_retrieval"] == 1.0
         assert report["tessellation"][row]["variants"]["decimated-50"]["count"] == 4
     assert report["poses"]["scores"][PRESET_ROW]["poses"] == 2
+    # Both poses remeshed at two resolutions; wolf0 and wolf2 differ by more than that.
+    across = report["poses"]["cross_resolution"]
+    assert across[PRESET_ROW]["poses"] == 2 and across[PRESET_ROW]["rank1"] == 1.0
+    markdown = (tmp_path / "out" / "robustness.md").read_text()
+    assert "Cross-resolution pose retrieval (2 poses" in markdown
     assert [m.name for m in pose_set(poses)] == ["wolf0.off.gz", "wolf2.off.gz"]
     assert report["failures"] == {}
     # The same meshes rotated; decimated to half the faces, about half the vertices.

@@ -287,6 +287,26 @@ def render_robustness_markdown(report: Mapping) -> str:
         ]
         if strays:
             lines += ["", "Poses nearest a mesh of the collection:", "", *strays]
+        if "cross_resolution" in report["poses"]:
+            across = report["poses"]["cross_resolution"]
+            first, second = report["poses"]["resolutions"]
+            count = next(iter(across.values()))["poses"]
+            lines += [
+                "",
+                f"Cross-resolution pose retrieval ({count} poses as `{first}` and as "
+                f"`{second}`): every pose at one resolution queries the poses at the other. "
+                "**rank 1**: its own pose is the nearest. **ratio**: median distance to its "
+                "own pose at the other resolution over the distance to the nearest other "
+                "pose at its own (below 1: the resolution moves a pose less than the next "
+                "pose is away).",
+                "",
+                "| | rank 1 | ratio |",
+                "|---|---:|---:|",
+            ]
+            for key, title in titles.items():
+                if key in across:
+                    row = across[key]
+                    lines.append(f"| {title} | {_pct(row['rank1'], 1)} | {row['ratio']:.3f} |")
     if report["failures"]:
         lines += ["", "## Meshes that could not be described", ""]
         for name, why in report["failures"].items():

@@ -19,7 +19,11 @@ fused score and for the ShapeDNA baseline:
 And on a set of poses of one object (SCAPE), next to the labelled collection in one
 gallery, the **pose invariance**: the median distance between two poses over the
 median distance between two objects of different classes of the collection, and
-how many poses have their nearest neighbour outside the pose set.
+how many poses have their nearest neighbour outside the pose set; and, with the
+poses remeshed at two resolutions, the **cross-resolution pose retrieval**: every
+pose at one resolution queries the same poses at the other, and should find its own
+pose first (one body in many poses is the hardest gallery there is for a file's
+tessellation to confuse).
 
 Distances are the preset's: D1 or D2 per modality (for D2, sigma over the gallery
 of originals), fused with the preset's rule and weights.
@@ -40,6 +44,8 @@ from .shapedna import BASELINE, shapedna_dissimilarity
 GAP_BAR = 0.1
 #: Row key of the preset's own fused score.
 PRESET_ROW = "preset"
+#: The variants of every pose that the cross-resolution pose retrieval compares.
+POSE_RESOLUTIONS = ("remeshed-8k", "remeshed-15k")
 
 
 def row_titles(preset: Preset) -> dict[str, str]:
@@ -192,5 +198,54 @@ def pose_invariance(
             "foreign_nearest": len(foreign),
             "foreign": foreign,
             "poses": p,
+        }
+    return out
+
+
+def cross_resolution(
+    first: Mapping[str, np.ndarray], second: Mapping[str, np.ndarray], preset: Preset
+) -> dict[str, dict]:
+    """The same poses at two resolutions: each queries the poses at the other one.
+
+    Parameters
+    ----------
+    first, second : modality -> (p, M) float [and ``BASELINE``]; row ``i`` of both
+        is pose ``i``.
+    preset : the dissimilarity, fusion rule and weights.
+
+    Returns
+    -------
+    row key -> {"rank1": fraction of the ``2 p`` queries (each pose at each
+    resolution) whose nearest pose at the other resolution is its own, "ratio":
+    median over those queries of the distance to its own pose at the other
+    resolution over the distance to the nearest other pose at its own resolution
+    (below 1: the resolution moves a pose less than the nearest other pose is away),
+    "poses": p}.
+    """
+
+    def distances(
+        q: Mapping[str, np.ndarray], g: Mapping[str, np.ndarray]
+    ) -> dict[str, np.ndarray]:
+        return _cross(q, g, preset, (q[BASELINE], g[BASELINE]) if BASELINE in q else None)
+
+    # Per direction: the queries against the other resolution, and against their own.
+    directions = [
+        (distances(first, second), distances(first, first)),
+        (distances(second, first), distances(second, second)),
+    ]
+    out: dict[str, dict] = {}
+    for row in directions[0][0]:
+        hits, ratios = [], []
+        for across, same in directions:
+            d = across[row]
+            own = np.diagonal(d)
+            hits.append(np.argmin(d, axis=1) == np.arange(len(d)))
+            others = same[row].copy()
+            np.fill_diagonal(others, np.inf)
+            ratios.append(own / others.min(axis=1))
+        out[row] = {
+            "rank1": float(np.concatenate(hits).mean()),
+            "ratio": float(np.median(np.concatenate(ratios))),
+            "poses": len(hits[0]),
         }
     return out

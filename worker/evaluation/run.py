@@ -13,14 +13,21 @@ import numpy as np
 from worker.engine.presets import Preset
 
 from .compute import compute_descriptors, descriptor_vectors
-from .datasets import EvaluationError, pose_set, read_labels
+from .datasets import EvaluationError, LabeledMesh, pose_set, read_labels
 from .report import (
     build_report,
     environment_info,
     render_markdown,
     render_robustness_markdown,
 )
-from .robustness import GAP_BAR, pose_invariance, row_titles, tessellation_scores
+from .robustness import (
+    GAP_BAR,
+    POSE_RESOLUTIONS,
+    cross_resolution,
+    pose_invariance,
+    row_titles,
+    tessellation_scores,
+)
 from .variants import VARIANTS
 
 
@@ -146,6 +153,11 @@ def run_robustness(
                 [m.name for m in posed.meshes],
                 [m.name for m in computed.meshes],
             ),
+            "resolutions": list(POSE_RESOLUTIONS),
+            "cross_resolution": cross_resolution(
+                *_both_resolutions(posed.meshes, preset, cache_root, jobs, progress, failures),
+                preset,
+            ),
         }
     report["seconds"] = time.perf_counter() - start
     out = Path(out_dir)
@@ -153,3 +165,30 @@ def run_robustness(
     (out / "robustness.json").write_text(json.dumps(report, indent=1) + "\n")
     (out / "robustness.md").write_text(render_robustness_markdown(report))
     return report
+
+
+def _both_resolutions(
+    poses: Sequence[LabeledMesh],
+    preset: Preset,
+    cache_root: str | Path,
+    jobs: int,
+    progress: bool,
+    failures: dict[str, dict[str, str]],
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """The poses' descriptor vectors at the two ``POSE_RESOLUTIONS``, row ``i`` of
+    both the same pose (poses that failed at either are left out of both, and
+    recorded in ``failures``)."""
+    done = []
+    for variant in POSE_RESOLUTIONS:
+        computed = compute_descriptors(
+            poses, preset, cache_root, jobs=jobs, progress=progress, variant=variant
+        )
+        for name, why in computed.failures.items():
+            failures.setdefault(name, {})[variant] = why
+        done.append(computed)
+    common = set.intersection(*({m.name for m in c.meshes} for c in done))
+    vectors = []
+    for computed in done:
+        rows = [i for i, m in enumerate(computed.meshes) if m.name in common]
+        vectors.append({k: v[rows] for k, v in descriptor_vectors(computed).items()})
+    return vectors[0], vectors[1]
