@@ -87,17 +87,18 @@ def test_modal_gdm_equals_full_svd_and_ignores_order_and_scale():
     np.testing.assert_allclose(modal_gdm(7.5 * gdm[perm][:, perm], 19), fast, rtol=1e-9)
 
 
-def test_sampled_gdm_equals_full_svd_and_ignores_order_and_scale():
+@pytest.mark.parametrize("count", [19, 38, 60, 400])  # LAPACK up to 2k samples, Lanczos above
+def test_sampled_gdm_equals_full_svd_and_ignores_order_and_scale(count):
     rng = np.random.default_rng(5)
     points = rng.random((400, 3))
-    samples = rng.choice(400, 60, replace=False)
+    samples = rng.choice(400, count, replace=False)
     distances = np.linalg.norm(points[:, None] - points[None, samples], axis=2)
     mass = rng.uniform(0.5, 2.0, 400)
     areas = voronoi_areas(distances, mass)
     fast = modal_gdm(distances, 19, mass, areas)
     np.testing.assert_allclose(fast, modal_gdm_reference(distances, 19, mass, areas), rtol=1e-9)
     assert np.all(np.diff(fast) <= 0)
-    rows, columns = rng.permutation(400), rng.permutation(60)
+    rows, columns = rng.permutation(400), rng.permutation(count)
     moved = 3.0 * distances[rows][:, columns]
     np.testing.assert_allclose(
         modal_gdm(moved, 19, 9.0 * mass[rows], 9.0 * areas[columns]), fast, rtol=1e-9

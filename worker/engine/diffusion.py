@@ -25,6 +25,11 @@ from .tol import TOL
 #: ARPACK tries (each with another start vector and a larger subspace) before the
 #: dense solver.
 EIGEN_ATTEMPTS = 2
+#: Lanczos vectors beyond ``k`` on the first try: of k + 20 .. 2k + 1 the fastest at
+#: k = 100 and 1,000-5,000 vertices (2,500: 0.14 s against 0.19 s at 2k + 1; the
+#: restarts cost less than orthogonalizing against a basis twice as large). A retry
+#: takes 2k + 21.
+KRYLOV_MARGIN = 40
 
 
 @dataclass(frozen=True)
@@ -70,6 +75,14 @@ class LaplaceBeltrami:
 def laplace_beltrami_eigenpairs(op: LaplaceBeltrami, k: int) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` smallest eigenpairs of eq. (3), by sparse shift-invert Lanczos (ARPACK).
 
+    ``A`` is diagonal, so eq. (3) is the standard problem ``S y = lambda y`` with
+    ``S = A^-1/2 L A^-1/2`` and ``phi = A^-1/2 y``: the same eigenvalues, and
+    eigenvectors that are A-orthonormal because the ``y`` are orthonormal. Lanczos on
+    ``S`` needs no products with ``A`` (ARPACK's generalized mode does three per
+    step); with a symmetric fill-reducing order for the shifted factor, this takes
+    0.13 s instead of 0.22 s at 2,500 vertices and k = 100. The tests check it
+    against the dense generalized solver.
+
     (A block-Krylov solver on the banded factorization was tried and was no faster
     at k = 150, n = 2,500 once it was accurate enough; see docs/benchmarks.md.)
 
@@ -78,20 +91,26 @@ def laplace_beltrami_eigenpairs(op: LaplaceBeltrami, k: int) -> tuple[np.ndarray
     eigenvalues : (k,) float, ascending; the first is 0 (constant eigenvector).
     eigenvectors : (n, k) float, A-orthonormal.
     """
-    laplacian = op.laplacian.tocsc()
-    mass = sp.diags(op.mass).tocsc()
+    inverse_root = sp.diags(1.0 / np.sqrt(op.mass))
+    symmetric = (inverse_root @ op.laplacian @ inverse_root).tocsc()
+    shifted = (symmetric - op.shift() * sp.identity(op.n)).tocsc()
+    # Minimum degree on the symmetric pattern fills the factor about 30% less than
+    # SuperLU's default (COLAMD), so each of the few hundred solves is faster.
+    factor = sla.splu(shifted, permc_spec="MMD_AT_PLUS_A", options={"SymmetricMode": True})
+    shift_invert = sla.LinearOperator(shifted.shape, matvec=factor.solve, dtype=np.float64)
     values: np.ndarray | None = None
     for attempt in range(EIGEN_ATTEMPTS):
         try:
             values, vectors = sla.eigsh(
-                laplacian,
+                symmetric,
                 k=k,
-                M=mass,
                 sigma=op.shift(),
+                OPinv=shift_invert,
                 which="LM",
                 v0=seeded_start(op.n, attempt),
-                ncv=min(op.n, 2 * k + 1 + 20 * attempt),
+                ncv=min(op.n, 2 * k + 21 if attempt else k + KRYLOV_MARGIN),
             )
+            vectors = inverse_root @ vectors
             break
         except (sla.ArpackError, sla.ArpackNoConvergence):
             continue

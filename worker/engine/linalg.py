@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.linalg import cholesky_banded, solve_triangular
+from scipy.linalg import cholesky_banded
+from scipy.linalg.lapack import dtrtri as trtri
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 MIN_BLOCK = 64
@@ -44,7 +45,8 @@ class BandedCholesky:
         self.bandwidth = int(offset.max()) if len(offset) else 0
         band = np.zeros((self.bandwidth + 1, n))
         np.add.at(band, (offset, ap.col[lower]), ap.data[lower])
-        factor = cholesky_banded(band, lower=True)  # factor[d, c] = L[c + d, c]
+        # cholesky_banded's factor[d, c] = L[c + d, c]; by column for _dense_block.
+        columns = np.ascontiguousarray(cholesky_banded(band, lower=True).T)
 
         size = max(self.bandwidth, MIN_BLOCK)
         self._starts = np.arange(0, n, size)
@@ -53,20 +55,36 @@ class BandedCholesky:
         for i, start in enumerate(self._starts):
             r0 = int(start)
             r1 = min(r0 + size, n)
-            diagonal = self._dense_block(factor, r0, r1, r0, r1)
-            inverse = solve_triangular(diagonal, np.eye(r1 - r0), lower=True, check_finite=False)
+            diagonal = self._dense_block(columns, r0, r1, r0, r1)
+            inverse, info = trtri(diagonal, lower=True)
+            if info:
+                raise np.linalg.LinAlgError(f"singular Cholesky block (trtri info {info})")
             self._inverse.append(inverse.astype(self.dtype))
             if i:
                 c0 = int(self._starts[i - 1])
-                self._below.append(self._dense_block(factor, r0, r1, c0, r0).astype(self.dtype))
+                self._below.append(self._dense_block(columns, r0, r1, c0, r0).astype(self.dtype))
 
-    def _dense_block(self, factor: np.ndarray, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+    def _dense_block(self, columns: np.ndarray, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+        """Block ``L[r0:r1, c0:c1]`` of the factor, dense.
+
+        ``columns`` is the band by column, C-contiguous: ``columns[c, d] = L[c + d, c]``,
+        at flat position ``c (w + 1) + d = r + c w`` for ``r = c + d`` (``w`` the
+        bandwidth). So the block is one strided view: rows step by 1, columns by ``w``.
+        Outside the band the view reads a neighbouring column's entries (every
+        position ``r + c w`` with ``r, c < n`` lies inside the array), which the mask
+        then zeroes.
+        """
+        w = self.bandwidth
+        flat = columns.reshape(-1)
+        view = np.lib.stride_tricks.as_strided(
+            flat[r0 + c0 * w :],
+            shape=(r1 - r0, c1 - c0),
+            strides=(flat.strides[0], w * flat.strides[0]),
+            writeable=False,
+        )
         rows, cols = np.ogrid[r0:r1, c0:c1]
         offset = rows - cols
-        inside = (offset >= 0) & (offset <= self.bandwidth)
-        block = np.zeros((r1 - r0, c1 - c0))
-        rr, cc = np.nonzero(inside)
-        block[rr, cc] = factor[offset[rr, cc], cc + c0]
+        block: np.ndarray = np.where((offset >= 0) & (offset <= w), view, 0.0)
         return block
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
