@@ -4,6 +4,9 @@ crash is raised so that the queue retries it."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -79,3 +82,25 @@ def test_a_mesh_error_keeps_its_code_and_a_crash_is_raised_for_a_retry():
             TOSCA / "missing.off.gz", "m.off.gz", "smeets2010-shrec", max_faces=10,
             time_limit=30, memory_limit_bytes=0,
         )  # fmt: skip
+
+
+def test_a_consumer_can_start_its_fork_server_before_the_first_job():
+    # In a fresh interpreter: this test process may have started one already.
+    script = (
+        "import os\n"
+        "from pathlib import Path\n"
+        "from worker.jobs.limits import start_fork_server\n"
+        "start_fork_server()\n"
+        "for stat in Path('/proc').glob('[0-9]*/stat'):\n"
+        "    try:\n"
+        "        fields = stat.read_text().rsplit(')', 1)[1].split()\n"
+        "        command = (stat.parent / 'cmdline').read_bytes()\n"
+        "    except OSError:\n"
+        "        continue\n"
+        "    if int(fields[1]) == os.getpid():\n"
+        "        print(command.replace(b'\\0', b' ').decode())\n"
+    )
+    children = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, check=True, timeout=60
+    ).stdout
+    assert "forkserver" in children

@@ -36,7 +36,7 @@ from typing import Any
 
 from huey import Huey, PriorityRedisHuey, SqliteHuey
 
-from .limits import describe_limited
+from .limits import describe_limited, start_fork_server
 from .settings import Queue, QueueSettings
 from .sources import local_file
 
@@ -176,6 +176,7 @@ def run_consumer(
     )
     if queue == "enroll" and settings.enroll_nice:
         os.nice(settings.enroll_nice)
+    start_fork_server()  # after the nice: the describing processes inherit it
     huey = make_huey(settings, queue)
     consumer = huey.create_consumer(
         workers=workers, worker_type="thread", initial_delay=0.1, backoff=1.15, max_delay=0.5
