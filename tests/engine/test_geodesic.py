@@ -141,3 +141,7 @@ def test_farthest_point_samples_cover_the_surface_whatever_the_vertex_order():
         farthest_point_samples(sphere.vertices, 10**6, ops.vertex_areas),
         np.arange(len(sphere.vertices)),
     )
+    # The definition, plainly: each next sample is the vertex farthest from all before.
+    distances = np.linalg.norm(bumpy[:, None] - bumpy[None, first], axis=2)
+    for i in range(1, len(first)):
+        assert first[i] == np.argmax(distances[:, :i].min(axis=1))
