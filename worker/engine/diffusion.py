@@ -107,6 +107,7 @@ def laplace_beltrami_eigenpairs(op: LaplaceBeltrami, k: int) -> tuple[np.ndarray
                 sigma=op.shift(),
                 OPinv=shift_invert,
                 which="LM",
+                tol=TOL.eigen_residual,
                 v0=seeded_start(op.n, attempt),
                 ncv=min(op.n, 2 * k + 21 if attempt else k + KRYLOV_MARGIN),
             )
