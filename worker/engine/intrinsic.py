@@ -131,7 +131,9 @@ def intrinsic_delaunay(mesh: IntrinsicMesh) -> IntrinsicMesh:
         k, opp = faces[f1, c1], faces[f2, c2]
         # Skip flips that would duplicate an existing edge or join a vertex to itself.
         new_keys = np.minimum(k, opp) * n + np.maximum(k, opp)
-        exists = np.isin(new_keys, sorted_keys) | (k == opp)
+        # (sorted_keys is sorted: a binary search, not np.isin's sort of all edges.)
+        at = np.minimum(np.searchsorted(sorted_keys, new_keys), len(sorted_keys) - 1)
+        exists = (sorted_keys[at] == new_keys) | (k == opp)
         # One flip per triangle per round: an edge wins if it is the most violating
         # edge of both of its triangles.
         best = np.full(m, -np.inf)
