@@ -119,7 +119,7 @@ def main() -> None:
         print(
             f"| {r['vertices']} | {r['load']:.3f} | {r['resample']:.3f} | {r['gdm']:.3f} | "
             f"{r['eigen_ddt']:.3f} | {r['modal']:.3f} | {r['descriptor']:.3f} | "
-            f"{r['shapedna']:.3f} | {r['ratio']:.1f}x | "
+            f"{r['shapedna']:.3f} | {r['ratio']:.2f}x | "
             f"{r['peak_rss_mb']:.0f} ({r['rss_before_mb']:.0f}) |"
         )
 
