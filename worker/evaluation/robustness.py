@@ -64,9 +64,9 @@ def _cross(
     queries: Mapping[str, np.ndarray],
     gallery: Mapping[str, np.ndarray],
     preset: Preset,
-    baseline: tuple[np.ndarray, np.ndarray] | None,
 ) -> dict[str, np.ndarray]:
-    """Row key -> (p, q) dissimilarity of every query to every gallery object."""
+    """Row key -> (p, q) dissimilarity of every query to every gallery object (and
+    ShapeDNA's, when both sides have ``BASELINE``)."""
     per: dict[str, np.ndarray] = {}
     for m in MODALITIES:
         sigma = gallery_sigma(gallery[m]) if preset.dissimilarity == "D2" else None
@@ -74,8 +74,8 @@ def _cross(
     weights = {m: preset.weight(m) for m in preset.fused_modalities}
     out = dict(per)
     out[PRESET_ROW] = fuse({m: per[m] for m in preset.fused_modalities}, preset.fusion, weights)
-    if baseline is not None:
-        q, g = baseline
+    if BASELINE in queries and BASELINE in gallery:
+        q, g = queries[BASELINE], gallery[BASELINE]
         both = shapedna_dissimilarity(np.concatenate([q, g]))
         out[BASELINE] = both[: len(q), len(q) :]
     return out
@@ -106,15 +106,12 @@ def tessellation_scores(
     below ``GAP_BAR``.
     """
     labels_arr = np.asarray([str(x) for x in labels])
-    has_baseline = BASELINE in originals
-    base = (originals[BASELINE], originals[BASELINE]) if has_baseline else None
-    among = _cross(originals, originals, preset, base)
+    among = _cross(originals, originals, preset)
     n = len(labels_arr)
     other_class = labels_arr[:, None] != labels_arr[None, :]
     cross = {}
     for name, (sources, vectors) in variants.items():
-        queries_base = (vectors[BASELINE], originals[BASELINE]) if has_baseline else None
-        cross[name] = (np.asarray(sources), _cross(vectors, originals, preset, queries_base))
+        cross[name] = (np.asarray(sources), _cross(vectors, originals, preset))
     scores: dict[str, dict] = {}
     for row, matrix in among.items():
         nearest_other = np.where(other_class, matrix, np.inf).min(axis=1)
@@ -179,8 +176,7 @@ def pose_invariance(
     """
     keys = [k for k in collection if k in poses]
     combined = {k: np.concatenate([poses[k], collection[k]]) for k in keys}
-    base = (combined[BASELINE], combined[BASELINE]) if BASELINE in combined else None
-    matrices = _cross(combined, combined, preset, base)
+    matrices = _cross(combined, combined, preset)
     p = len(next(iter(poses.values())))
     labels_arr = np.asarray([str(x) for x in labels])
     between = labels_arr[:, None] != labels_arr[None, :]
@@ -223,15 +219,10 @@ def cross_resolution(
     "poses": p}.
     """
 
-    def distances(
-        q: Mapping[str, np.ndarray], g: Mapping[str, np.ndarray]
-    ) -> dict[str, np.ndarray]:
-        return _cross(q, g, preset, (q[BASELINE], g[BASELINE]) if BASELINE in q else None)
-
     # Per direction: the queries against the other resolution, and against their own.
     directions = [
-        (distances(first, second), distances(first, first)),
-        (distances(second, first), distances(second, second)),
+        (_cross(first, second, preset), _cross(first, first, preset)),
+        (_cross(second, first, preset), _cross(second, second, preset)),
     ]
     out: dict[str, dict] = {}
     for row in directions[0][0]:
