@@ -4,6 +4,8 @@ seen along the mesh's axis of least extent."""
 from __future__ import annotations
 
 import io
+import subprocess
+import sys
 
 import numpy as np
 import trimesh
@@ -88,3 +90,33 @@ def test_previews_of_the_preview_mesh_are_the_same_bytes():
     small = preview_mesh(sphere)
     assert preview_glb(small) == preview_glb(sphere)
     assert thumbnail_png(small) == thumbnail_png(sphere)
+
+
+def test_imports_names_every_package_the_previews_load():
+    """What a fork server preloads for its jobs (worker/jobs/limits.py): a package
+    missing from ``IMPORTS`` would be imported again by every job."""
+    script = (
+        "import importlib, sys\n"
+        "import numpy as np\n"
+        "from worker.engine.mesh_io import Mesh\n"
+        "from worker.jobs.previews import IMPORTS, preview_glb, preview_mesh, thumbnail_png\n"
+        "for name in IMPORTS:\n"
+        "    importlib.import_module(name)\n"
+        "# A torus of 24 x 12 quads, made with numpy alone (nothing the previews import).\n"
+        "u, v = np.meshgrid(np.arange(24) * np.pi / 12, np.arange(12) * np.pi / 6, indexing='ij')\n"
+        "r = 3 + np.cos(v)\n"
+        "vertices = np.stack([r * np.cos(u), r * np.sin(u), np.sin(v)], -1).reshape(-1, 3)\n"
+        "i, j = np.meshgrid(np.arange(24), np.arange(12), indexing='ij')\n"
+        "a, b = i * 12 + j, (i + 1) % 24 * 12 + j\n"
+        "c, d = (i + 1) % 24 * 12 + (j + 1) % 12, i * 12 + (j + 1) % 12\n"
+        "faces = np.stack([a, b, c, a, c, d], -1).reshape(-1, 3)\n"
+        "mesh = Mesh(vertices=vertices, faces=faces)\n"
+        "before = {name.split('.')[0] for name in sys.modules}\n"
+        "small = preview_mesh(mesh, max_faces=100)\n"
+        "preview_glb(small), thumbnail_png(small)\n"
+        "print(sorted({name.split('.')[0] for name in sys.modules} - before))\n"
+    )
+    loaded = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, check=True, timeout=120
+    ).stdout
+    assert loaded.strip() == "[]"
