@@ -26,6 +26,7 @@ from worker.engine.intrinsic import (
 from worker.engine.modal import (
     core_diagonal,
     ddt_core,
+    extended_basis,
     hosvd_core,
     modal_gdm,
     modal_gdm_reference,
@@ -33,6 +34,7 @@ from worker.engine.modal import (
     orthonormal_basis,
     voronoi_areas,
 )
+from worker.engine.tol import TOL
 
 TIMES = (100.0, 200.0, 400.0, 800.0, 1500.0)
 
@@ -159,6 +161,20 @@ def test_orthonormal_basis_drops_dependent_columns():
     np.testing.assert_allclose(q @ (q.T @ columns), columns, atol=1e-10)
 
 
+def test_extended_basis_spans_both_blocks_as_the_pivoted_qr_does():
+    rng = np.random.default_rng(6)
+    first, _ = np.linalg.qr(rng.standard_normal((200, 30)))
+    extra = rng.standard_normal((200, 3))
+    # A column inside the first block and a repeated one add no direction.
+    more = np.column_stack([extra, first @ rng.standard_normal(30), extra[:, 0]])
+    q = extended_basis(first, more)
+    reference = orthonormal_basis(np.column_stack([first, more]))
+    assert q.shape == reference.shape == (200, 33)
+    np.testing.assert_array_equal(q[:, :30], first)
+    np.testing.assert_allclose(q.T @ q, np.eye(33), atol=1e-13)
+    np.testing.assert_allclose(q @ q.T, reference @ reference.T, atol=1e-12)
+
+
 def _weighted_eigenpairs(k=80):
     """Eigenpairs orthonormal in the lumped-area inner product, and the areas."""
     sphere = trimesh.creation.icosphere(subdivisions=3)
@@ -174,7 +190,9 @@ def _weighted_eigenpairs(k=80):
 @pytest.mark.slow  # dense DDTs
 def test_area_weighted_core_equals_the_hosvd_of_the_dense_weighted_tensor():
     values, functions, mass = _weighted_eigenpairs()
-    np.testing.assert_allclose(functions.T @ (mass[:, None] * functions), np.eye(80), atol=1e-8)
+    # Orthonormal in the areas to ddt_core's tolerance: its basis is the eigenvectors.
+    gram = functions.T @ (mass[:, None] * functions)
+    np.testing.assert_allclose(gram, np.eye(80), atol=TOL.orthonormal)
     dense = diffusion_distance_tensor(values, functions, TIMES)
     root = np.sqrt(mass)
     weighted = dense * (root[:, None] * root[None, :])[:, :, None]
@@ -186,7 +204,10 @@ def test_area_weighted_core_equals_the_hosvd_of_the_dense_weighted_tensor():
 
 
 def test_unit_weights_give_the_papers_core():
+    # The paper's eigenvectors are orthonormal in its A, not in unit weights: ddt_core
+    # must see that and take the pivoted QR, whose core is the paper's.
     values, vectors = _eigenpairs(40)
+    assert np.abs(vectors.T @ vectors - np.eye(40)).max() > TOL.orthonormal
     paper = ddt_core(values, vectors, TIMES, (10, 10, 5))
     ones = ddt_core(values, vectors, TIMES, (10, 10, 5), np.ones(len(vectors)))
     np.testing.assert_allclose(ones, paper, atol=1e-10 * paper.max())

@@ -200,17 +200,35 @@ def core_diagonal(core: np.ndarray) -> np.ndarray:
     return diagonal
 
 
-def orthonormal_basis(columns: np.ndarray) -> np.ndarray:
+def orthonormal_basis(columns: np.ndarray, scale: float | None = None) -> np.ndarray:
     """Orthonormal basis of the span of ``columns`` (n, m), n >> m, rank-revealing.
 
     Householder QR with column pivoting; directions whose pivot is below
-    ``TOL.basis_rank`` of the largest are numerically absent and dropped (the
-    constant vector is also the first eigenvector, so the columns are dependent).
+    ``TOL.basis_rank`` of ``scale`` (by default the largest pivot, i.e. the longest
+    column) are numerically absent and dropped (the constant vector is also the first
+    eigenvector, so the columns are dependent).
     """
     q, r, _ = la.qr(columns, mode="economic", pivoting=True)
     pivots = np.abs(np.diag(r))
-    basis: np.ndarray = q[:, pivots > TOL.basis_rank * pivots[0]]
+    reference = pivots[0] if scale is None else scale
+    basis: np.ndarray = q[:, pivots > TOL.basis_rank * reference]
     return basis
+
+
+def extended_basis(orthonormal: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """Orthonormal basis of the span of ``[orthonormal, columns]``, given the first
+    block's orthonormal columns (n, k) and a few more columns (n, m), m small.
+
+    The same span as :func:`orthonormal_basis` of both blocks, without the pivoted QR
+    of all ``k + m`` columns: ``columns`` are orthogonalized against the first block
+    (two passes of classical Gram-Schmidt, which keeps them orthogonal to working
+    precision), and what is left of them gets its own rank-revealing basis, measured
+    against the longest column of either block, as :func:`orthonormal_basis` does.
+    """
+    rest = columns - orthonormal @ (orthonormal.T @ columns)
+    rest -= orthonormal @ (orthonormal.T @ rest)
+    scale = max(1.0, float(np.linalg.norm(columns, axis=0).max()))
+    return np.column_stack([orthonormal, orthonormal_basis(rest, scale)])
 
 
 def ddt_core(
@@ -233,6 +251,12 @@ def ddt_core(
     times ``sum w``: for ``w = 1`` that is the paper's division by the sum, times
     ``n`` (:func:`normalize_slices`).
 
+    With ``mass``, ``W^1/2 Phi`` is already orthonormal (the eigenvectors are, in the
+    weights' inner product) and contains ``W^1/2 1`` (the first eigenvector is
+    constant), so ``Q`` is ``W^1/2 Phi`` extended by the ``r_t``
+    (:func:`extended_basis`); columns that are not orthonormal to ``TOL.orthonormal``
+    get the pivoted QR of all of them instead (:func:`orthonormal_basis`).
+
     Parameters
     ----------
     eigenvalues : (k,) float, in the unit of ``times``.
@@ -250,16 +274,26 @@ def ddt_core(
     weights = np.ones(n) if mass is None else np.asarray(mass, dtype=np.float64)
     root = np.sqrt(weights)
     total = float(weights.sum())
-    psis = [eigenvectors * np.exp(-eigenvalues * t) for t in times]
-    rows = [np.einsum("ik,ik->i", psi, psi) for psi in psis]
-    q = orthonormal_basis(root[:, None] * np.column_stack([np.ones(n), *rows, eigenvectors]))
-    q_one = q.T @ root
+    decays = np.exp(-np.outer(eigenvalues, times))  # (k, s): column t is exp(-Lambda t)
+    rows = (eigenvectors**2) @ decays**2  # (n, s): column t is r_t
+    phi = root[:, None] * eigenvectors
+    others = root[:, None] * np.column_stack([np.ones(n), rows])
+    gram = phi.T @ phi
+    if mass is not None and np.abs(gram - np.eye(len(gram))).max() <= TOL.orthonormal:
+        q = extended_basis(phi, others[:, 1:])
+    else:
+        q = orthonormal_basis(np.column_stack([others, phi]))
+    q_one, q_rows = np.hsplit(q.T @ others, [1])
+    q_one = q_one[:, 0]
+    q_phi = q.T @ phi  # Q^T W^1/2 Psi_t = q_phi exp(-Lambda t), for every t
+    mass_phi = weights @ eigenvectors
     slices = []
-    for psi, r in zip(psis, rows, strict=True):
-        q_r = q.T @ (root * r)
-        q_psi = q.T @ (root[:, None] * psi)
+    for j in range(len(times)):
+        q_r, q_psi = q_rows[:, j], q_phi * decays[:, j]
         # sum_ij w_i w_j d_ij of eq. (4), from the same low-rank form.
-        integral = 2.0 * total * (weights @ r) - 2.0 * np.sum((weights @ psi) ** 2)
+        integral = 2.0 * total * (weights @ rows[:, j]) - 2.0 * np.sum(
+            (mass_phi * decays[:, j]) ** 2
+        )
         small = np.outer(q_r, q_one) + np.outer(q_one, q_r) - 2.0 * q_psi @ q_psi.T
         slices.append(small * (total / integral))
     return hosvd_core(np.stack(slices, axis=2), core_shape)

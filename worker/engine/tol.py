@@ -29,6 +29,9 @@ class Tolerances:
     eigen_residual: float = 1e-10
     # Relative eigenvalue of a Gram matrix below which a direction is numerically absent.
     basis_rank: float = 1e-12
+    # Columns whose Gram matrix is within this of the identity (element-wise) are an
+    # orthonormal basis as they are (ARPACK's eigenvectors are, to about 4e-15).
+    orthonormal: float = 1e-10
     # Regularization of the singular Poisson system of the heat method, relative.
     poisson_regularization: float = 1e-9
     # Largest diameter / sqrt(heat time): the heat step decays like exp(-d / sqrt(t)),
