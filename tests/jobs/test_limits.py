@@ -111,11 +111,14 @@ def test_a_job_starts_with_the_engine_and_the_previews_libraries_imported(tmp_pa
     # In a fresh interpreter, a job's process from the fork server reports its modules:
     # what the server preloaded, a job does not import again (0.4 s a job for the previews).
     report = tmp_path / "modules.txt"
+    # (The fork server is one per process: any forkserver context's process comes from it.)
     script = (
-        "from worker.jobs.limits import _context, start_fork_server\n"
+        "import multiprocessing\n"
+        "from worker.jobs.limits import start_fork_server\n"
         "start_fork_server()\n"
         "code = 'import sys; open(%r, \"w\").write(chr(10).join(sys.modules))'\n"
-        f"child = _context().Process(target=exec, args=(code % {str(report)!r},))\n"
+        "context = multiprocessing.get_context('forkserver')\n"
+        f"child = context.Process(target=exec, args=(code % {str(report)!r},))\n"
         "child.start()\n"
         "child.join()\n"
     )
