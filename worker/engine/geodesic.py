@@ -131,7 +131,8 @@ class HeatMethod:
             single = diameter / np.sqrt(t) <= TOL.heat_max_decay_single
             heat_dtype = np.float32 if single else np.float64
             self._heat = BandedCholesky(heat, dtype=heat_dtype)
-            self._poisson = BandedCholesky(poisson, dtype=np.float32)
+            # Both systems have the sparsity of the stiffness matrix: one ordering.
+            self._poisson = BandedCholesky(poisson, dtype=np.float32, order=self._heat.perm)
             self._gradient = ops.gradient.astype(heat_dtype)
             self._divergence = ops.divergence.astype(np.float32)
 
@@ -195,9 +196,8 @@ def geodesic_distance_matrix(
     (n, n) float32, symmetric with zero diagonal, in the mesh's length unit (single
     precision, as the Poisson step that makes it: 2,500 vertices take 25 MB).
     """
-    solver = HeatMethod(mesh, ops, time_factor, n_reference)
     n = mesh.n_vertices
-    gdm = _distance_columns(solver, np.arange(n))
+    gdm = sample_distances(mesh, ops, np.arange(n), time_factor, n_reference)
     # Symmetrize block by block: gdm += gdm.T would copy the whole transpose first.
     for start in range(0, n, SOURCE_BLOCK):
         rows = slice(start, min(start + SOURCE_BLOCK, n))

@@ -31,14 +31,23 @@ class BandedCholesky:
     dtype : precision of the solves. The factorization is always computed in
         float64; ``float32`` then halves the cost of every solve, for systems whose
         solution needs only single precision.
+    order : (n,) int, the band ordering ``P`` (another factor's ``perm``, for a
+        matrix of the same sparsity); by default reverse Cuthill-McKee of ``matrix``.
     """
 
-    def __init__(self, matrix: sp.csc_matrix | sp.csr_matrix, dtype: type = np.float64) -> None:
+    def __init__(
+        self,
+        matrix: sp.csc_matrix | sp.csr_matrix,
+        dtype: type = np.float64,
+        order: np.ndarray | None = None,
+    ) -> None:
         self.dtype = np.dtype(dtype)
         a = sp.csr_matrix(matrix)
         n = a.shape[0]
         self.n = n
-        self.perm = reverse_cuthill_mckee(a, symmetric_mode=True).astype(np.int64)
+        if order is None:
+            order = reverse_cuthill_mckee(a, symmetric_mode=True)
+        self.perm = np.asarray(order, dtype=np.int64)
         ap = a[self.perm][:, self.perm].tocoo()
         lower = ap.row >= ap.col
         offset = (ap.row - ap.col)[lower]
