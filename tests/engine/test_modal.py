@@ -32,6 +32,7 @@ from worker.engine.modal import (
     modal_gdm_reference,
     normalize_slices,
     orthonormal_basis,
+    vertex_modes_core,
     voronoi_areas,
 )
 from worker.engine.tol import TOL
@@ -201,6 +202,46 @@ def test_area_weighted_core_equals_the_hosvd_of_the_dense_weighted_tensor():
     expected = hosvd_core(weighted, (20, 20, 5))
     fast = ddt_core(values, functions, TIMES, (20, 20, 5), mass)
     np.testing.assert_allclose(fast, expected, atol=1e-9 * expected.max())
+
+
+def _vertex_modes_reference(tensor: np.ndarray, rank: int) -> np.ndarray:
+    """The partial Tucker in plain numpy: the mode-1 unfolding's leading left singular
+    vectors on both vertex modes of every slice (the tensor is symmetric in them)."""
+    u = np.linalg.svd(tensor.reshape(len(tensor), -1), full_matrices=False)[0][:, :rank]
+    return np.abs(np.einsum("ai,abt,bj->ijt", u, tensor, u))
+
+
+@pytest.mark.slow  # dense DDTs
+def test_vertex_modes_core_of_the_weighted_ddt_equals_the_plain_one():
+    values, functions, mass = _weighted_eigenpairs()
+    dense = diffusion_distance_tensor(values, functions, TIMES)
+    root = np.sqrt(mass)
+    weighted = dense * (root[:, None] * root[None, :])[:, :, None]
+    weighted *= mass.sum() / np.einsum("i,ijs,j->s", mass, dense, mass)
+    expected = _vertex_modes_reference(weighted, 20)
+    fast = ddt_core(values, functions, TIMES, (20, 20, 5), mass, mix_times=False)
+    assert fast.shape == (20, 20, 5)
+    np.testing.assert_allclose(fast, expected, atol=1e-9 * expected.max())
+    direct = vertex_modes_core(weighted, (20, 20))
+    np.testing.assert_allclose(direct, expected, atol=1e-9 * expected.max())
+    # Vertex order and eigenvector signs do not move it.
+    perm = np.random.default_rng(3).permutation(len(functions))
+    flipped = functions * np.where(np.arange(functions.shape[1]) % 2, -1.0, 1.0)
+    again = ddt_core(values, flipped[perm], TIMES, (20, 20, 5), mass[perm], mix_times=False)
+    np.testing.assert_allclose(again, fast, atol=1e-9 * fast.max())
+
+
+def test_vertex_modes_core_keeps_each_time_its_own_slice():
+    """Reordering the times reorders the slices of the core and changes nothing else;
+    the full HOSVD mixes them, so its slices are other numbers."""
+    values, functions, mass = _weighted_eigenpairs(40)
+    order = [3, 0, 4, 1, 2]
+    shuffled = tuple(TIMES[i] for i in order)
+    kept = ddt_core(values, functions, TIMES, (10, 10, 5), mass, mix_times=False)
+    again = ddt_core(values, functions, shuffled, (10, 10, 5), mass, mix_times=False)
+    np.testing.assert_allclose(again, kept[:, :, order], atol=1e-10 * kept.max())
+    mixed = ddt_core(values, functions, TIMES, (10, 10, 5), mass)
+    assert not np.allclose(core_diagonal(mixed), core_diagonal(kept), rtol=0.1)
 
 
 def test_unit_weights_give_the_papers_core():

@@ -12,6 +12,8 @@ from worker.engine.presets import DEFAULT_PRESET, MODALITIES, PRESETS, Preset, g
 def test_inconsistent_presets_are_refused():
     with pytest.raises(ValueError, match="more slices than diffusion times"):
         Preset(name="x", version=1, ddt_core_shape=(20, 20, 6))
+    with pytest.raises(ValueError, match="one slice per time"):
+        Preset(name="x", version=1, ddt_core_shape=(20, 20, 4), ddt_mix_times=False)
     with pytest.raises(ValueError, match="spectrum_size must be below n_eigenpairs"):
         Preset(name="x", version=1, spectrum_size=150, n_eigenpairs=150)
     with pytest.raises(ValueError, match=r"unknown modalities \['colour'\]"):

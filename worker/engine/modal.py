@@ -28,7 +28,7 @@ import numpy as np
 import scipy.linalg as la
 import scipy.sparse.linalg as sla
 import tensorly as tl
-from tensorly.decomposition import tucker
+from tensorly.decomposition import partial_tucker, tucker
 
 from .diffusion import seeded_start
 from .tol import TOL
@@ -185,6 +185,35 @@ def hosvd_core(tensor: np.ndarray, core_shape: tuple[int, int, int]) -> np.ndarr
     return magnitudes
 
 
+def vertex_modes_core(tensor: np.ndarray, rank: tuple[int, int]) -> np.ndarray:
+    """Core of a truncated HOSVD in the first two modes only (a partial Tucker).
+
+    Eqs. (5)-(7) permute the first two modes, the vertices; the third, the
+    diffusion times, has its own order and needs no factor. Decomposing only the
+    vertex modes keeps it: slice ``k`` of the core is ``U1^T T_k U2`` for the leading
+    singular vectors ``U1``, ``U2`` of the two vertex unfoldings (tensorly's
+    ``partial_tucker`` with no iterations), i.e. time ``t_k``'s own slice. The full
+    HOSVD (:func:`hosvd_core`) also rotates that mode by the time unfolding's singular
+    vectors, a shape-dependent mixture of the times whose later slices are
+    differences of nearly equal slices, elements that cross zero. Absolute values,
+    as :func:`hosvd_core`, for the same invariance to signs.
+
+    Parameters
+    ----------
+    tensor : (p, p, s) float
+    rank : (r1, r2)
+
+    Returns
+    -------
+    (r1, r2, s) float, non-negative.
+    """
+    (core, _), _ = partial_tucker(
+        tl.tensor(tensor), rank=list(rank), modes=[0, 1], n_iter_max=0, init="svd"
+    )
+    magnitudes: np.ndarray = np.abs(tl.to_numpy(core))
+    return magnitudes
+
+
 def core_diagonal(core: np.ndarray) -> np.ndarray:
     """The elements ``S[i, i, k]`` of a core whose first two modes are symmetric.
 
@@ -231,12 +260,19 @@ def extended_basis(orthonormal: np.ndarray, columns: np.ndarray) -> np.ndarray:
     return np.column_stack([orthonormal, orthonormal_basis(rest, scale)])
 
 
+def _is_orthonormal(columns: np.ndarray) -> bool:
+    """Whether the columns are orthonormal to ``TOL.orthonormal``."""
+    gram = columns.T @ columns
+    return bool(np.abs(gram - np.eye(len(gram))).max() <= TOL.orthonormal)
+
+
 def ddt_core(
     eigenvalues: np.ndarray,
     eigenvectors: np.ndarray,
     times: tuple[float, ...],
     core_shape: tuple[int, int, int],
     mass: np.ndarray | None = None,
+    mix_times: bool = True,
 ) -> np.ndarray:
     """HOSVD core of the normalized DDT without forming the ``n x n x s`` tensor.
 
@@ -265,10 +301,13 @@ def ddt_core(
     times : diffusion times.
     core_shape : (r1, r2, r3)
     mass : (n,) float, lumped vertex areas, or None for the paper's vertex matrices.
+    mix_times : True, the whole HOSVD (the paper); False, the vertex modes only
+        (:func:`vertex_modes_core`), so the core's third size is ``len(times)``.
 
     Returns
     -------
-    core_shape float, as :func:`hosvd_core` of the normalized dense (weighted) DDT.
+    core_shape float, as :func:`hosvd_core` (or :func:`vertex_modes_core`) of the
+    normalized dense (weighted) DDT.
     """
     n = eigenvectors.shape[0]
     weights = np.ones(n) if mass is None else np.asarray(mass, dtype=np.float64)
@@ -278,13 +317,12 @@ def ddt_core(
     rows = (eigenvectors**2) @ decays**2  # (n, s): column t is r_t
     phi = root[:, None] * eigenvectors
     others = root[:, None] * np.column_stack([np.ones(n), rows])
-    gram = phi.T @ phi
-    if mass is not None and np.abs(gram - np.eye(len(gram))).max() <= TOL.orthonormal:
+    if mass is not None and _is_orthonormal(phi):
         q = extended_basis(phi, others[:, 1:])
     else:
         q = orthonormal_basis(np.column_stack([others, phi]))
-    q_one, q_rows = np.hsplit(q.T @ others, [1])
-    q_one = q_one[:, 0]
+    q_others = q.T @ others
+    q_one, q_rows = q_others[:, 0], q_others[:, 1:]
     q_phi = q.T @ phi  # Q^T W^1/2 Psi_t = q_phi exp(-Lambda t), for every t
     mass_phi = weights @ eigenvectors
     slices = []
@@ -296,4 +334,7 @@ def ddt_core(
         )
         small = np.outer(q_r, q_one) + np.outer(q_one, q_r) - 2.0 * q_psi @ q_psi.T
         slices.append(small * (total / integral))
-    return hosvd_core(np.stack(slices, axis=2), core_shape)
+    tensor = np.stack(slices, axis=2)
+    if mix_times:
+        return hosvd_core(tensor, core_shape)
+    return vertex_modes_core(tensor, core_shape[:2])

@@ -154,10 +154,17 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
     op = LaplaceBeltrami.from_fem(ops)
     eigenvalues, eigenvectors = laplace_beltrami_eigenpairs(op, preset.n_eigenpairs)
     if mass is None:  # eq. (4) with the paper's A and time unit
-        core = ddt_core(eigenvalues, eigenvectors, preset.diffusion_times, preset.ddt_core_shape)
+        values, functions = eigenvalues, eigenvectors
     else:
         values, functions = surface_eigenpairs(op, eigenvalues, eigenvectors, preset.n_vertices)
-        core = ddt_core(values, functions, preset.diffusion_times, preset.ddt_core_shape, mass)
+    core = ddt_core(
+        values,
+        functions,
+        preset.diffusion_times,
+        preset.ddt_core_shape,
+        mass,
+        mix_times=preset.ddt_mix_times,
+    )
     ddt = core_diagonal(core) if preset.ddt_elements == "diagonal" else core
     spectrum = normalized_spectrum(op, eigenvalues, preset.spectrum_size)
     lap("eigen_ddt")
