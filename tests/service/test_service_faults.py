@@ -1,12 +1,16 @@
-"""Durable jobs: a worker killed mid-job, and a restart with work still queued."""
+"""Durable jobs: a worker killed mid-job, a restart with work still queued, and a
+restart on a database described by the previous version of the preset."""
 
 from __future__ import annotations
 
 import os
 import signal
+import sqlite3
 import time
 
-from .conftest import TIMEOUT, Service
+from worker.engine.presets import DEFAULT_PRESET, get_preset
+
+from .conftest import TIMEOUT, Service, migrated_service, running
 
 
 def _wait_processing(service: Service, job_id: int) -> dict:
@@ -57,3 +61,37 @@ def test_restart_loses_nothing_queued_and_reloads_the_index(service: Service, ga
     assert service.wait_mesh(mesh_id)["status"] == "ready"
     matches = service.client.post(f"/meshes/{mesh_id}/similar", params={"k": 2}).json()
     assert matches["matches"][0]["label"] == "wolf"
+
+
+def test_a_new_preset_version_describes_every_stored_mesh_again(tmp_path_factory):
+    """Deploying a new version of the default preset (v2 -> v3) over the data of the
+    previous one: the service queues every mesh without a descriptor of the current
+    version, rebuilds the index from the new descriptors and answers as before."""
+    version = get_preset(DEFAULT_PRESET).version
+    with running(migrated_service(tmp_path_factory, "older-version"), workers=1) as svc:
+        ids = {}
+        for name, label in (("wolf0", "wolf"), ("centaur0", "centaur")):
+            ids[name] = svc.upload(name, label).json()["id"]
+            assert svc.wait_mesh(ids[name])["status"] == "ready"
+        svc.stop_api()
+        # What the previous version left: its descriptors, its jobs and its index.
+        with sqlite3.connect(svc.data_dir / "shapes.sqlite3") as db:
+            db.execute("UPDATE descriptors SET preset_version = preset_version - 1")
+            db.execute("UPDATE jobs SET preset_version = preset_version - 1")
+        index = svc.data_dir / "index"
+        current = index / f"{DEFAULT_PRESET}-v{version}"
+        current.rename(index / f"{DEFAULT_PRESET}-v{version - 1}")
+
+        svc.start_api()
+        deadline = time.monotonic() + TIMEOUT
+        for mesh_id in ids.values():
+            while True:
+                body = svc.client.get(f"/meshes/{mesh_id}").json()
+                described = (body.get("descriptor") or {}).get("preset_version")
+                if body["status"] == "ready" and described == version:
+                    break
+                assert body["status"] != "failed" and time.monotonic() < deadline, body
+                time.sleep(0.2)
+        assert svc.client.get("/ready").json()["checks"]["index"] == "ok (2 shapes)"
+        matches = svc.query("wolf1", k=2).json()["matches"]
+        assert [m["label"] for m in matches] == ["wolf", "centaur"]
