@@ -188,17 +188,23 @@ def _weighted_eigenpairs(k=80):
     return values, functions, ops.vertex_areas
 
 
+def _dense_weighted_ddt(values, functions, mass) -> np.ndarray:
+    """The dense DDT weighted ``M^1/2 D_t M^1/2``, each slice divided by its
+    area-weighted mean times the area (what ``ddt_core`` decomposes with ``mass``)."""
+    dense = diffusion_distance_tensor(values, functions, TIMES)
+    root = np.sqrt(mass)
+    weighted = dense * (root[:, None] * root[None, :])[:, :, None]
+    weighted *= mass.sum() / np.einsum("i,ijs,j->s", mass, dense, mass)
+    return weighted
+
+
 @pytest.mark.slow  # dense DDTs
 def test_area_weighted_core_equals_the_hosvd_of_the_dense_weighted_tensor():
     values, functions, mass = _weighted_eigenpairs()
     # Orthonormal in the areas to ddt_core's tolerance: its basis is the eigenvectors.
     gram = functions.T @ (mass[:, None] * functions)
     np.testing.assert_allclose(gram, np.eye(80), atol=TOL.orthonormal)
-    dense = diffusion_distance_tensor(values, functions, TIMES)
-    root = np.sqrt(mass)
-    weighted = dense * (root[:, None] * root[None, :])[:, :, None]
-    # Each slice divided by its area-weighted mean times the area.
-    weighted *= mass.sum() / np.einsum("i,ijs,j->s", mass, dense, mass)
+    weighted = _dense_weighted_ddt(values, functions, mass)
     expected = hosvd_core(weighted, (20, 20, 5))
     fast = ddt_core(values, functions, TIMES, (20, 20, 5), mass)
     np.testing.assert_allclose(fast, expected, atol=1e-9 * expected.max())
@@ -214,10 +220,7 @@ def _vertex_modes_reference(tensor: np.ndarray, rank: int) -> np.ndarray:
 @pytest.mark.slow  # dense DDTs
 def test_vertex_modes_core_of_the_weighted_ddt_equals_the_plain_one():
     values, functions, mass = _weighted_eigenpairs()
-    dense = diffusion_distance_tensor(values, functions, TIMES)
-    root = np.sqrt(mass)
-    weighted = dense * (root[:, None] * root[None, :])[:, :, None]
-    weighted *= mass.sum() / np.einsum("i,ijs,j->s", mass, dense, mass)
+    weighted = _dense_weighted_ddt(values, functions, mass)
     expected = _vertex_modes_reference(weighted, 20)
     fast = ddt_core(values, functions, TIMES, (20, 20, 5), mass, mix_times=False)
     assert fast.shape == (20, 20, 5)
