@@ -11,12 +11,20 @@ import trimesh
 from worker.engine import diffusion
 from worker.engine.diffusion import (
     LaplaceBeltrami,
+    averaged_mass_spectrum,
     diffusion_distance_tensor,
     laplace_beltrami_eigenpairs,
     normalized_spectrum,
+    ritz_values,
     surface_eigenpairs,
 )
-from worker.engine.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay
+from worker.engine.intrinsic import (
+    IntrinsicMesh,
+    averaged_mass,
+    fem_operators,
+    intrinsic_delaunay,
+    surface_operators,
+)
 from worker.engine.mesh_io import load_mesh
 from worker.engine.modal import core_diagonal, ddt_core
 from worker.engine.presets import get_preset
@@ -120,6 +128,86 @@ def test_spectrum_is_scale_invariant_and_matches_sphere():
     # Unit sphere: eigenvalues l(l+1) with multiplicity 2l+1, area 4 pi.
     expected = np.array([2.0] * 3 + [6.0] * 5) * 4 * np.pi
     np.testing.assert_allclose(spectra[0], expected, rtol=0.01)
+
+
+def test_averaged_mass_is_the_mean_of_lumped_and_consistent():
+    """Against the consistent mass assembled face by face from its textbook element
+    matrix area/12 * [[2, 1, 1], [1, 2, 1], [1, 1, 2]]."""
+    sphere = trimesh.creation.icosphere(subdivisions=1)
+    noisy = sphere.vertices * (1 + 0.2 * np.random.default_rng(5).random((len(sphere.vertices), 1)))
+    mesh, ops = surface_operators(noisy, sphere.faces)
+    consistent = np.zeros((mesh.n_vertices, mesh.n_vertices))
+    element = (np.ones((3, 3)) + np.eye(3)) / 12.0
+    for face, area in zip(mesh.faces, ops.face_areas, strict=True):
+        consistent[np.ix_(face, face)] += area * element
+    mass = averaged_mass(mesh, ops.face_areas).toarray()
+    np.testing.assert_allclose(mass, 0.5 * (np.diag(ops.vertex_areas) + consistent), atol=1e-15)
+    np.testing.assert_allclose(mass.sum(axis=1), ops.vertex_areas, rtol=1e-12)
+    assert np.linalg.eigvalsh(mass).min() > 0
+
+
+def test_averaged_mass_spectrum_is_the_sphere_where_the_lumped_is_not():
+    """Unit sphere at the default's 2,500 vertices: the first 48 eigenvalues
+    (l = 1..6) within 0.4% of l(l+1) with the averaged mass; the lumped mass is
+    more than 1% off at the top."""
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    mesh, ops = surface_operators(sphere.vertices, sphere.faces)
+    op = LaplaceBeltrami.from_fem(ops)
+    values, vectors = laplace_beltrami_eigenpairs(op, 100)
+    degrees = np.repeat(np.arange(1, 7), 2 * np.arange(1, 7) + 1)
+    exact = degrees * (degrees + 1) * 4 * np.pi
+    averaged = averaged_mass_spectrum(mesh, ops, vectors, 48)
+    lumped = normalized_spectrum(op, values, 48)
+    assert np.abs(averaged / exact - 1).max() < 0.004
+    assert np.abs(lumped / exact - 1).max() > 0.01
+
+
+def _averaged_mass_full_solve(mesh, ops, count: int) -> np.ndarray:
+    """The plain reference: ``K phi = lambda M phi`` with the averaged mass solved
+    as written (shift-invert Lanczos on the generalized problem)."""
+    area = float(ops.face_areas.sum())
+    values = sla.eigsh(
+        ops.stiffness.tocsc(),
+        k=count + 1,
+        M=averaged_mass(mesh, ops.face_areas).tocsc(),
+        sigma=-1e-3 * 4 * np.pi / area,
+        v0=np.random.default_rng(0).standard_normal(mesh.n_vertices),
+    )[0]
+    return np.sort(values)[1:] * area
+
+
+def test_ritz_values_are_the_dense_solve_on_the_whole_space():
+    """With a basis of every vertex the Ritz values are the problem's eigenvalues."""
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    noisy = sphere.vertices * (1 + 0.1 * np.random.default_rng(3).random((162, 1)))
+    mesh, ops = surface_operators(noisy, sphere.faces)
+    mass = averaged_mass(mesh, ops.face_areas)
+    basis = np.random.default_rng(4).standard_normal((mesh.n_vertices, mesh.n_vertices))
+    dense = la.eigh(ops.stiffness.toarray(), mass.toarray(), eigvals_only=True)
+    ritz = ritz_values(ops.stiffness, mass, basis)
+    np.testing.assert_allclose(ritz, dense, rtol=1e-7, atol=1e-10)
+
+
+@pytest.mark.parametrize("source", ["noisy sphere", "centaur3.off.gz", "david0.off.gz"])
+def test_averaged_mass_spectrum_matches_its_full_solve(source, tosca_dir):
+    """The default's optimized path (Ritz values in the span of eq. (3)'s 100
+    eigenvectors) against the full averaged-mass eigenproblem: within 0.5% for the
+    50 eigenvalues kept (measured 0.13% at the 50th on a TOSCA cat)."""
+    preset = get_preset("smeets2010-surface")
+    if source == "noisy sphere":
+        sphere = trimesh.creation.icosphere(subdivisions=4)
+        rng = np.random.default_rng(6)
+        vertices = sphere.vertices * (1 + 0.05 * rng.random((len(sphere.vertices), 1)))
+        faces = sphere.faces
+    else:
+        resampled = resample_mesh(load_mesh(tosca_dir / source), preset.n_vertices)
+        vertices, faces = resampled.vertices, resampled.faces
+    mesh, ops = surface_operators(vertices, faces)
+    _, vectors = laplace_beltrami_eigenpairs(LaplaceBeltrami.from_fem(ops), preset.n_eigenpairs)
+    spectrum = averaged_mass_spectrum(mesh, ops, vectors, preset.spectrum_size)
+    reference = _averaged_mass_full_solve(mesh, ops, preset.spectrum_size)
+    np.testing.assert_allclose(spectrum, reference, rtol=5e-3)
+    assert np.all(spectrum >= reference * (1 - 1e-9))  # Ritz values bound from above
 
 
 def test_diffusion_distances_are_symmetric_and_shrink_with_time():

@@ -64,9 +64,9 @@ def test_restart_loses_nothing_queued_and_reloads_the_index(service: Service, ga
 
 
 def test_a_new_preset_version_describes_every_stored_mesh_again(tmp_path_factory):
-    """Deploying a new version of the default preset (v2 -> v3) over the data of the
-    previous one: the service queues every mesh without a descriptor of the current
-    version, rebuilds the index from the new descriptors and answers as before."""
+    """Deploying a new version of the default preset (as v3 -> v4) over the data of
+    the previous one: the service queues every mesh without a descriptor of the
+    current version, rebuilds the index from the new descriptors and answers as before."""
     version = get_preset(DEFAULT_PRESET).version
     with running(migrated_service(tmp_path_factory, "older-version"), workers=1) as svc:
         ids = {}

@@ -243,6 +243,40 @@ def fem_operators(mesh: IntrinsicMesh) -> FEMOperators:
     return FEMOperators(gradient, area, stiffness, vertex_areas)
 
 
+def averaged_mass(mesh: IntrinsicMesh, face_areas: np.ndarray) -> sp.csr_matrix:
+    """The mean of the lumped and the consistent (Galerkin) mass matrices.
+
+    The consistent mass integrates products of hat functions exactly
+    (``area / 6`` on a face's diagonal, ``area / 12`` off it), the lumped one puts a
+    third of each face on its corners. For linear elements the two err on opposite
+    sides: on a uniform mesh the lumped mass lowers the eigenvalues of
+    ``K phi = lambda M phi`` and the consistent mass raises them, by the same leading
+    ``O(lambda^2 h^2)`` term, which their mean cancels (a classical result of
+    finite-element vibration analysis; see Hughes, *The Finite Element Method*, 1987,
+    on higher-order mass matrices). On a 2,562-vertex icosphere the 50th eigenvalue is
+    2.2% off the sphere's with the lumped mass and 0.1% with the mean
+    (``tests/engine/test_diffusion.py``). Its rows sum to the lumped masses.
+
+    Parameters
+    ----------
+    mesh : the triangulation (its faces).
+    face_areas : (m,) float, as in :class:`FEMOperators`.
+
+    Returns
+    -------
+    (n, n) sparse, symmetric positive definite.
+    """
+    faces, n = mesh.faces, mesh.n_vertices
+    # Each face adds area/12 * (1 + [i == j]) (consistent) + area/3 * [i == j] (lumped)
+    # to entry (i, j), halved: area/24 off the diagonal, area/4 on it.
+    corner_pairs = np.eye(3, dtype=bool).ravel()
+    weights = np.where(corner_pairs, 1.0 / 4.0, 1.0 / 24.0)[None, :] * face_areas[:, None]
+    rows = np.repeat(faces, 3, axis=1).ravel()
+    cols = np.tile(faces, (1, 3)).ravel()
+    mass: sp.csr_matrix = sp.csr_matrix((weights.ravel(), (rows, cols)), shape=(n, n))
+    return mass
+
+
 def surface_operators(
     vertices: np.ndarray, faces: np.ndarray
 ) -> tuple[IntrinsicMesh, FEMOperators]:

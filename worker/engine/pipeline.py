@@ -14,6 +14,7 @@ import numpy as np
 
 from .diffusion import (
     LaplaceBeltrami,
+    averaged_mass_spectrum,
     laplace_beltrami_eigenpairs,
     normalized_spectrum,
     surface_eigenpairs,
@@ -166,7 +167,10 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
         mix_times=preset.ddt_mix_times,
     )
     ddt = core_diagonal(core) if preset.ddt_elements == "diagonal" else core
-    spectrum = normalized_spectrum(op, eigenvalues, preset.spectrum_size)
+    if preset.spectrum_mass == "averaged":
+        spectrum = averaged_mass_spectrum(intrinsic, ops, eigenvectors, preset.spectrum_size)
+    else:
+        spectrum = normalized_spectrum(op, eigenvalues, preset.spectrum_size)
     lap("eigen_ddt")
     singular_values = modal_gdm(gdm, preset.gdm_singular_values, mass, sample_areas)
     lap("modal")
