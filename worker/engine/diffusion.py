@@ -206,13 +206,13 @@ def averaged_mass_spectrum(
 ) -> np.ndarray:
     """The spectrum modality with the averaged mass (:func:`.intrinsic.averaged_mass`).
 
-    With the lumped mass of eq. (3) the eigenvalues of a 2,500-vertex resample are a
-    median 1.2-2.7% (up to 9% at the 50th) below those of the full-resolution TOSCA
-    surface, by amounts that follow the triangulation; with the averaged mass
-    0.1-1.2% (docs/evaluation.md). The eigenvectors of eq. (3) span nearly the same
-    low-frequency space, so the averaged-mass eigenvalues are taken as Ritz values in
-    their span (within 0.2% of a full solve at the 50th of 100; tested) instead of by
-    a second eigensolve.
+    With the lumped mass of eq. (3) the 50 eigenvalues of a 2,500-vertex resample of a
+    TOSCA figure are a median 1.45% off those of the full-resolution file (0.8-2.7% per
+    input, the 50th up to 9%), by amounts that follow the triangulation; with the
+    averaged mass 0.91% (0.1-1.6%; ``bench/spectrum_accuracy.py``, docs/evaluation.md).
+    The eigenvectors of eq. (3) span nearly the same low-frequency space, so the
+    averaged-mass eigenvalues are taken as Ritz values in their span (within 0.2% of a
+    full solve at the 50th of 100; tested) instead of by a second eigensolve.
 
     Parameters
     ----------
