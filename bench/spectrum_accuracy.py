@@ -16,20 +16,15 @@ from __future__ import annotations
 
 import argparse
 import csv
+from dataclasses import replace
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-from worker.engine.diffusion import (
-    LaplaceBeltrami,
-    averaged_mass_spectrum,
-    laplace_beltrami_eigenpairs,
-    normalized_spectrum,
-)
 from worker.engine.intrinsic import averaged_mass, surface_operators
 from worker.engine.mesh_io import Mesh, load_mesh
-from worker.engine.pipeline import resampled_surface
+from worker.engine.pipeline import describe_mesh
 from worker.engine.presets import get_preset
 from worker.evaluation.datasets import shared_dataset
 from worker.evaluation.variants import make_variant
@@ -58,14 +53,10 @@ def full_resolution_spectra(mesh: Mesh) -> dict[str, np.ndarray]:
 
 
 def resampled_spectra(mesh: Mesh) -> dict[str, np.ndarray]:
-    """The default preset's resample, its spectrum with each mass."""
-    resampled = resampled_surface(mesh, PRESET)
-    intrinsic, ops = surface_operators(resampled.vertices, resampled.faces)
-    op = LaplaceBeltrami.from_fem(ops)
-    values, vectors = laplace_beltrami_eigenpairs(op, PRESET.n_eigenpairs)
+    """The default preset's spectrum of ``mesh``, and the same pipeline's with the lumped mass."""
     return {
-        "lumped": normalized_spectrum(op, values, SIZE),
-        "averaged": averaged_mass_spectrum(intrinsic, ops, vectors, SIZE),
+        mass: describe_mesh(mesh, replace(PRESET, spectrum_mass=mass)).spectrum
+        for mass in ("lumped", "averaged")
     }
 
 
