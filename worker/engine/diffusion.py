@@ -59,6 +59,13 @@ class LaplaceBeltrami:
     def n(self) -> int:
         return len(self.mass)
 
+    @property
+    def fem_scale(self) -> float:
+        """``c`` of ``A = c M``, ``M`` the lumped FEM mass (``15 / mean triangle area``):
+        eq. (3)'s ``lambda`` is ``2 lambda_FEM / c`` and ``sqrt(c) phi`` is
+        M-orthonormal."""
+        return float(self.mass.sum()) / self.total_area
+
     def shift(self) -> float:
         """A small negative shift that makes ``L - shift * A`` positive definite.
 
@@ -156,7 +163,7 @@ def surface_eigenpairs(
     eigenvectors : (n, k) float, orthonormal in the lumped-area inner product
         (``phi^T M phi = 1``, i.e. in L2 of the surface).
     """
-    c = float(op.mass.sum()) / op.total_area
+    c = op.fem_scale
     area_eigenvalues = 0.5 * c * eigenvalues * op.total_area  # lambda_FEM * area
     return area_eigenvalues / (15.0 * n_reference), eigenvectors * np.sqrt(c)
 
@@ -176,33 +183,13 @@ def normalized_spectrum(op: LaplaceBeltrami, eigenvalues: np.ndarray, size: int)
     return spectrum
 
 
-def ritz_values(stiffness: sp.spmatrix, mass: sp.spmatrix, basis: np.ndarray) -> np.ndarray:
-    """Rayleigh-Ritz values of ``K phi = lambda M phi`` on the span of ``basis``.
-
-    Upper bounds of the problem's smallest eigenvalues, as close as the basis spans
-    their eigenvectors.
-
-    Parameters
-    ----------
-    stiffness, mass : (n, n) sparse, symmetric; ``mass`` positive definite.
-    basis : (n, k) float, linearly independent columns.
-
-    Returns
-    -------
-    (k,) float, ascending.
-    """
-    small_stiffness = basis.T @ (stiffness @ basis)
-    small_mass = basis.T @ (mass @ basis)
-    values: np.ndarray = la.eigh(
-        0.5 * (small_stiffness + small_stiffness.T),
-        0.5 * (small_mass + small_mass.T),
-        eigvals_only=True,
-    )
-    return values
-
-
 def averaged_mass_spectrum(
-    mesh: IntrinsicMesh, ops: FEMOperators, eigenvectors: np.ndarray, size: int
+    op: LaplaceBeltrami,
+    mesh: IntrinsicMesh,
+    ops: FEMOperators,
+    eigenvalues: np.ndarray,
+    eigenvectors: np.ndarray,
+    size: int,
 ) -> np.ndarray:
     """The spectrum modality with the averaged mass (:func:`.intrinsic.averaged_mass`).
 
@@ -211,21 +198,32 @@ def averaged_mass_spectrum(
     input, the 50th up to 9%), by amounts that follow the triangulation; with the
     averaged mass 0.91% (0.1-1.6%; ``bench/spectrum_accuracy.py``, docs/evaluation.md).
     The eigenvectors of eq. (3) span nearly the same low-frequency space, so the
-    averaged-mass eigenvalues are taken as Ritz values in their span (within 0.2% of a
-    full solve at the 50th of 100; tested) instead of by a second eigensolve.
+    averaged-mass eigenvalues are taken as Rayleigh-Ritz values in their span (within
+    0.2% of a full solve at the 50th of 100; tested) instead of by a second eigensolve:
+    the eigenvalues of ``B^T K B y = mu B^T M B y``. With ``B = sqrt(c) Phi``, eq. (3)'s
+    eigenvectors made M-orthonormal, ``B^T K B`` is ``diag(lambda_FEM)`` by eq. (3)
+    itself (to the eigensolver's residual), so only ``B^T M B`` is formed (tested
+    against forming both).
 
     Parameters
     ----------
+    op : the paper's operator pair.
     mesh, ops : the triangulation and its operators (:func:`.intrinsic.surface_operators`).
-    eigenvectors : (n, k) float, eigenvectors of eq. (3), ``k > size``.
+    eigenvalues, eigenvectors : (k,), (n, k) float, eq. (3)'s
+        (:func:`laplace_beltrami_eigenpairs`), ``k > size``.
     size : number of non-zero eigenvalues kept.
 
     Returns
     -------
     (size,) float, ``lambda_FEM * area`` as in ShapeDNA (scale-invariant).
     """
-    values = ritz_values(ops.stiffness, averaged_mass(mesh, ops.face_areas), eigenvectors)
-    spectrum: np.ndarray = values[1 : size + 1] * float(ops.face_areas.sum())
+    c = op.fem_scale
+    basis = np.sqrt(c) * eigenvectors
+    small_mass = basis.T @ (averaged_mass(mesh, ops.face_areas) @ basis)
+    values = la.eigh(
+        np.diag(0.5 * c * eigenvalues), 0.5 * (small_mass + small_mass.T), eigvals_only=True
+    )
+    spectrum: np.ndarray = values[1 : size + 1] * op.total_area
     return spectrum
 
 

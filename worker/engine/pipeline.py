@@ -168,7 +168,9 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
     )
     ddt = core_diagonal(core) if preset.ddt_elements == "diagonal" else core
     if preset.spectrum_mass == "averaged":
-        spectrum = averaged_mass_spectrum(intrinsic, ops, eigenvectors, preset.spectrum_size)
+        spectrum = averaged_mass_spectrum(
+            op, intrinsic, ops, eigenvalues, eigenvectors, preset.spectrum_size
+        )
     else:
         spectrum = normalized_spectrum(op, eigenvalues, preset.spectrum_size)
     lap("eigen_ddt")
