@@ -34,18 +34,21 @@ PRESET = get_preset("smeets2010-surface")
 SIZE = PRESET.spectrum_size
 
 
-def full_resolution_spectra(mesh: Mesh) -> dict[str, np.ndarray]:
-    """The file's own spectrum with each mass, by shift-invert Lanczos."""
+def full_resolution_spectra(
+    mesh: Mesh, names: tuple[str, ...] = ("lumped", "averaged")
+) -> dict[str, np.ndarray]:
+    """The file's own spectrum with each mass named, by shift-invert Lanczos."""
     intrinsic, ops = surface_operators(mesh.vertices, mesh.faces)
     area = float(ops.face_areas.sum())
     masses = {
-        "lumped": sp.diags(ops.vertex_areas),
-        "averaged": averaged_mass(intrinsic, ops.face_areas),
+        "lumped": lambda: sp.diags(ops.vertex_areas),
+        "averaged": lambda: averaged_mass(intrinsic, ops.face_areas),
     }
     start = np.random.default_rng(0).standard_normal(intrinsic.n_vertices)
     shift = -1e-3 * 4 * np.pi / area  # below the spectrum, as in LaplaceBeltrami.shift
     spectra = {}
-    for name, mass in masses.items():
+    for name in names:
+        mass = masses[name]()
         stiffness = ops.stiffness.tocsc()
         values = sla.eigsh(stiffness, k=SIZE + 1, M=mass.tocsc(), sigma=shift, v0=start)[0]
         spectra[name] = np.sort(values)[1:] * area
