@@ -69,6 +69,15 @@ class Mesh:
         return len(self.faces)
 
 
+def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(m,) float, the area of every triangle (half its edge vectors' cross product)."""
+    corners = vertices[faces]
+    areas: np.ndarray = 0.5 * np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
+    )
+    return areas
+
+
 def mesh_format(filename: str) -> tuple[str, bool]:
     """Return ``(format, gzipped)`` for a file name, or raise ``UnsupportedFormatError``."""
     name = Path(filename).name.lower()
@@ -195,10 +204,7 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
     faces = faces[~repeated]
     merged = vertices[first]
     if len(faces):
-        cross = np.cross(
-            merged[faces[:, 1]] - merged[faces[:, 0]], merged[faces[:, 2]] - merged[faces[:, 0]]
-        )
-        area = 0.5 * np.linalg.norm(cross, axis=1)
+        area = face_areas(merged, faces)
         faces = faces[area > TOL.degenerate_area_fraction * max(area.mean(), np.finfo(float).tiny)]
     if len(faces):
         # The same triangle listed twice (in any corner order) is one face.
@@ -249,12 +255,9 @@ def canonical_frame(mesh: Mesh) -> Mesh:
     # Order-one coordinates first, so that squares and cubes below cannot overflow.
     low, high = vertices.min(axis=0), vertices.max(axis=0)
     vertices = (vertices - 0.5 * (low + high)) / max(float(np.max(high - low)), _TINY)
-    corners = vertices[mesh.faces]
-    areas = 0.5 * np.linalg.norm(
-        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
-    )
+    areas = face_areas(vertices, mesh.faces)
     total = float(areas.sum())
-    centroids = corners.mean(axis=1)
+    centroids = vertices[mesh.faces].mean(axis=1)
     centre = areas @ centroids / total
     scale = np.sqrt(CANONICAL_AREA / total)
     offsets = (centroids - centre) * scale

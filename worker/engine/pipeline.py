@@ -20,6 +20,7 @@ from .diffusion import (
     surface_eigenpairs,
 )
 from .geodesic import farthest_point_samples, geodesic_distance_matrix, sample_distances
+from .holes import close_small_holes
 from .intrinsic import surface_operators
 from .mesh_io import DEFAULT_MAX_FACES, Mesh, canonical_frame, load_mesh
 from .modal import core_diagonal, ddt_core, modal_gdm, voronoi_areas
@@ -117,9 +118,13 @@ class ShapeDescriptor:
 
 def resampled_surface(mesh: Mesh, preset: Preset) -> Mesh:
     """The mesh every descriptor of ``mesh`` is computed on: in its canonical frame
-    (:func:`~worker.engine.mesh_io.canonical_frame`), resampled to the preset's
-    vertex count."""
-    return resample_mesh(canonical_frame(mesh), preset.n_vertices)
+    (:func:`~worker.engine.mesh_io.canonical_frame`), its small holes closed if the
+    preset says so (:func:`~worker.engine.holes.close_small_holes`), resampled to the
+    preset's vertex count."""
+    surface = canonical_frame(mesh)
+    if preset.max_hole_perimeter is not None:
+        surface = close_small_holes(surface, preset.max_hole_perimeter)
+    return resample_mesh(surface, preset.n_vertices)
 
 
 def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
