@@ -22,7 +22,7 @@ from .diffusion import (
 from .geodesic import farthest_point_samples, geodesic_distance_matrix, sample_distances
 from .holes import close_small_holes
 from .intrinsic import surface_operators
-from .mesh_io import DEFAULT_MAX_FACES, Mesh, canonical_frame, load_mesh
+from .mesh_io import CANONICAL_AREA, DEFAULT_MAX_FACES, Mesh, canonical_frame, load_mesh
 from .modal import core_diagonal, ddt_core, modal_gdm, voronoi_areas
 from .presets import MODALITIES, Preset
 from .resample import resample_mesh
@@ -123,7 +123,7 @@ def resampled_surface(mesh: Mesh, preset: Preset) -> Mesh:
     preset's vertex count."""
     surface = canonical_frame(mesh)
     if preset.max_hole_perimeter is not None:
-        surface = close_small_holes(surface, preset.max_hole_perimeter)
+        surface = close_small_holes(surface, preset.max_hole_perimeter, CANONICAL_AREA)
     return resample_mesh(surface, preset.n_vertices)
 
 
