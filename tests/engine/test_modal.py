@@ -32,6 +32,8 @@ from worker.engine.modal import (
     modal_gdm_reference,
     normalize_slices,
     orthonormal_basis,
+    slice_singular_values,
+    small_ddt,
     vertex_modes_core,
     voronoi_areas,
 )
@@ -239,6 +241,65 @@ def test_vertex_modes_core_of_the_weighted_ddt_equals_the_plain_one():
     flipped = functions * np.where(np.arange(functions.shape[1]) % 2, -1.0, 1.0)
     again = ddt_core(values, flipped[perm], TIMES, (20, 20, 5), mass[perm], mix_times=False)
     np.testing.assert_allclose(again, fast, atol=1e-9 * fast.max())
+
+
+@pytest.mark.slow  # dense DDTs
+def test_slice_values_of_the_small_ddt_are_the_dense_slices_singular_values():
+    """Against a plain SVD of every slice of the dense DDT, weighted by area (the
+    default's) and as the paper's vertex matrices; vertex order and eigenvector signs
+    do not move them."""
+    values, functions, mass = _weighted_eigenpairs()
+    weighted = _dense_weighted_ddt(values, functions, mass)
+    paper_values, paper_vectors = _eigenpairs()
+    paper = normalize_slices(diffusion_distance_tensor(paper_values, paper_vectors, TIMES))
+    for dense, fast_tensor in (
+        (weighted, small_ddt(values, functions, TIMES, mass)),
+        (paper, small_ddt(paper_values, paper_vectors, TIMES)),
+    ):
+        expected = np.column_stack(
+            [np.linalg.svd(dense[:, :, t], compute_uv=False)[:20] for t in range(len(TIMES))]
+        )
+        fast = slice_singular_values(fast_tensor, 20)
+        assert fast.shape == (20, 5)
+        np.testing.assert_allclose(fast, expected, atol=1e-9 * expected.max())
+    perm = np.random.default_rng(3).permutation(len(functions))
+    flipped = functions * np.where(np.arange(functions.shape[1]) % 2, -1.0, 1.0)
+    kept = slice_singular_values(small_ddt(values, functions, TIMES, mass), 20)
+    again = slice_singular_values(small_ddt(values, flipped[perm], TIMES, mass[perm]), 20)
+    np.testing.assert_allclose(again, kept, rtol=1e-9)
+
+
+def test_slice_values_do_not_swap_where_the_core_diagonal_does():
+    """Two modes whose norms over all times are equal (one larger early, the other
+    late, as the two sides of a figure can be): the HOSVD may take any mixture of the
+    pair as its factor, and a perturbation of 1e-9 decides which. Tipped towards one
+    mode, the core's diagonal holds the slices' own values; tipped towards their
+    45-degree mixture, both elements are the mean, a third of the larger one away.
+    Each slice's singular values move by the perturbation."""
+    basis = np.linalg.qr(np.random.default_rng(11).standard_normal((60, 6)))[0]
+    spectra = np.array([[9.0, 1.0, 3.0, 0.5, 0.2, 0.1], [9.0, 3.0, 1.0, 0.4, 0.2, 0.1]])
+    tensor = np.stack([basis @ np.diag(d) @ basis.T for d in spectra], axis=2)
+    pure, mixed = basis[:, 1], (basis[:, 1] + basis[:, 2]) / np.sqrt(2.0)
+    tipped = [tensor + 1e-9 * np.outer(v, v)[:, :, None] for v in (pure, mixed)]
+    diagonals = [core_diagonal(vertex_modes_core(t, (4, 4))) for t in tipped]
+    np.testing.assert_allclose(diagonals[0][1:3], [[1.0, 3.0], [3.0, 1.0]], atol=1e-6)
+    np.testing.assert_allclose(diagonals[1][1:3], [[2.0, 2.0], [2.0, 2.0]], atol=1e-6)
+    values = [slice_singular_values(t, 4) for t in tipped]
+    np.testing.assert_allclose(values[0], [[9.0, 9.0], [3.0, 3.0], [1.0, 1.0], [0.5, 0.4]])
+    np.testing.assert_allclose(values[1], values[0], atol=1e-8)
+
+
+def test_slice_values_under_rounding_are_raised_to_the_floor():
+    """Eigenvalues of 1e-17 and 1e-20 of the largest are whatever rounding makes them;
+    both copies of the slice give the floor, so eq. (8) sees no difference."""
+    basis = np.linalg.qr(np.random.default_rng(5).standard_normal((30, 4)))[0]
+    slice_ = basis @ np.diag([2.0, 1e-3, 1e-17, 1e-20]) @ basis.T
+    noise = np.random.default_rng(6).standard_normal((30, 30))
+    rounded = slice_ + 1e-16 * (noise + noise.T)
+    values = [slice_singular_values(t[:, :, None], 4)[:, 0] for t in (slice_, rounded)]
+    floor = 2.0 * TOL.slice_value_floor
+    np.testing.assert_allclose(values[0], [2.0, 1e-3, floor, floor], rtol=1e-9)
+    np.testing.assert_allclose(values[1][2:], [floor, floor], rtol=1e-12)
 
 
 def test_vertex_modes_core_keeps_each_time_its_own_slice():

@@ -78,6 +78,10 @@ def test_modality_sizes_follow_the_ddt_elements():
     diagonal = Preset(name="x", version=1, ddt_elements="diagonal")
     assert core.modality_sizes() == {"gdm": 19, "ddt": 2000, "spectrum": 50}
     assert diagonal.modality_sizes()["ddt"] == 100
+    values = Preset(name="x", version=1, ddt_elements="slice_values", ddt_mix_times=False)
+    assert values.modality_sizes()["ddt"] == 100
+    with pytest.raises(ValueError, match="each time's own"):
+        Preset(name="x", version=1, ddt_elements="slice_values")
 
 
 def test_descriptor_fields_leave_out_how_descriptors_are_compared():

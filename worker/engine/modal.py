@@ -2,7 +2,9 @@
 
 A simultaneous permutation of the first two modes (eq. 5) leaves the singular
 values of the GDM and the HOSVD core of the DDT unchanged (eqs. 6-7), so these are
-the descriptors. Both tensors are first normalized per slice (sec. 4.2).
+the descriptors; so are the singular values of each slice of the DDT, which the
+default preset takes instead of the core (:func:`slice_singular_values`). Both tensors
+are first normalized per slice (sec. 4.2).
 
 Two discretizations of the same idea:
 
@@ -272,15 +274,14 @@ def _is_orthonormal(columns: np.ndarray) -> bool:
     return bool(np.abs(gram - np.eye(len(gram))).max() <= TOL.orthonormal)
 
 
-def ddt_core(
+def small_ddt(
     eigenvalues: np.ndarray,
     eigenvectors: np.ndarray,
     times: tuple[float, ...],
-    core_shape: tuple[int, int, int],
     mass: np.ndarray | None = None,
-    mix_times: bool = True,
 ) -> np.ndarray:
-    """HOSVD core of the normalized DDT without forming the ``n x n x s`` tensor.
+    """The normalized DDT in a small orthonormal basis of its slices' span, without
+    forming the ``n x n x s`` tensor.
 
     Every slice of eq. (4) is low rank:
     ``D_t = r_t 1^T + 1 r_t^T - 2 Psi_t Psi_t^T`` with ``Psi_t = Phi exp(-Lambda t)``
@@ -288,7 +289,8 @@ def ddt_core(
     or ones for the paper's vertex matrices) every weighted slice
     ``W^1/2 D_t W^1/2`` lives in the span of ``W^1/2 [1, r_1 .. r_s, Phi]``; with
     ``Q`` an orthonormal basis of it, the small tensor ``Q^T W^1/2 D_t W^1/2 Q`` has
-    exactly the same HOSVD core (its factors are ``Q^T`` times the big ones).
+    exactly the same HOSVD core (its factors are ``Q^T`` times the big ones) and
+    every slice the same non-zero eigenvalues.
     Each slice is divided by its weighted mean ``sum_ij w_i w_j d_ij / (sum w)^2``
     times ``sum w``: for ``w = 1`` that is the paper's division by the sum, times
     ``n`` (:func:`normalize_slices`).
@@ -305,15 +307,12 @@ def ddt_core(
     eigenvectors : (n, k) float, orthonormal in the inner product of ``mass``
         (without ``mass``: the paper's ``A``).
     times : diffusion times.
-    core_shape : (r1, r2, r3)
     mass : (n,) float, lumped vertex areas, or None for the paper's vertex matrices.
-    mix_times : True, the whole HOSVD (the paper); False, the vertex modes only
-        (:func:`vertex_modes_core`), so the core's third size is ``len(times)``.
 
     Returns
     -------
-    core_shape float, as :func:`hosvd_core` (or :func:`vertex_modes_core`) of the
-    normalized dense (weighted) DDT.
+    (p, p, len(times)) float, ``p`` at most ``k + len(times) + 1``; every slice
+    symmetric.
     """
     n = eigenvectors.shape[0]
     weights = np.ones(n) if mass is None else np.asarray(mass, dtype=np.float64)
@@ -340,7 +339,64 @@ def ddt_core(
         )
         small = np.outer(q_r, q_one) + np.outer(q_one, q_r) - 2.0 * q_psi @ q_psi.T
         slices.append(small * (total / integral))
-    tensor = np.stack(slices, axis=2)
+    return np.stack(slices, axis=2)
+
+
+def ddt_core(
+    eigenvalues: np.ndarray,
+    eigenvectors: np.ndarray,
+    times: tuple[float, ...],
+    core_shape: tuple[int, int, int],
+    mass: np.ndarray | None = None,
+    mix_times: bool = True,
+) -> np.ndarray:
+    """HOSVD core of the normalized DDT: that of its small form (:func:`small_ddt`).
+
+    Parameters
+    ----------
+    eigenvalues, eigenvectors, times, mass : as :func:`small_ddt`.
+    core_shape : (r1, r2, r3)
+    mix_times : True, the whole HOSVD (the paper); False, the vertex modes only
+        (:func:`vertex_modes_core`), so the core's third size is ``len(times)``.
+
+    Returns
+    -------
+    core_shape float, as :func:`hosvd_core` (or :func:`vertex_modes_core`) of the
+    normalized dense (weighted) DDT.
+    """
+    tensor = small_ddt(eigenvalues, eigenvectors, times, mass)
     if mix_times:
         return hosvd_core(tensor, core_shape)
     return vertex_modes_core(tensor, core_shape[:2])
+
+
+def slice_singular_values(tensor: np.ndarray, k: int) -> np.ndarray:
+    """The ``k`` largest singular values of every slice of a tensor whose slices are
+    symmetric (a DDT, or its :func:`small_ddt`), descending.
+
+    Eq. (5) permutes the vertices of every slice alike, so each slice's singular
+    values are invariant to it, as the GDM's are (eq. 6). They are also what the
+    HOSVD core of the DDT tends to when its slices share their eigenvectors (the
+    area-weighted ones nearly do, so :func:`core_diagonal` holds nearly the same
+    numbers), without the core's weak
+    point: the core's element ``S[i, i, t]`` belongs to the ``i``-th singular vector
+    of the unfolding of all times together, and where two of those are nearly equal
+    (the two sides of a figure) any mixture of the pair is as good a factor, so the
+    diagonal elements trade places and values with the triangulation. A slice's
+    singular values are continuous in the slice (Weyl), whatever its eigenvectors do.
+
+    Parameters
+    ----------
+    tensor : (p, p, s) float, every slice symmetric.
+    k : values kept per slice, ``k <= p``.
+
+    Returns
+    -------
+    (k, s) float, column ``t`` the ``k`` largest ``|eigenvalues|`` of slice ``t``, none
+    below ``TOL.slice_value_floor`` of the largest (below it they are rounding).
+    """
+    columns = []
+    for t in range(tensor.shape[2]):
+        values = np.sort(np.abs(la.eigvalsh(tensor[:, :, t])))[::-1][:k]
+        columns.append(np.maximum(values, TOL.slice_value_floor * values[0]))
+    return np.column_stack(columns)

@@ -23,7 +23,14 @@ from .geodesic import farthest_point_samples, geodesic_distance_matrix, sample_d
 from .holes import close_small_holes
 from .intrinsic import surface_operators
 from .mesh_io import CANONICAL_AREA, DEFAULT_MAX_FACES, Mesh, canonical_frame, load_mesh
-from .modal import core_diagonal, ddt_core, modal_gdm, voronoi_areas
+from .modal import (
+    core_diagonal,
+    ddt_core,
+    modal_gdm,
+    slice_singular_values,
+    small_ddt,
+    voronoi_areas,
+)
 from .presets import MODALITIES, Preset
 from .resample import resample_mesh
 
@@ -36,7 +43,8 @@ class ShapeDescriptor:
     ----------
     preset, preset_version : the preset that made it.
     gdm : (k,) float, largest singular values of the normalized GDM.
-    ddt : (r1, r2, r3) float, |HOSVD core| of the normalized DDT.
+    ddt : float, the normalized DDT's modal representation (:func:`ddt_descriptor`):
+        its |HOSVD core| (r1, r2, r3), or (r, s) values per diffusion time.
     spectrum : (s,) float, area-normalized Laplace-Beltrami eigenvalues.
     input_vertices, input_faces : size of the cleaned upload.
     vertices : size after resampling.
@@ -127,12 +135,31 @@ def resampled_surface(mesh: Mesh, preset: Preset) -> Mesh:
     return resample_mesh(surface, preset.n_vertices)
 
 
+def ddt_descriptor(
+    eigenvalues: np.ndarray, eigenvectors: np.ndarray, preset: Preset, mass: np.ndarray | None
+) -> np.ndarray:
+    """The DDT modality of eq. (4)'s eigenpairs, as the preset's ``ddt_elements`` say:
+    the HOSVD core (eqs. 5-7), its diagonal, or each slice's singular values."""
+    if preset.ddt_elements == "slice_values":
+        tensor = small_ddt(eigenvalues, eigenvectors, preset.diffusion_times, mass)
+        return slice_singular_values(tensor, min(preset.ddt_core_shape[:2]))
+    core = ddt_core(
+        eigenvalues,
+        eigenvectors,
+        preset.diffusion_times,
+        preset.ddt_core_shape,
+        mass,
+        mix_times=preset.ddt_mix_times,
+    )
+    return core_diagonal(core) if preset.ddt_elements == "diagonal" else core
+
+
 def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
     """Compute all modalities of a cleaned mesh.
 
     Stages (timed): ``resample``, ``gdm`` (intrinsic Delaunay, heat-method GDM),
-    ``eigen_ddt`` (eq. 3 eigenpairs and the DDT core), ``modal`` (GDM singular
-    values).
+    ``eigen_ddt`` (eq. 3 eigenpairs and the DDT's modal representation), ``modal``
+    (GDM singular values).
     """
     timings: dict[str, float] = {}
     clock = time.perf_counter()
@@ -163,15 +190,7 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
         values, functions = eigenvalues, eigenvectors
     else:
         values, functions = surface_eigenpairs(op, eigenvalues, eigenvectors, preset.n_vertices)
-    core = ddt_core(
-        values,
-        functions,
-        preset.diffusion_times,
-        preset.ddt_core_shape,
-        mass,
-        mix_times=preset.ddt_mix_times,
-    )
-    ddt = core_diagonal(core) if preset.ddt_elements == "diagonal" else core
+    ddt = ddt_descriptor(values, functions, preset, mass)
     if preset.spectrum_mass == "averaged":
         spectrum = averaged_mass_spectrum(
             op, intrinsic, ops, eigenvalues, eigenvectors, preset.spectrum_size

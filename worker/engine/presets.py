@@ -13,7 +13,7 @@ from typing import Any, Literal
 Dissimilarity = Literal["D1", "D2"]
 Fusion = Literal["sum", "product"]
 Measure = Literal["vertices", "surface"]
-DdtElements = Literal["core", "diagonal"]
+DdtElements = Literal["core", "diagonal", "slice_values"]
 SpectrumMass = Literal["lumped", "averaged"]
 MODALITIES = ("gdm", "ddt", "spectrum")
 
@@ -62,7 +62,11 @@ class Preset:
         elements ``S[i, i, k]``. Weighted by area, the slices nearly share their
         eigenfunctions, so the HOSVD nearly diagonalizes them and most off-diagonal
         elements are rounding-level numbers whose relative differences (eq. 8) are
-        noise.
+        noise; or "slice_values", no HOSVD: the ``min(r1, r2)`` largest singular
+        values of each diffusion time's slice, as the GDM's (the numbers the diagonal
+        tends to, without its swaps between nearly equal modes;
+        :func:`worker.engine.modal.slice_singular_values`; needs ``ddt_mix_times``
+        False, the core's third size the number of times).
     ddt_mix_times : True, the DDT's whole HOSVD (the paper), whose third factor
         turns the core's slices into combinations of the diffusion times; False, only
         the two vertex modes are decomposed (the ones eq. 5 permutes), so slice ``k``
@@ -99,6 +103,8 @@ class Preset:
             raise ValueError("the DDT core cannot have more slices than diffusion times")
         if not self.ddt_mix_times and self.ddt_core_shape[2] != len(self.diffusion_times):
             raise ValueError("without mixing the times, the DDT core has one slice per time")
+        if self.ddt_elements == "slice_values" and self.ddt_mix_times:
+            raise ValueError("the DDT's slice values are each time's own: ddt_mix_times=False")
         if self.spectrum_size >= self.n_eigenpairs:
             raise ValueError("spectrum_size must be below n_eigenpairs")
         if self.gdm_samples is not None and (
@@ -119,7 +125,7 @@ class Preset:
         r1, r2, r3 = self.ddt_core_shape
         return {
             "gdm": self.gdm_singular_values,
-            "ddt": min(r1, r2) * r3 if self.ddt_elements == "diagonal" else r1 * r2 * r3,
+            "ddt": r1 * r2 * r3 if self.ddt_elements == "core" else min(r1, r2) * r3,
             "spectrum": self.spectrum_size,
         }
 
@@ -171,26 +177,27 @@ PRESETS: dict[str, Preset] = {
         # eigenvalues with the averaged mass (variant class retrieval 98.6 -> 100% and
         # tessellation gap 0.082 -> 0.055 for the spectrum alone; docs/evaluation.md).
         # v5: holes of at most 2% of the area closed before resampling (scan gaps;
-        # docs/evaluation.md, sec. "Scan gaps").
+        # docs/evaluation.md, sec. "Scan gaps"). v6: the DDT as each diffusion time's
+        # singular values instead of its core's diagonal (docs/evaluation.md, sec.
+        # "The default's version 6").
         Preset(
             name="smeets2010-surface",
-            version=5,
+            version=6,
             max_hole_perimeter=0.5,
             measure="surface",
             heat_time_factor=12.0,
             gdm_samples=500,
             n_eigenpairs=100,
             spectrum_mass="averaged",
-            ddt_elements="diagonal",
+            ddt_elements="slice_values",
             ddt_mix_times=False,
             dissimilarity="D1",
             fusion="product",
             fused_modalities=("gdm", "ddt", "spectrum"),
-            # bench/fusion_weights.py: the GDM gets 0 in every fold, the DDT 0.25 in
-            # three of five and 0.5 in two; on all meshes 0.25 and 0.5 tie (loss 0.0362
-            # and 0.0360), and the robustness protocol breaks the tie: with 0.25 every
-            # variant finds its class, with 0.5 three remeshed davids do not
-            # (docs/evaluation.md, sec. "The default's version 5").
+            # bench/fusion_weights.py (v6): the GDM gets 0 in every fold, the DDT 0.125,
+            # 0.25 (twice), 0.5 and 1 in the five folds and 0.25 on all meshes (loss
+            # 0.0402, 0.0405 at 0 and at 1: TOSCA barely tells the DDT's weights apart;
+            # docs/evaluation.md, sec. "The default's version 6").
             fusion_weights={"gdm": 0.0, "ddt": 0.25, "spectrum": 1.0},
         ),
     )
