@@ -250,21 +250,20 @@ def test_slice_values_of_the_small_ddt_are_the_dense_slices_singular_values():
     do not move them."""
     values, functions, mass = _weighted_eigenpairs()
     weighted = _dense_weighted_ddt(values, functions, mass)
+    kept = slice_singular_values(small_ddt(values, functions, TIMES, mass), 20)
     paper_values, paper_vectors = _eigenpairs()
     paper = normalize_slices(diffusion_distance_tensor(paper_values, paper_vectors, TIMES))
-    for dense, fast_tensor in (
-        (weighted, small_ddt(values, functions, TIMES, mass)),
-        (paper, small_ddt(paper_values, paper_vectors, TIMES)),
+    for dense, fast in (
+        (weighted, kept),
+        (paper, slice_singular_values(small_ddt(paper_values, paper_vectors, TIMES), 20)),
     ):
         expected = np.column_stack(
             [np.linalg.svd(dense[:, :, t], compute_uv=False)[:20] for t in range(len(TIMES))]
         )
-        fast = slice_singular_values(fast_tensor, 20)
         assert fast.shape == (20, 5)
         np.testing.assert_allclose(fast, expected, atol=1e-9 * expected.max())
     perm = np.random.default_rng(3).permutation(len(functions))
     flipped = functions * np.where(np.arange(functions.shape[1]) % 2, -1.0, 1.0)
-    kept = slice_singular_values(small_ddt(values, functions, TIMES, mass), 20)
     again = slice_singular_values(small_ddt(values, flipped[perm], TIMES, mass[perm]), 20)
     np.testing.assert_allclose(again, kept, rtol=1e-9)
 

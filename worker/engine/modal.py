@@ -375,15 +375,15 @@ def slice_singular_values(tensor: np.ndarray, k: int) -> np.ndarray:
     symmetric (a DDT, or its :func:`small_ddt`), descending.
 
     Eq. (5) permutes the vertices of every slice alike, so each slice's singular
-    values are invariant to it, as the GDM's are (eq. 6). They are also what the
-    HOSVD core of the DDT tends to when its slices share their eigenvectors (the
-    area-weighted ones nearly do, so :func:`core_diagonal` holds nearly the same
-    numbers), without the core's weak
-    point: the core's element ``S[i, i, t]`` belongs to the ``i``-th singular vector
-    of the unfolding of all times together, and where two of those are nearly equal
-    (the two sides of a figure) any mixture of the pair is as good a factor, so the
-    diagonal elements trade places and values with the triangulation. A slice's
-    singular values are continuous in the slice (Weyl), whatever its eigenvectors do.
+    values are invariant to it, as the GDM's are (eq. 6). :func:`core_diagonal` would
+    hold the same numbers if the slices shared their eigenvectors exactly; weighted by
+    area they do only roughly (on three TOSCA meshes the two are 2-4% apart at the
+    early times and 29-33% at the latest, docs/evaluation.md). The core's element
+    ``S[i, i, t]`` belongs to the ``i``-th singular vector of the unfolding of all
+    times together, and where two of those are nearly equal (the two sides of a
+    figure) any mixture of the pair is as good a factor, so the diagonal elements
+    trade places and values with the triangulation. A slice's singular values are
+    continuous in the slice (Weyl), whatever its eigenvectors do.
 
     Parameters
     ----------
