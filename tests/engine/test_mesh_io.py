@@ -206,6 +206,19 @@ def test_canonical_frame_undoes_rotation_translation_and_scale(sphere):
         )
 
 
+def test_face_areas_are_the_cross_product_formula_bitwise():
+    # The fast path must give numpy's cross-and-norm numbers exactly: the canonical
+    # frame's scale, and so every resample, depends on their sum to the last bit.
+    rng = np.random.default_rng(11)
+    vertices = rng.normal(size=(300, 3)) * 10.0 ** rng.uniform(-20, 20, size=(300, 1))
+    faces = rng.integers(0, 300, size=(1000, 3))
+    corners = vertices[faces]
+    expected = 0.5 * np.linalg.norm(
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
+    )
+    np.testing.assert_array_equal(mesh_io.face_areas(vertices, faces), expected)
+
+
 @pytest.mark.parametrize(
     ("header", "vertex_extra", "note"),
     [

@@ -6,7 +6,13 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from worker.engine.topology import edge_keys, euler_and_boundary, unique_rows, used_vertices
+from worker.engine.topology import (
+    edge_keys,
+    euler_and_boundary,
+    keys_seen_once,
+    unique_rows,
+    used_vertices,
+)
 
 
 def open_tube(sections: int = 24, rings: int = 5) -> np.ndarray:
@@ -58,3 +64,14 @@ def test_euler_characteristic_and_boundary_of_a_sphere_a_torus_and_a_tube():
     assert euler_and_boundary(torus.faces, len(torus.vertices)) == (0, 0)
     tube = open_tube(sections=24)
     assert euler_and_boundary(tube, tube.max() + 1) == (0, 2 * 24)  # an annulus: two rims
+
+
+def test_keys_seen_once_and_the_edge_counts_agree_with_numpy_unique():
+    # Random faces over few vertices: edges used once, twice and three or more times.
+    faces = np.random.default_rng(2).integers(0, 40, size=(300, 3))
+    keys = edge_keys(faces, 40)
+    unique, counts = np.unique(keys, return_counts=True)
+    np.testing.assert_array_equal(keys_seen_once(keys), unique[counts == 1])
+    assert (counts > 2).any() and (counts == 1).any()
+    assert euler_and_boundary(faces, 40) == (40 - len(unique) + 300, np.sum(counts == 1))
+    assert len(keys_seen_once(np.array([3, 3]))) == 0

@@ -27,7 +27,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from .mesh_io import Mesh, face_areas
-from .topology import edge_keys
+from .topology import edge_keys, keys_seen_once
 
 
 def close_small_holes(mesh: Mesh, max_perimeter: float, area: float | None = None) -> Mesh:
@@ -51,17 +51,13 @@ def close_small_holes(mesh: Mesh, max_perimeter: float, area: float | None = Non
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     faces = np.asarray(mesh.faces, dtype=np.int64)
     n = len(vertices)
-    # Boundary edges: keys seen once (one unstable sort; np.unique's return_index
-    # would sort stably, 4x slower on a 100,000-face upload).
     keys = edge_keys(faces, n).ravel()
-    order = np.argsort(keys)
-    sorted_keys = keys[order]
-    once = np.ones(len(keys), dtype=bool)
-    once[1:] &= sorted_keys[1:] != sorted_keys[:-1]
-    once[:-1] &= sorted_keys[:-1] != sorted_keys[1:]
-    boundary = order[once]
-    if len(boundary) == 0:
+    boundary_keys = keys_seen_once(keys)
+    if len(boundary_keys) == 0:
         return mesh
+    # The corners that face a boundary edge, in the order of their keys.
+    corners = np.flatnonzero(np.isin(keys, boundary_keys))
+    boundary = corners[np.argsort(keys[corners])]
     # Each boundary edge as the face runs along it (a -> b), so the fan triangle
     # (b, a, centroid) has the neighbouring face's orientation.
     face, corner = np.divmod(boundary, 3)

