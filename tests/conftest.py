@@ -86,6 +86,8 @@ def surface_preset() -> Preset:
         n_eigenpairs=100,
         measure="surface",
         heat_time_factor=12.0,
+        spectrum_mass="averaged",
+        ddt_mass="averaged",
         ddt_elements="slice_values",
         ddt_mix_times=False,
         dissimilarity="D1",

@@ -22,6 +22,8 @@ def test_inconsistent_presets_are_refused():
         Preset(name="x", version=1, gdm_samples=500)  # the paper's vertex matrices
     with pytest.raises(ValueError, match="at least gdm_singular_values samples"):
         Preset(name="x", version=1, measure="surface", gdm_samples=10)
+    with pytest.raises(ValueError, match="averaged mass needs the surface measure"):
+        Preset(name="x", version=1, ddt_mass="averaged")
 
 
 def test_unknown_preset_names_the_known_ones():

@@ -138,6 +138,19 @@ def seeded_start(n: int, attempt: int = 0) -> np.ndarray:
     return np.random.default_rng(attempt).standard_normal(n)
 
 
+def in_diffusion_time_units(area_eigenvalues: np.ndarray, n_reference: int) -> np.ndarray:
+    """Scale-free eigenvalues ``lambda_FEM * area`` in the surface presets' unit of
+    eq. (4)'s diffusion times, ``area / (15 n_reference)``.
+
+    Eq. (3)'s ``A = c M`` with ``c = 15 / mean triangle area`` counts time in a unit
+    that follows the resampled mesh's triangle size; for a closed mesh of
+    ``n_reference`` vertices (``2 n`` triangles) it is this one, which no
+    triangulation of the surface changes.
+    """
+    scaled: np.ndarray = area_eigenvalues / (15.0 * n_reference)
+    return scaled
+
+
 def surface_eigenpairs(
     op: LaplaceBeltrami, eigenvalues: np.ndarray, eigenvectors: np.ndarray, n_reference: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -145,11 +158,8 @@ def surface_eigenpairs(
 
     The paper's ``A`` is proportional to the FEM mass, ``A = c M`` with
     ``c = 15 / mean triangle area``, and its ``L`` is twice the FEM stiffness, so
-    ``lambda = 2 lambda_FEM / c``: the diffusion times of eq. (4) are counted in a
-    unit that follows the resampled mesh's triangle size. Here the time unit is
-    ``area / (15 n_reference)`` instead, which is the paper's for a closed mesh of
-    ``n_reference`` vertices (``2 n`` triangles) and the same for any
-    triangulation of the surface.
+    ``lambda = 2 lambda_FEM / c``. Here the eigenvalues are ``lambda_FEM`` in the
+    time unit of :func:`in_diffusion_time_units`.
 
     Parameters
     ----------
@@ -165,7 +175,7 @@ def surface_eigenpairs(
     """
     c = op.fem_scale
     area_eigenvalues = 0.5 * c * eigenvalues * op.total_area  # lambda_FEM * area
-    return area_eigenvalues / (15.0 * n_reference), eigenvectors * np.sqrt(c)
+    return in_diffusion_time_units(area_eigenvalues, n_reference), eigenvectors * np.sqrt(c)
 
 
 def normalized_spectrum(op: LaplaceBeltrami, eigenvalues: np.ndarray, size: int) -> np.ndarray:
@@ -183,48 +193,47 @@ def normalized_spectrum(op: LaplaceBeltrami, eigenvalues: np.ndarray, size: int)
     return spectrum
 
 
-def averaged_mass_spectrum(
+def averaged_mass_eigenpairs(
     op: LaplaceBeltrami,
     mesh: IntrinsicMesh,
     ops: FEMOperators,
     eigenvalues: np.ndarray,
     eigenvectors: np.ndarray,
-    size: int,
-) -> np.ndarray:
-    """The spectrum modality with the averaged mass (:func:`.intrinsic.averaged_mass`).
+) -> tuple[np.ndarray, np.ndarray]:
+    """The Laplace-Beltrami eigenpairs with the averaged mass
+    (:func:`.intrinsic.averaged_mass`), as Rayleigh-Ritz pairs in the span of eq. (3)'s.
 
     With the lumped mass of eq. (3) the 50 eigenvalues of a 2,500-vertex resample of a
     TOSCA figure are a median 1.45% off those of the full-resolution file (0.8-2.7% per
     input, the 50th up to 9%), by amounts that follow the triangulation; with the
     averaged mass 0.91% (0.1-1.6%; ``bench/spectrum_accuracy.py``, docs/evaluation.md).
     The eigenvectors of eq. (3) span nearly the same low-frequency space, so the
-    averaged-mass eigenvalues are taken as Rayleigh-Ritz values in their span (within
-    0.2% of a full solve at the 50th of 100; tested) instead of by a second eigensolve:
-    the eigenvalues of ``B^T K B y = mu B^T M B y``. With ``B = sqrt(c) Phi``, eq. (3)'s
-    eigenvectors made M-orthonormal, ``B^T K B`` is ``diag(lambda_FEM)`` by eq. (3)
-    itself (to the eigensolver's residual), so only ``B^T M B`` is formed (tested
-    against forming both).
+    averaged-mass pairs are taken as Rayleigh-Ritz pairs in their span (the values
+    within 0.2% of a full solve at the 50th of 100; tested) instead of by a second
+    eigensolve: ``B^T K B y = mu B^T M B y``, eigenvectors ``B y``. With
+    ``B = sqrt(c) Phi``, eq. (3)'s eigenvectors made M-orthonormal, ``B^T K B`` is
+    ``diag(lambda_FEM)`` by eq. (3) itself (to the eigensolver's residual), so only
+    ``B^T M B`` is formed (tested against forming both).
 
     Parameters
     ----------
     op : the paper's operator pair.
     mesh, ops : the triangulation and its operators (:func:`.intrinsic.surface_operators`).
     eigenvalues, eigenvectors : (k,), (n, k) float, eq. (3)'s
-        (:func:`laplace_beltrami_eigenpairs`), ``k > size``.
-    size : number of non-zero eigenvalues kept.
+        (:func:`laplace_beltrami_eigenpairs`).
 
     Returns
     -------
-    (size,) float, ``lambda_FEM * area`` as in ShapeDNA (scale-invariant).
+    eigenvalues : (k,) float, ascending, ``lambda_FEM`` in the mesh's units (the first
+        zero, to rounding).
+    eigenvectors : (n, k) float, orthonormal in the averaged mass's inner product.
     """
     c = op.fem_scale
     basis = np.sqrt(c) * eigenvectors
     small_mass = basis.T @ (averaged_mass(mesh, ops.face_areas) @ basis)
-    values = la.eigh(
-        np.diag(0.5 * c * eigenvalues), 0.5 * (small_mass + small_mass.T), eigvals_only=True
-    )
-    spectrum: np.ndarray = values[1 : size + 1] * op.total_area
-    return spectrum
+    values, coordinates = la.eigh(np.diag(0.5 * c * eigenvalues), 0.5 * (small_mass + small_mass.T))
+    vectors: np.ndarray = basis @ coordinates
+    return values, vectors
 
 
 def diffusion_distance_tensor(

@@ -14,7 +14,8 @@ import numpy as np
 
 from .diffusion import (
     LaplaceBeltrami,
-    averaged_mass_spectrum,
+    averaged_mass_eigenpairs,
+    in_diffusion_time_units,
     laplace_beltrami_eigenpairs,
     normalized_spectrum,
     surface_eigenpairs,
@@ -186,15 +187,22 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
     lap("gdm")
     op = LaplaceBeltrami.from_fem(ops)
     eigenvalues, eigenvectors = laplace_beltrami_eigenpairs(op, preset.n_eigenpairs)
+    averaged = None
+    if "averaged" in (preset.spectrum_mass, preset.ddt_mass):
+        ritz_values, ritz_vectors = averaged_mass_eigenpairs(
+            op, intrinsic, ops, eigenvalues, eigenvectors
+        )
+        averaged = ritz_values * op.total_area, ritz_vectors  # lambda_FEM * area
     if mass is None:  # eq. (4) with the paper's A and time unit
         values, functions = eigenvalues, eigenvectors
+    elif preset.ddt_mass == "averaged" and averaged is not None:
+        values = in_diffusion_time_units(averaged[0], preset.n_vertices)
+        functions = averaged[1]
     else:
         values, functions = surface_eigenpairs(op, eigenvalues, eigenvectors, preset.n_vertices)
     ddt = ddt_descriptor(values, functions, preset, mass)
-    if preset.spectrum_mass == "averaged":
-        spectrum = averaged_mass_spectrum(
-            op, intrinsic, ops, eigenvalues, eigenvectors, preset.spectrum_size
-        )
+    if preset.spectrum_mass == "averaged" and averaged is not None:
+        spectrum = averaged[0][1 : preset.spectrum_size + 1]
     else:
         spectrum = normalized_spectrum(op, eigenvalues, preset.spectrum_size)
     lap("eigen_ddt")
