@@ -10,7 +10,8 @@ of the area (``--holes h:f,...``), and the holed and the intact file are describ
 as the default preset does (which closes small holes first,
 :func:`worker.engine.holes.close_small_holes`) and, for comparison, with the holes
 left open (the same preset with ``max_hole_perimeter=None``; each cell reads
-"open / closed"). Each distance (D1; the fused score with the preset's weights) is
+"open / closed"). Each distance (D1; the fused score with the preset's weights, on
+the protocol's scale, :func:`worker.evaluation.robustness.protocol_distance`) is
 divided by the median distance from a TOSCA mesh to the nearest mesh of another
 class, read from the preset's robustness report, as the protocol's *gap* is (bar
 there: below 0.1). As a reference for the spectrum, the same ratio for the
@@ -30,11 +31,12 @@ from pathlib import Path
 
 import numpy as np
 
-from worker.engine.compare import dissimilarity, fuse
+from worker.engine.compare import dissimilarity
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas, load_mesh
 from worker.engine.pipeline import ShapeDescriptor, describe_mesh
 from worker.engine.presets import MODALITIES, get_preset
 from worker.evaluation.datasets import shared_dataset
+from worker.evaluation.robustness import protocol_distance
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -75,7 +77,7 @@ def gap(holed: ShapeDescriptor, intact: ShapeDescriptor, row: str) -> float:
     single = {
         m: np.array([[d1(getattr(holed, m), getattr(intact, m))]]) for m in PRESET.fused_modalities
     }
-    return float(fuse(single, PRESET.fusion, PRESET.fusion_weights)[0, 0])
+    return float(protocol_distance(single, PRESET)[0, 0])
 
 
 def main() -> None:

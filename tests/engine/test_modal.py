@@ -272,35 +272,31 @@ def test_slice_values_of_the_small_ddt_are_the_dense_slices_singular_values():
 
 @pytest.mark.slow  # dense DDTs
 def test_slice_values_with_the_averaged_mass_are_the_dense_slices_singular_values():
-    """The averaged mass's Ritz vectors are orthonormal in that mass, not in the
-    lumped areas that weight the DDT: the small DDT's basis then comes from one
-    Cholesky QR step, and must give what the dense weighted tensor of those very
-    pairs gives, and what the pivoted QR of all the columns gives."""
+    """The averaged mass's Ritz vectors, given as coordinates in eq. (3)'s
+    eigenfunctions (orthonormal in that mass, not in the lumped areas that weight the
+    DDT): the small DDT reuses eq. (3)'s basis, and must give what the dense weighted
+    tensor of the Ritz pairs themselves gives, and what the pivoted QR of all the
+    columns gives (the path for columns that are not orthonormal)."""
     sphere = trimesh.creation.icosphere(subdivisions=3)
     v = sphere.vertices * (1 + 0.2 * np.random.default_rng(7).random((len(sphere.vertices), 1)))
     mesh, ops = surface_operators(v, sphere.faces)
     op = LaplaceBeltrami.from_fem(ops)
-    ritz_values, functions = averaged_mass_eigenpairs(
-        op, mesh, ops, *laplace_beltrami_eigenpairs(op, 80)
-    )
+    eigenvalues, eigenvectors = laplace_beltrami_eigenpairs(op, 80)
+    ritz_values, coordinates = averaged_mass_eigenpairs(op, mesh, ops, eigenvalues, eigenvectors)
+    _, basis = surface_eigenpairs(op, eigenvalues, eigenvectors, 2500)
     values = in_diffusion_time_units(ritz_values * op.total_area, 2500)
+    functions = basis @ coordinates
     mass = ops.vertex_areas
     lumped_gram = functions.T @ (mass[:, None] * functions)
     assert np.abs(lumped_gram - np.eye(80)).max() > 1e3 * TOL.orthonormal  # not orthonormal
-    kept = slice_singular_values(small_ddt(values, functions, TIMES, mass), 20)
+    kept = slice_singular_values(small_ddt(values, basis, TIMES, mass, coordinates), 20)
     dense = _dense_weighted_ddt(values, functions, mass)
     expected = np.column_stack(
         [np.linalg.svd(dense[:, :, t], compute_uv=False)[:20] for t in range(len(TIMES))]
     )
     np.testing.assert_allclose(kept, expected, atol=1e-9 * expected.max())
-    # The pivoted QR of every column (what small_ddt falls back to) agrees.
-    root = np.sqrt(mass)
-    rows = (functions**2) @ np.exp(-2.0 * np.outer(values, TIMES))
-    q = orthonormal_basis(np.column_stack([root, root[:, None] * rows, root[:, None] * functions]))
-    projected = np.einsum("ai,abt,bj->ijt", q, dense, q)
-    np.testing.assert_allclose(
-        kept, slice_singular_values(projected, 20), atol=1e-9 * expected.max()
-    )
+    fallback = slice_singular_values(small_ddt(values, functions, TIMES, mass), 20)
+    np.testing.assert_allclose(fallback, kept, atol=1e-9 * expected.max())
 
 
 def test_slice_values_do_not_swap_where_the_core_diagonal_does():

@@ -60,6 +60,25 @@ def test_a_variant_that_drifts_towards_another_class_fails(collection):
     assert row["variants"]["drift"]["count"] == 1
 
 
+def test_a_product_is_measured_on_the_scale_of_one_distance(collection):
+    # Two modalities moved alike, fused by a product with weights 1 and 3: the product
+    # of the distances would put the gap at its fourth power; its weighted geometric
+    # mean, the protocol's scale, at the modalities' own.
+    originals, labels = collection
+    drifted = _descriptors(originals["gdm"] + [[0.0, 0.03]])
+    preset = dataclasses.replace(
+        PRESET, fused_modalities=("gdm", "ddt"), fusion_weights={"gdm": 1.0, "ddt": 3.0}
+    )
+    variants = {"drift": (np.arange(6), drifted)}
+    scores = tessellation_scores(originals, labels, variants, preset)
+    assert scores[PRESET_ROW]["gap"] == pytest.approx(scores["gdm"]["gap"], rel=1e-9)
+    assert scores["gdm"]["gap"] > 0.01
+    summed = tessellation_scores(
+        originals, labels, variants, dataclasses.replace(preset, fusion="sum")
+    )
+    assert summed[PRESET_ROW]["gap"] == pytest.approx(scores["gdm"]["gap"], rel=1e-9)
+
+
 def test_pose_invariance_counts_poses_closer_to_the_collection(collection):
     originals, labels = collection
     poses = _descriptors(np.array([[8.0, 8.0], [8.0, 8.2], [1.02, 1.0]]))  # one near class a

@@ -211,9 +211,12 @@ def averaged_mass_eigenpairs(
     averaged-mass pairs are taken as Rayleigh-Ritz pairs in their span (the values
     within 0.2% of a full solve at the 50th of 100; tested) instead of by a second
     eigensolve: ``B^T K B y = mu B^T M B y``, eigenvectors ``B y``. With
-    ``B = sqrt(c) Phi``, eq. (3)'s eigenvectors made M-orthonormal, ``B^T K B`` is
-    ``diag(lambda_FEM)`` by eq. (3) itself (to the eigensolver's residual), so only
-    ``B^T M B`` is formed (tested against forming both).
+    ``B = sqrt(c) Phi``, eq. (3)'s eigenvectors made M-orthonormal
+    (:func:`surface_eigenpairs`), ``B^T K B`` is ``diag(lambda_FEM)`` by eq. (3) itself
+    (to the eigensolver's residual), so only ``B^T M B`` is formed (tested against
+    forming both). The vectors are returned as their coordinates ``y`` in ``B``, the
+    basis they share with eq. (3)'s (:func:`worker.engine.modal.small_ddt` needs no
+    other).
 
     Parameters
     ----------
@@ -226,14 +229,14 @@ def averaged_mass_eigenpairs(
     -------
     eigenvalues : (k,) float, ascending, ``lambda_FEM`` in the mesh's units (the first
         zero, to rounding).
-    eigenvectors : (n, k) float, orthonormal in the averaged mass's inner product.
+    coordinates : (k, k) float, the eigenvectors ``sqrt(c) Phi @ coordinates``,
+        orthonormal in the averaged mass's inner product.
     """
     c = op.fem_scale
     basis = np.sqrt(c) * eigenvectors
     small_mass = basis.T @ (averaged_mass(mesh, ops.face_areas) @ basis)
     values, coordinates = la.eigh(np.diag(0.5 * c * eigenvalues), 0.5 * (small_mass + small_mass.T))
-    vectors: np.ndarray = basis @ coordinates
-    return values, vectors
+    return values, coordinates
 
 
 def diffusion_distance_tensor(

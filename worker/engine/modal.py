@@ -274,32 +274,12 @@ def _is_orthonormal(columns: np.ndarray) -> bool:
     return bool(np.abs(gram - np.eye(len(gram))).max() <= TOL.orthonormal)
 
 
-def _well_conditioned_basis(columns: np.ndarray) -> np.ndarray | None:
-    """An orthonormal basis of the span of nearly orthonormal columns: the columns
-    themselves, or one Cholesky QR step (``columns R^-1``, ``R^T R`` their Gram
-    matrix), whose loss of orthogonality grows with the square of their condition
-    number; None when that is not orthonormal to ``TOL.orthonormal`` (then a pivoted
-    QR is needed).
-
-    The Ritz vectors of the averaged mass (orthonormal in that mass, not in the
-    lumped one that weights the DDT) take this step: 1.5 ms at 2,500 x 100,
-    against 10 ms for the pivoted QR of all the DDT's columns.
-    """
-    if _is_orthonormal(columns):
-        return columns
-    try:
-        factor = la.cholesky(columns.T @ columns)
-    except la.LinAlgError:
-        return None
-    basis: np.ndarray = la.solve_triangular(factor, columns.T, trans="T").T
-    return basis if _is_orthonormal(basis) else None
-
-
 def small_ddt(
     eigenvalues: np.ndarray,
     eigenvectors: np.ndarray,
     times: tuple[float, ...],
     mass: np.ndarray | None = None,
+    coordinates: np.ndarray | None = None,
 ) -> np.ndarray:
     """The normalized DDT in a small orthonormal basis of its slices' span, without
     forming the ``n x n x s`` tensor.
@@ -316,46 +296,56 @@ def small_ddt(
     times ``sum w``: for ``w = 1`` that is the paper's division by the sum, times
     ``n`` (:func:`normalize_slices`).
 
-    With ``mass``, ``W^1/2 Phi`` is already orthonormal (eq. (3)'s eigenvectors are,
-    in the weights' inner product), or nearly (the averaged mass's, orthonormal in
-    that mass: one Cholesky QR step makes them so), and contains ``W^1/2 1`` (the
-    constant is an eigenvector), so ``Q`` is that basis extended by the ``r_t``
-    (:func:`extended_basis`); columns too far from orthonormal get the pivoted QR of
-    all of them instead (:func:`orthonormal_basis`).
+    With ``mass``, ``W^1/2`` times the eigenvectors is already orthonormal (eq. (3)'s
+    are, in the weights' inner product) and contains ``W^1/2 1`` (the constant is an
+    eigenvector), so ``Q`` is those columns extended by the ``r_t``
+    (:func:`extended_basis`), and ``Q^T W^1/2 Phi`` is the coordinates over zeros;
+    columns that are not orthonormal to ``TOL.orthonormal`` get the pivoted QR of all
+    of them instead (:func:`orthonormal_basis`). Eigenfunctions given by
+    ``coordinates`` in that basis (the averaged mass's Ritz vectors,
+    :func:`worker.engine.diffusion.averaged_mass_eigenpairs`) share it, so they cost
+    no second orthonormalization.
 
     Parameters
     ----------
     eigenvalues : (k,) float, in the unit of ``times``.
-    eigenvectors : (n, k) float, orthonormal in the inner product of ``mass`` or
-        nearly (the averaged mass's; without ``mass``: the paper's ``A``).
+    eigenvectors : (n, k) float, orthonormal in the inner product of ``mass``
+        (without ``mass``: the paper's ``A``).
     times : diffusion times.
     mass : (n,) float, lumped vertex areas, or None for the paper's vertex matrices.
+    coordinates : (k, k) float, optional: eq. (4)'s eigenfunctions are
+        ``eigenvectors @ coordinates`` (with ``eigenvalues`` theirs); by default the
+        eigenvectors themselves.
 
     Returns
     -------
     (p, p, len(times)) float, ``p`` at most ``k + len(times) + 1``; every slice
     symmetric.
     """
-    n = eigenvectors.shape[0]
+    n, k = eigenvectors.shape
     weights = np.ones(n) if mass is None else np.asarray(mass, dtype=np.float64)
     root = np.sqrt(weights)
     total = float(weights.sum())
+    functions = eigenvectors if coordinates is None else eigenvectors @ coordinates
     decays = np.exp(-np.outer(eigenvalues, times))  # (k, s): column t is exp(-Lambda t)
-    rows = (eigenvectors**2) @ decays**2  # (n, s): column t is r_t
-    phi = root[:, None] * eigenvectors
+    rows = (functions**2) @ decays**2  # (n, s): column t is r_t
+    spanning = root[:, None] * eigenvectors
     others = root[:, None] * np.column_stack([np.ones(n), rows])
-    basis = None if mass is None else _well_conditioned_basis(phi)
-    if basis is not None:
-        q = extended_basis(basis, others[:, 1:])
+    if mass is not None and _is_orthonormal(spanning):
+        q = extended_basis(spanning, others[:, 1:])
+        # Q^T W^1/2 Phi: the basis leads with W^1/2 times the eigenvectors, and the rest
+        # of it is orthogonal to them (to working precision).
+        q_phi = np.zeros((q.shape[1], k))
+        q_phi[:k] = np.eye(k) if coordinates is None else coordinates
     else:
-        q = orthonormal_basis(np.column_stack([others, phi]))
+        q = orthonormal_basis(np.column_stack([others, spanning]))
+        q_phi = q.T @ (root[:, None] * functions)
     q_others = q.T @ others
     q_one, q_rows = q_others[:, 0], q_others[:, 1:]
-    q_phi = q.T @ phi  # Q^T W^1/2 Psi_t = q_phi exp(-Lambda t), for every t
-    mass_phi = weights @ eigenvectors
+    mass_phi = weights @ functions
     slices = []
     for j in range(len(times)):
-        q_r, q_psi = q_rows[:, j], q_phi * decays[:, j]
+        q_r, q_psi = q_rows[:, j], q_phi * decays[:, j]  # Q^T W^1/2 Psi_t
         # sum_ij w_i w_j d_ij of eq. (4), from the same low-rank form.
         integral = 2.0 * total * (weights @ rows[:, j]) - 2.0 * np.sum(
             (mass_phi * decays[:, j]) ** 2
@@ -372,12 +362,13 @@ def ddt_core(
     core_shape: tuple[int, int, int],
     mass: np.ndarray | None = None,
     mix_times: bool = True,
+    coordinates: np.ndarray | None = None,
 ) -> np.ndarray:
     """HOSVD core of the normalized DDT: that of its small form (:func:`small_ddt`).
 
     Parameters
     ----------
-    eigenvalues, eigenvectors, times, mass : as :func:`small_ddt`.
+    eigenvalues, eigenvectors, times, mass, coordinates : as :func:`small_ddt`.
     core_shape : (r1, r2, r3)
     mix_times : True, the whole HOSVD (the paper); False, the vertex modes only
         (:func:`vertex_modes_core`), so the core's third size is ``len(times)``.
@@ -387,7 +378,7 @@ def ddt_core(
     core_shape float, as :func:`hosvd_core` (or :func:`vertex_modes_core`) of the
     normalized dense (weighted) DDT.
     """
-    tensor = small_ddt(eigenvalues, eigenvectors, times, mass)
+    tensor = small_ddt(eigenvalues, eigenvectors, times, mass, coordinates)
     if mix_times:
         return hosvd_core(tensor, core_shape)
     return vertex_modes_core(tensor, core_shape[:2])

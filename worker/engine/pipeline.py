@@ -137,20 +137,28 @@ def resampled_surface(mesh: Mesh, preset: Preset) -> Mesh:
 
 
 def ddt_descriptor(
-    eigenvalues: np.ndarray, eigenvectors: np.ndarray, preset: Preset, mass: np.ndarray | None
+    eigenvalues: np.ndarray,
+    eigenvectors: np.ndarray,
+    preset: Preset,
+    mass: np.ndarray | None,
+    coordinates: np.ndarray | None = None,
 ) -> np.ndarray:
-    """The DDT modality of eq. (4)'s eigenpairs, as the preset's ``ddt_elements`` say:
-    the HOSVD core (eqs. 5-7), its diagonal, or each slice's singular values."""
+    """The DDT modality of eq. (4)'s eigenpairs (eigenfunctions ``eigenvectors`` or
+    ``eigenvectors @ coordinates``, :func:`~worker.engine.modal.small_ddt`), as the
+    preset's ``ddt_elements`` say: the HOSVD core (eqs. 5-7), its diagonal, or each
+    slice's singular values."""
+    times = preset.diffusion_times
     if preset.ddt_elements == "slice_values":
-        tensor = small_ddt(eigenvalues, eigenvectors, preset.diffusion_times, mass)
+        tensor = small_ddt(eigenvalues, eigenvectors, times, mass, coordinates)
         return slice_singular_values(tensor, min(preset.ddt_core_shape[:2]))
     core = ddt_core(
         eigenvalues,
         eigenvectors,
-        preset.diffusion_times,
+        times,
         preset.ddt_core_shape,
         mass,
         mix_times=preset.ddt_mix_times,
+        coordinates=coordinates,
     )
     return core_diagonal(core) if preset.ddt_elements == "diagonal" else core
 
@@ -187,21 +195,23 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
     lap("gdm")
     op = LaplaceBeltrami.from_fem(ops)
     eigenvalues, eigenvectors = laplace_beltrami_eigenpairs(op, preset.n_eigenpairs)
+    # The averaged mass's Ritz pairs, for the spectrum and the DDT that ask for them.
     averaged = None
     if "averaged" in (preset.spectrum_mass, preset.ddt_mass):
-        ritz_values, ritz_vectors = averaged_mass_eigenpairs(
+        ritz_values, coordinates = averaged_mass_eigenpairs(
             op, intrinsic, ops, eigenvalues, eigenvectors
         )
-        averaged = ritz_values * op.total_area, ritz_vectors  # lambda_FEM * area
+        averaged = ritz_values * op.total_area, coordinates  # lambda_FEM * area
     if mass is None:  # eq. (4) with the paper's A and time unit
-        values, functions = eigenvalues, eigenvectors
-    elif preset.ddt_mass == "averaged" and averaged is not None:
-        values = in_diffusion_time_units(averaged[0], preset.n_vertices)
-        functions = averaged[1]
+        ddt = ddt_descriptor(eigenvalues, eigenvectors, preset, None)
     else:
         values, functions = surface_eigenpairs(op, eigenvalues, eigenvectors, preset.n_vertices)
-    ddt = ddt_descriptor(values, functions, preset, mass)
-    if preset.spectrum_mass == "averaged" and averaged is not None:
+        if averaged is not None and preset.ddt_mass == "averaged":
+            values = in_diffusion_time_units(averaged[0], preset.n_vertices)
+            ddt = ddt_descriptor(values, functions, preset, mass, averaged[1])
+        else:
+            ddt = ddt_descriptor(values, functions, preset, mass)
+    if averaged is not None and preset.spectrum_mass == "averaged":
         spectrum = averaged[0][1 : preset.spectrum_size + 1]
     else:
         spectrum = normalized_spectrum(op, eigenvalues, preset.spectrum_size)

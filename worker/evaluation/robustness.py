@@ -26,7 +26,12 @@ pose first (one body in many poses is the hardest gallery there is for a file's
 tessellation to confuse).
 
 Distances are the preset's: D1 or D2 per modality (for D2, sigma over the gallery
-of originals), fused with the preset's rule and weights.
+of originals), fused with the preset's rule and weights. A product ``prod_m D_m^w_m``
+is measured on its ``sum_m w_m``-th root, the weighted geometric mean of the
+modalities' distances: the same ranking, on the scale of one modality's distance. The
+product itself multiplies ratios (two modalities at a gap of 0.05 each make a product
+at 0.0025), so its gaps and ratios would shrink with the weights alone and could not be
+compared with a modality's, nor between two choices of weights.
 """
 
 from __future__ import annotations
@@ -60,6 +65,24 @@ def row_titles(preset: Preset) -> dict[str, str]:
     }
 
 
+def protocol_distance(per: Mapping[str, np.ndarray], preset: Preset) -> np.ndarray:
+    """The preset's fused score on the protocol's scale: its sum, or the
+    ``sum_m w_m``-th root of its product (the modalities' weighted geometric mean;
+    the same ranking as the product, in the units of one modality's distance).
+
+    Parameters
+    ----------
+    per : modality -> dissimilarities (any shape, the same for every modality).
+    preset : the fusion rule and weights.
+    """
+    weights = {m: preset.weight(m) for m in preset.fused_modalities}
+    fused = fuse({m: per[m] for m in preset.fused_modalities}, preset.fusion, weights)
+    total = sum(weights.values())
+    if preset.fusion == "product" and total > 0:
+        fused = fused ** (1.0 / total)
+    return fused
+
+
 def _cross(
     queries: Mapping[str, np.ndarray],
     gallery: Mapping[str, np.ndarray],
@@ -71,9 +94,8 @@ def _cross(
     for m in MODALITIES:
         sigma = gallery_sigma(gallery[m]) if preset.dissimilarity == "D2" else None
         per[m] = dissimilarity(queries[m], gallery[m], preset.dissimilarity, sigma)
-    weights = {m: preset.weight(m) for m in preset.fused_modalities}
     out = dict(per)
-    out[PRESET_ROW] = fuse({m: per[m] for m in preset.fused_modalities}, preset.fusion, weights)
+    out[PRESET_ROW] = protocol_distance(per, preset)
     if BASELINE in queries and BASELINE in gallery:
         q, g = queries[BASELINE], gallery[BASELINE]
         both = shapedna_dissimilarity(np.concatenate([q, g]))
