@@ -10,9 +10,11 @@ by the mean of its EER and 1 - mAP (verification and retrieval errors weigh
 equally), and the chosen weights are measured on the pairs that involve an object
 of the fifth fold (EER) and with the fifth fold's objects as queries against all
 others (NN, mAP), so no weight ever sees its test pairs. The table shows each
-fold's choice and test scores; the last line is the choice on all meshes, the
-weights a preset takes. Descriptors come from (and go to) the evaluation cache
-that ``shapes evaluate`` uses, so after an evaluation this takes seconds.
+fold's choice and test scores; then the choice on all meshes, the weights a preset
+takes, and the loss on all meshes with each weight moved over the grid (the others as
+chosen), which shows how sharply TOSCA decides it. Descriptors come from (and go to)
+the evaluation cache that ``shapes evaluate`` uses, so after an evaluation this takes
+seconds.
 """
 
 from __future__ import annotations
@@ -103,6 +105,12 @@ def main() -> None:
         )
     weights = choose(mats, labels, preset.fusion)
     print("chosen on all meshes: " + ", ".join(f"{m} {weights[m]:g}" for m in names))
+    # How sharply TOSCA decides: each weight moved over the grid, the others as chosen.
+    print("\n| on all meshes | " + " | ".join(f"{w:g}" for w in GRID) + " |")
+    print("|---|" + "---:|" * len(GRID))
+    for m in names[:-1]:
+        losses = [loss(scores(fuse(mats, preset.fusion, {**weights, m: w}), labels)) for w in GRID]
+        print(f"| loss, {m} weight | " + " | ".join(f"{x:.5f}" for x in losses) + " |")
 
 
 if __name__ == "__main__":
