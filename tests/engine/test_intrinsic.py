@@ -10,7 +10,7 @@ import trimesh
 from worker.engine.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay, mollify
 from worker.engine.mesh_io import load_mesh
 from worker.engine.resample import resample_mesh
-from worker.engine.topology import edge_keys
+from worker.engine.topology import edge_keys, euler_and_boundary
 
 
 def _edge_cotan_sums(mesh: IntrinsicMesh) -> np.ndarray:
@@ -60,6 +60,29 @@ def test_flips_keep_the_surface_and_remove_obtuse_pairs(decimated):
     assert n_bad_before > 50
     # Only flips that would duplicate an existing edge are skipped.
     assert n_bad_after <= 0.01 * n_bad_before
+
+
+def test_a_triangle_with_two_equally_violating_edges_loses_only_one_per_round():
+    # A tall isosceles triangle ABC whose two long sides each face a vertex just
+    # across them, mirrored: both sides are non-Delaunay by exactly the same amount
+    # (the ties of symmetric meshes, a cylinder's fans). Flipping both in one round
+    # gave four faces to one edge and a boundary that was not there.
+    offset = 0.2 * np.array([-3.0, 1.0]) / np.sqrt(10.0)
+    d = np.array([-0.5, 1.5]) + offset
+    e = d * [-1.0, 1.0]
+    vertices = np.array([[-1.0, 0.0], [1.0, 0.0], [0.0, 3.0], d, e])
+    vertices = np.column_stack([vertices, np.zeros(5)])
+    faces = np.array([[0, 1, 2], [0, 2, 3], [2, 1, 4]])
+    before = IntrinsicMesh.from_mesh(vertices, faces)
+    sums = _edge_cotan_sums(before)
+    assert np.count_nonzero(sums < -1e-9) == 2
+    assert sorted(sums)[0] == sorted(sums)[1]  # the premise: an exact tie
+    after = intrinsic_delaunay(before)
+    assert euler_and_boundary(after.faces, 5) == euler_and_boundary(faces, 5)
+    keys = edge_keys(after.faces, 5).ravel()
+    assert np.bincount(np.unique(keys, return_inverse=True)[1]).max() <= 2
+    assert after.face_areas.sum() == pytest.approx(before.face_areas.sum(), rel=1e-12)
+    assert np.count_nonzero(_edge_cotan_sums(after) < -1e-9) == 0
 
 
 def test_matches_robust_laplacian_where_every_flip_was_possible(decimated):

@@ -135,15 +135,20 @@ def intrinsic_delaunay(mesh: IntrinsicMesh) -> IntrinsicMesh:
         at = np.minimum(np.searchsorted(sorted_keys, new_keys), len(sorted_keys) - 1)
         exists = (sorted_keys[at] == new_keys) | (k == opp)
         # One flip per triangle per round: an edge wins if it is the most violating
-        # edge of both of its triangles.
-        best = np.full(m, -np.inf)
-        score = np.where(exists, -np.inf, violation)
-        np.maximum.at(best, f1, score)
-        np.maximum.at(best, f2, score)
-        chosen = ~exists & (score == best[f1]) & (score == best[f2])
+        # edge of both of its triangles. Candidates are ranked by violation, ties by
+        # position, so that on a symmetric mesh (a cylinder's fans, a box), where two
+        # edges of a triangle can violate exactly alike, it still loses only one: two
+        # flips of one triangle in a round would corrupt the triangulation.
+        candidates = np.flatnonzero(~exists)
+        ranked = candidates[np.lexsort((candidates, -violation[candidates]))]
+        rank = np.arange(len(ranked))
+        first = np.full(m, len(ranked))
+        np.minimum.at(first, f1[ranked], rank)
+        np.minimum.at(first, f2[ranked], rank)
+        chosen = np.sort(ranked[(first[f1[ranked]] == rank) & (first[f2[ranked]] == rank)])
         # Two flips creating the same new edge: keep the first.
-        _, first = np.unique(new_keys[chosen], return_index=True)
-        idx = np.flatnonzero(chosen)[first]
+        _, first_new = np.unique(new_keys[chosen], return_index=True)
+        idx = chosen[first_new]
         if not len(idx):
             break
         faces, lengths = _flip(faces, lengths, f1[idx], c1[idx], f2[idx], c2[idx])
