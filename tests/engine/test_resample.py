@@ -7,8 +7,14 @@ import pytest
 import trimesh
 
 from worker.engine.mesh_io import Mesh, clean_mesh
-from worker.engine.resample import resample_mesh
-from worker.engine.topology import euler_and_boundary, unique_rows
+from worker.engine.resample import (
+    MAX_REFINED_VERTICES,
+    resample_mesh,
+    split_edges,
+    split_long_edges,
+    tiling_edge,
+)
+from worker.engine.topology import edge_keys, euler_and_boundary, unique_rows
 
 
 def area(mesh: Mesh) -> float:
@@ -55,3 +61,69 @@ def test_a_small_mesh_is_subdivided_without_changing_its_surface():
     assert abs(refined.n_vertices - 60) <= 3
     assert area(refined) == pytest.approx(22.0, rel=1e-9)  # a box's faces stay flat
     assert_clean(refined)
+
+
+def edge_lengths(mesh: Mesh) -> np.ndarray:
+    p = mesh.vertices[mesh.faces]
+    return np.linalg.norm(p - p[:, [1, 2, 0]], axis=2).ravel()
+
+
+@pytest.fixture(scope="module")
+def cad_cylinder() -> Mesh:
+    """A CAD-style cylinder: 48 strips, each two triangles the whole height long."""
+    c = trimesh.creation.cylinder(radius=0.5, height=2.0, sections=48)
+    return clean_mesh(c.vertices, c.faces)
+
+
+def test_splitting_some_edges_keeps_the_surface_and_its_orientation(cad_cylinder):
+    mesh = cad_cylinder
+    keys = np.unique(edge_keys(mesh.faces, mesh.n_vertices))
+    chosen = np.sort(np.random.default_rng(0).choice(keys, size=len(keys) // 3, replace=False))
+    vertices, faces = split_edges(mesh.vertices, mesh.faces, chosen)
+    out = Mesh(vertices=vertices, faces=faces)
+    assert out.n_vertices == mesh.n_vertices + len(chosen)
+    assert area(out) == pytest.approx(area(mesh), rel=1e-12)
+    assert euler_and_boundary(out.faces, out.n_vertices) == (2, 0)
+    assert_clean(out)
+    # every face keeps the outward orientation of the face it came from
+    normals = trimesh.Trimesh(out.vertices, out.faces, process=False).face_normals
+    centers = out.vertices[out.faces].mean(axis=1)
+    radial = np.c_[centers[:, :2], np.zeros(len(centers))]
+    side = np.abs(centers[:, 2]) < 1.0 - 1e-9
+    outward = np.where(side, np.einsum("ij,ij->i", normals, radial), normals[:, 2] * centers[:, 2])
+    assert (outward > 0).all()
+
+
+def test_all_edges_split_is_the_midpoint_subdivision():
+    box = trimesh.creation.box(extents=(1.0, 2.0, 3.0))
+    mesh = clean_mesh(box.vertices, box.faces)
+    out = resample_mesh(mesh, 26)  # exactly one subdivision
+    vertices, faces = split_edges(mesh.vertices, mesh.faces, np.unique(edge_keys(mesh.faces, 8)))
+    assert np.array_equal(out.vertices, vertices) and np.array_equal(out.faces, faces)
+
+
+def test_decimation_leaves_a_cylinders_strips_long_and_the_bound_refines_them(cad_cylinder):
+    target = 1000
+    h = tiling_edge(area(cad_cylinder), target)
+    plain = resample_mesh(cad_cylinder, target)
+    # along the strips nothing holds a vertex: elements a quarter of the height long
+    assert edge_lengths(plain).max() > 5 * h
+    bounded = resample_mesh(cad_cylinder, target, max_edge=3.0)
+    assert edge_lengths(bounded).max() <= 3.0 * h
+    assert area(bounded) == pytest.approx(area(plain), rel=1e-12)
+    assert euler_and_boundary(bounded.faces, bounded.n_vertices) == (2, 0)
+    assert_clean(bounded)
+
+
+def test_the_edge_bound_stops_at_its_vertex_budget_longest_edges_first():
+    long_thin = trimesh.creation.cylinder(radius=0.5, height=20.0, sections=64)
+    mesh = clean_mesh(long_thin.vertices, long_thin.faces)
+    before = edge_lengths(mesh).max()
+    out = split_long_edges(mesh, max_length=1e-3, max_vertices=5 * mesh.n_vertices)
+    assert out.n_vertices == 5 * mesh.n_vertices
+    assert edge_lengths(out).max() < before
+    assert area(out) == pytest.approx(area(mesh), rel=1e-12)
+    assert_clean(out)
+    # through resample_mesh the budget is MAX_REFINED_VERTICES times the target
+    bounded = resample_mesh(mesh, 500, max_edge=0.5)
+    assert bounded.n_vertices <= MAX_REFINED_VERTICES * 500

@@ -4,44 +4,119 @@ The modal representation compares matrices of the same size, so every mesh is
 brought to the preset's vertex count first (sec. 4.2: 2,500 points for SHREC).
 
 Method: quadric error decimation (Garland-Heckbert, via ``fast_simplification``).
-It keeps the shape's features at this density (an earlier measurement on TOSCA
-found isotropic remeshing worse for every modality; not repeated here), at the
-price of badly shaped triangles; the operators built on the result therefore use
-its intrinsic Delaunay triangulation (:mod:`worker.engine.intrinsic`), which makes them
-insensitive to triangle shape (measured: docs/engine.md). Meshes with fewer
-vertices than the target are first refined by midpoint subdivision, which does not
-change the surface.
+It keeps the shape's features at this density (an isotropic remesh to 2,500
+vertices, MeshLab's, took TOSCA's DDT EER from 6.46 to 8.77%: docs/evaluation.md,
+sec. "CAD-style files"), at the price of badly shaped triangles; the operators
+built on the result therefore use its intrinsic Delaunay triangulation
+(:mod:`worker.engine.intrinsic`), which makes them insensitive to triangle shape
+(measured: docs/engine.md). Meshes with fewer vertices than the target are first
+refined by midpoint subdivision, which does not change the surface.
+
+Decimation measures only how far the surface moves, so where a file is flat or
+ruled (a CAD cylinder's strips, a box's faces) it leaves triangles that span the
+whole part: nothing there holds a vertex. The operators cannot resolve a function
+across such an element, so a preset can bound the edge length afterwards
+(:func:`split_long_edges`), again by midpoints, which keeps the surface.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .mesh_io import Mesh, clean_mesh
-from .topology import euler_and_boundary, unique_rows
+from .mesh_io import Mesh, clean_mesh, face_areas
+from .topology import edge_keys, euler_and_boundary
+
+#: The edge-length bound stops refining before a mesh would pass this many times the
+#: resampling target (a file of long thin strips, such as a finely faceted long
+#: cylinder, would otherwise grow without bound); the longest edges go first.
+MAX_REFINED_VERTICES = 4
+
+
+def split_edges(
+    vertices: np.ndarray, faces: np.ndarray, keys: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Split the edges ``keys`` (sorted unique :func:`~worker.engine.topology.edge_keys`)
+    at their midpoints; the surface is unchanged.
+
+    A face with one split edge becomes two triangles, with two it becomes three (its
+    quadrilateral cut along the shorter diagonal), with three it becomes four (the
+    midpoint subdivision, faces in the order corner a, b, c, middle). New vertices
+    are appended in the order of ``keys``.
+    """
+    n = len(vertices)
+    corner_keys = edge_keys(faces, n)  # [f, c]: the edge opposite corner c
+    position = np.minimum(np.searchsorted(keys, corner_keys), len(keys) - 1)
+    split = keys[position] == corner_keys
+    mid = np.where(split, n + position, -1)
+    vertices = np.concatenate([vertices, 0.5 * (vertices[keys // n] + vertices[keys % n])])
+    count = split.sum(axis=1)
+    rows = np.arange(len(faces))
+    out = [faces[count == 0]]
+
+    one = rows[count == 1]  # corner c opposite the split edge: (c, c+1, m), (c, m, c+2)
+    c = np.argmax(split[one], axis=1)
+    a, b, d = faces[one, c], faces[one, (c + 1) % 3], faces[one, (c + 2) % 3]
+    m = mid[one, c]
+    out += [np.stack([a, b, m], axis=1), np.stack([a, m, d], axis=1)]
+
+    two = rows[count == 2]  # corner c opposite the kept edge b-d
+    c = np.argmin(split[two], axis=1)
+    a, b, d = faces[two, c], faces[two, (c + 1) % 3], faces[two, (c + 2) % 3]
+    mab, mda = mid[two, (c + 2) % 3], mid[two, (c + 1) % 3]
+    out.append(np.stack([a, mab, mda], axis=1))
+    short = np.linalg.norm(vertices[mab] - vertices[d], axis=1) <= np.linalg.norm(
+        vertices[b] - vertices[mda], axis=1
+    )
+    out += [
+        np.stack([mab[short], b[short], d[short]], axis=1),
+        np.stack([mab[short], d[short], mda[short]], axis=1),
+        np.stack([mab[~short], b[~short], mda[~short]], axis=1),
+        np.stack([b[~short], d[~short], mda[~short]], axis=1),
+    ]
+
+    three = rows[count == 3]
+    a, b, d = faces[three].T
+    mbd, mda, mab = mid[three].T
+    out += [
+        np.stack([a, mab, mda], axis=1),
+        np.stack([mab, b, mbd], axis=1),
+        np.stack([mda, mbd, d], axis=1),
+        np.stack([mab, mbd, mda], axis=1),
+    ]
+    return vertices, np.concatenate(out).astype(faces.dtype)
 
 
 def _subdivide(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Split every triangle into four at its edge midpoints; the surface is unchanged."""
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    first, edge_index = unique_rows(edges)
-    midpoints = vertices[edges[first]].mean(axis=1)
-    m = len(faces)
-    mid = edge_index.reshape(3, m).T + len(vertices)  # midpoints of edges 01, 12, 20
-    a, b, c = faces.T
-    ab, bc, ca = mid.T
-    new_faces = np.concatenate(
-        [
-            np.stack([a, ab, ca], axis=1),
-            np.stack([ab, b, bc], axis=1),
-            np.stack([ca, bc, c], axis=1),
-            np.stack([ab, bc, ca], axis=1),
-        ]
-    )
-    return np.concatenate([vertices, midpoints]), new_faces
+    return split_edges(vertices, faces, np.unique(edge_keys(faces, len(vertices))))
 
 
-def resample_mesh(mesh: Mesh, n_vertices: int) -> Mesh:
+def tiling_edge(area: float, n_vertices: int) -> float:
+    """Edge of the equilateral tiling of ``area`` by a closed mesh of ``n_vertices``
+    vertices (about ``2 n_vertices`` triangles)."""
+    return float(np.sqrt(area / (2 * n_vertices) * 4 / np.sqrt(3)))
+
+
+def split_long_edges(mesh: Mesh, max_length: float, max_vertices: int) -> Mesh:
+    """Split every edge longer than ``max_length`` at its midpoint, in rounds, until
+    none is left or the mesh reaches ``max_vertices`` (the longest edges first)."""
+    vertices, faces = mesh.vertices, mesh.faces
+    while len(vertices) < max_vertices:
+        keys = edge_keys(faces, len(vertices))
+        p = vertices[faces]
+        lengths = np.linalg.norm(p[:, [2, 0, 1]] - p[:, [1, 2, 0]], axis=2)  # opposite corner c
+        keys, first = np.unique(keys[lengths > max_length], return_index=True)
+        if len(keys) == 0:
+            break
+        room = max_vertices - len(vertices)
+        if len(keys) > room:
+            longest = np.argsort(-lengths[lengths > max_length][first], kind="stable")[:room]
+            keys = np.sort(keys[longest])
+        vertices, faces = split_edges(vertices, faces, keys)
+    return Mesh(vertices=vertices, faces=faces)
+
+
+def resample_mesh(mesh: Mesh, n_vertices: int, max_edge: float | None = None) -> Mesh:
     """Return a mesh of the same surface with about ``n_vertices`` vertices.
 
     Parameters
@@ -51,6 +126,10 @@ def resample_mesh(mesh: Mesh, n_vertices: int) -> Mesh:
         so the result can differ from the target by a few vertices on surfaces
         with boundaries or handles; the descriptors are normalized to be
         insensitive to that (see :func:`worker.engine.modal.normalize_slices`).
+    max_edge : if given, no edge of the result is longer than this many
+        :func:`tiling_edge` of its area for ``n_vertices`` (:func:`split_long_edges`,
+        up to :data:`MAX_REFINED_VERTICES` times ``n_vertices``); such a mesh can
+        have more vertices than the target.
 
     Returns
     -------
@@ -62,13 +141,17 @@ def resample_mesh(mesh: Mesh, n_vertices: int) -> Mesh:
     while len(vertices) < n_vertices:
         vertices, faces = _subdivide(vertices, faces)
     if len(vertices) == n_vertices:
-        return Mesh(vertices=vertices, faces=faces)
-
-    # Euler: F = 2V - 2chi for a closed surface, so aim at the face count that
-    # gives n_vertices for this surface's own characteristic and boundary.
-    euler, boundary = euler_and_boundary(faces, len(vertices))
-    target_faces = max(2 * n_vertices - 2 * euler - boundary, 4)
-    reduced_vertices, reduced_faces = fast_simplification.simplify(
-        vertices, faces.astype(np.int32), target_count=int(target_faces)
-    )
-    return clean_mesh(reduced_vertices, reduced_faces)
+        out = Mesh(vertices=vertices, faces=faces)
+    else:
+        # Euler: F = 2V - 2chi for a closed surface, so aim at the face count that
+        # gives n_vertices for this surface's own characteristic and boundary.
+        euler, boundary = euler_and_boundary(faces, len(vertices))
+        target_faces = max(2 * n_vertices - 2 * euler - boundary, 4)
+        reduced_vertices, reduced_faces = fast_simplification.simplify(
+            vertices, faces.astype(np.int32), target_count=int(target_faces)
+        )
+        out = clean_mesh(reduced_vertices, reduced_faces)
+    if max_edge is None:
+        return out
+    limit = max_edge * tiling_edge(float(face_areas(out.vertices, out.faces).sum()), n_vertices)
+    return split_long_edges(out, limit, MAX_REFINED_VERTICES * n_vertices)
