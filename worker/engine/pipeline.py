@@ -129,11 +129,11 @@ def resampled_surface(mesh: Mesh, preset: Preset) -> Mesh:
     """The mesh every descriptor of ``mesh`` is computed on: in its canonical frame
     (:func:`~worker.engine.mesh_io.canonical_frame`), its small holes closed if the
     preset says so (:func:`~worker.engine.holes.close_small_holes`), resampled to the
-    preset's vertex count."""
+    preset's vertex count, its edges bounded if the preset says so."""
     surface = canonical_frame(mesh)
     if preset.max_hole_perimeter is not None:
         surface = close_small_holes(surface, preset.max_hole_perimeter, CANONICAL_AREA)
-    return resample_mesh(surface, preset.n_vertices)
+    return resample_mesh(surface, preset.n_vertices, preset.max_edge)
 
 
 def ddt_descriptor(
