@@ -1,0 +1,83 @@
+"""What the resample's edge bound costs on CAD-style cylinders, side by side.
+
+    OPENBLAS_NUM_THREADS=1 python bench/cad_cost.py [--preset smeets2010-surface]
+
+Each file (trimesh's cylinders: few long strips, two fans whose centres have one
+neighbour per side) is described once in a fresh process with the preset as it is and
+with ``max_edge=None`` (the decimated mesh as it is, the default before v8), so the
+peak resident memory is that file's. Prints the vertex count, the seconds of the whole
+description and of its GDM stage, and the peak RSS.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+from dataclasses import replace
+
+from worker.engine.presets import DEFAULT_PRESET
+
+#: label -> (radius, height, sections) of trimesh.creation.cylinder
+CYLINDERS = {
+    "cylinder 1:2, 96 sides": (0.5, 2.0, 96),
+    "cylinder 1:20, 64 sides": (0.5, 20.0, 64),
+    "cylinder 1:2, 512 sides": (0.5, 2.0, 512),
+    "cylinder 1:2, 2,048 sides": (0.5, 2.0, 2048),
+}
+
+
+def _measure(preset_name: str, label: str, bounded: bool) -> dict:
+    import trimesh
+
+    from worker.engine.mesh_io import clean_mesh
+    from worker.engine.pipeline import describe_mesh
+    from worker.engine.presets import get_preset
+
+    preset = get_preset(preset_name)
+    if not bounded:
+        preset = replace(preset, max_edge=None)
+    radius, height, sections = CYLINDERS[label]
+    shape = trimesh.creation.cylinder(radius, height, sections=sections)
+    mesh = clean_mesh(shape.vertices, shape.faces)
+    start = time.perf_counter()
+    descriptor = describe_mesh(mesh, preset)
+    return {
+        "vertices": descriptor.vertices,
+        "seconds": time.perf_counter() - start,
+        "gdm": descriptor.timings["gdm"],
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--preset", default=DEFAULT_PRESET)
+    parser.add_argument("--child", help=argparse.SUPPRESS)
+    parser.add_argument("--unbounded", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        print(json.dumps(_measure(args.preset, args.child, not args.unbounded)))
+        return
+    print(f"preset {args.preset}, one run per file and setting\n")
+    print("| file | edge bound | vertices | seconds | of which GDM | peak RSS MB |")
+    print("|---|---|---:|---:|---:|---:|")
+    for label in CYLINDERS:
+        for bounded in (False, True):
+            command = [sys.executable, __file__, "--preset", args.preset, "--child", label]
+            if not bounded:
+                command.append("--unbounded")
+            out = subprocess.run(command, check=True, capture_output=True, text=True)
+            r = json.loads(out.stdout.strip().splitlines()[-1])
+            print(
+                f"| {label} | {'preset' if bounded else 'none'} | {r['vertices']:,} | "
+                f"{r['seconds']:.2f} | {r['gdm']:.2f} | {r['peak_rss_mb']:,.0f} |",
+                flush=True,
+            )
+
+
+if __name__ == "__main__":
+    main()
