@@ -7,10 +7,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.sparse.linalg as sla
 import trimesh
 from conftest import swept_tube
 
 from worker.engine.geodesic import (
+    MAX_BANDWIDTH,
     HeatMethod,
     farthest_point_samples,
     geodesic_distance_matrix,
@@ -24,7 +26,8 @@ from worker.engine.intrinsic import (
     intrinsic_delaunay,
     surface_operators,
 )
-from worker.engine.mesh_io import load_mesh
+from worker.engine.linalg import BandedCholesky
+from worker.engine.mesh_io import clean_mesh, load_mesh
 from worker.engine.resample import resample_mesh
 
 MEDIAN_RELATIVE_ERROR = 0.02
@@ -145,3 +148,24 @@ def test_farthest_point_samples_cover_the_surface_whatever_the_vertex_order():
     distances = np.linalg.norm(bumpy[:, None] - bumpy[None, first], axis=2)
     for i in range(1, len(first)):
         assert first[i] == np.argmax(distances[:, :i].min(axis=1))
+
+
+def test_a_wide_band_takes_superlu_and_a_tosca_resample_the_banded_factor(tosca_dir):
+    """A CAD cylinder's cap fans (512 triangles round one vertex) leave the heat
+    system's band wider than MAX_BANDWIDTH, where the banded factor costs far more
+    than SuperLU (docs/benchmarks.md); the distances are then the reference path's."""
+    c = trimesh.creation.cylinder(radius=0.5, height=2.0, sections=512)
+    fan = clean_mesh(c.vertices, c.faces)
+    tosca = resample_mesh(load_mesh(tosca_dir / "wolf0.off.gz"), 2500)
+    for mesh, wide in ((fan, True), (tosca, False)):
+        intrinsic, ops = surface_operators(mesh.vertices, mesh.faces)
+        solver = HeatMethod(intrinsic, ops, 12.0, 2500)
+        assert isinstance(solver._heat, sla.SuperLU if wide else BandedCholesky)
+        sources = np.array([0, 7, mesh.n_vertices - 1])
+        expected = HeatMethod(intrinsic, ops, 12.0, 2500, reference=True).distances_from(sources)
+        got = solver.distances_from(sources)
+        if wide:
+            np.testing.assert_array_equal(got, expected)
+        else:
+            assert solver._heat.bandwidth <= MAX_BANDWIDTH
+            np.testing.assert_allclose(got, expected, rtol=1e-3, atol=1e-3 * expected.max())

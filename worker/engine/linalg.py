@@ -22,6 +22,18 @@ from scipy.sparse.csgraph import reverse_cuthill_mckee
 MIN_BLOCK = 64
 
 
+def band_ordering(matrix: sp.csr_matrix | sp.csc_matrix) -> tuple[np.ndarray, int]:
+    """Reverse Cuthill-McKee ordering of a symmetric sparse matrix and the
+    bandwidth it leaves (the largest ``|i - j|`` of a non-zero after reordering)."""
+    a = sp.csr_matrix(matrix)
+    order = np.asarray(reverse_cuthill_mckee(a, symmetric_mode=True), dtype=np.int64)
+    position = np.empty_like(order)
+    position[order] = np.arange(len(order))
+    rows, cols = a.nonzero()
+    width = int(np.abs(position[rows] - position[cols]).max()) if len(rows) else 0
+    return order, width
+
+
 class BandedCholesky:
     """Cholesky factorization ``P A P^T = L L^T`` of a sparse SPD matrix in band form.
 
@@ -46,7 +58,7 @@ class BandedCholesky:
         n = a.shape[0]
         self.n = n
         if order is None:
-            order = reverse_cuthill_mckee(a, symmetric_mode=True)
+            order, _ = band_ordering(a)
         self.perm = np.asarray(order, dtype=np.int64)
         ap = a[self.perm][:, self.perm].tocoo()
         lower = ap.row >= ap.col
