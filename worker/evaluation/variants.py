@@ -16,7 +16,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from worker.engine.mesh_io import Mesh, clean_mesh
+from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
+from worker.engine.resample import tiling_edge
 
 #: Gaussian vertex noise, as a fraction of the mesh's mean edge length.
 NOISE_FRACTION = 0.1
@@ -52,14 +53,7 @@ def remeshed(mesh: Mesh, n_vertices: int) -> Mesh:
         raise RuntimeError(
             "isotropic remeshing needs pymeshlab: pip install 'modalshape[eval]'"
         ) from exc
-    corners = mesh.vertices[mesh.faces]
-    area = (
-        0.5
-        * np.linalg.norm(
-            np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1
-        ).sum()
-    )
-    edge = np.sqrt(area / (2 * n_vertices) * 4 / np.sqrt(3))
+    edge = tiling_edge(float(face_areas(mesh.vertices, mesh.faces).sum()), n_vertices)
     meshes = pymeshlab.MeshSet()
     meshes.add_mesh(pymeshlab.Mesh(mesh.vertices, mesh.faces.astype(np.int32)))
     meshes.meshing_isotropic_explicit_remeshing(
