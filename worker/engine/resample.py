@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .intrinsic import IntrinsicMesh
 from .mesh_io import Mesh, clean_mesh, face_areas
 from .topology import edge_keys, euler_and_boundary
 
@@ -102,15 +103,14 @@ def split_long_edges(mesh: Mesh, max_length: float, max_vertices: int) -> Mesh:
     none is left or the mesh reaches ``max_vertices`` (the longest edges first)."""
     vertices, faces = mesh.vertices, mesh.faces
     while len(vertices) < max_vertices:
-        keys = edge_keys(faces, len(vertices))
-        p = vertices[faces]
-        lengths = np.linalg.norm(p[:, [2, 0, 1]] - p[:, [1, 2, 0]], axis=2)  # opposite corner c
-        keys, first = np.unique(keys[lengths > max_length], return_index=True)
+        lengths = IntrinsicMesh.from_mesh(vertices, faces).lengths
+        long_ = lengths > max_length
+        keys, first = np.unique(edge_keys(faces, len(vertices))[long_], return_index=True)
         if len(keys) == 0:
             break
         room = max_vertices - len(vertices)
         if len(keys) > room:
-            longest = np.argsort(-lengths[lengths > max_length][first], kind="stable")[:room]
+            longest = np.argsort(-lengths[long_][first], kind="stable")[:room]
             keys = np.sort(keys[longest])
         vertices, faces = split_edges(vertices, faces, keys)
     return Mesh(vertices=vertices, faces=faces)
