@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from worker.engine.mesh_io import Mesh, clean_mesh
+from worker.engine.mesh_io import Mesh, clean_mesh, load_mesh
 from worker.engine.resample import (
     MAX_REFINED_VERTICES,
     resample_mesh,
@@ -112,6 +112,23 @@ def test_decimation_leaves_a_cylinders_strips_long_and_the_bound_refines_them(ca
     assert edge_lengths(bounded).max() <= 3.0 * h
     assert area(bounded) == pytest.approx(area(plain), rel=1e-12)
     assert euler_and_boundary(bounded.faces, bounded.n_vertices) == (2, 0)
+    assert_clean(bounded)
+
+
+def test_the_bounds_vertices_come_out_of_the_decimation(tosca_dir):
+    wolf = load_mesh(tosca_dir / "wolf0.off.gz")
+    target = 2500
+    plain = resample_mesh(wolf, target)
+    limit = 3.0 * tiling_edge(area(plain), target)
+    split_only = split_long_edges(plain, limit, MAX_REFINED_VERTICES * target)
+    assert split_only.n_vertices > plain.n_vertices + 40  # the bound alone adds 66
+    bounded = resample_mesh(wolf, target, max_edge=3.0)
+    assert abs(bounded.n_vertices - plain.n_vertices) <= 0.01 * target
+    assert edge_lengths(bounded).max() <= limit
+    assert area(bounded) == pytest.approx(area(plain), rel=0.01)
+    assert euler_and_boundary(bounded.faces, bounded.n_vertices) == euler_and_boundary(
+        plain.faces, plain.n_vertices
+    )
     assert_clean(bounded)
 
 
