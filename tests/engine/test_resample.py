@@ -6,13 +6,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from worker.engine.mesh_io import Mesh, clean_mesh, load_mesh
+from worker.engine.mesh_io import Mesh, clean_mesh, load_mesh, tiling_edge
 from worker.engine.resample import (
     MAX_REFINED_VERTICES,
     resample_mesh,
     split_edges,
     split_long_edges,
-    tiling_edge,
 )
 from worker.engine.topology import edge_keys, euler_and_boundary, unique_rows
 

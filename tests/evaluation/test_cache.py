@@ -7,7 +7,13 @@ from pathlib import Path
 
 import worker
 from worker.engine.presets import Preset
-from worker.evaluation.cache import cache_namespace, engine_fingerprint, engine_modules
+from worker.evaluation.cache import (
+    cache_namespace,
+    engine_fingerprint,
+    engine_modules,
+    variant_mesh_fingerprint,
+    worker_modules,
+)
 
 EVAL_PRESET = Preset(name="test-eval-small", version=0, n_vertices=500, n_eigenpairs=100)
 WORKER = Path(worker.__file__).parent
@@ -47,3 +53,23 @@ def test_fingerprint_changes_with_the_source_of_a_module_imported_indirectly(mon
 
     monkeypatch.setattr(Path, "read_bytes", edited)
     assert engine_fingerprint() != before
+
+
+def test_variant_meshes_depend_on_how_they_are_made_not_on_the_pipeline(monkeypatch):
+    modules = worker_modules(["worker.evaluation.variants"])
+    assert {"worker.evaluation.variants", "worker.engine.mesh_io"} <= set(modules)
+    assert not {"worker.engine.resample", "worker.engine.pipeline"} & set(modules)
+    before = variant_mesh_fingerprint()
+    resample = engine_modules()["worker.engine.resample"]
+    mesh_io = modules["worker.engine.mesh_io"]
+    real = Path.read_bytes
+    edited_file = resample
+
+    def edited(path: Path) -> bytes:
+        data = real(path)
+        return data + b"\n# edited\n" if path == edited_file else data
+
+    monkeypatch.setattr(Path, "read_bytes", edited)
+    assert variant_mesh_fingerprint() == before  # the resampling edited: meshes kept
+    edited_file = mesh_io
+    assert variant_mesh_fingerprint() != before  # reading and cleaning edited: remade

@@ -14,7 +14,7 @@ from worker.cli import main
 from worker.engine.presets import PRESETS, Preset
 from worker.evaluation import compute
 from worker.evaluation.cache import file_sha256
-from worker.evaluation.datasets import read_labels, shared_dataset
+from worker.evaluation.datasets import LabeledMesh, read_labels, shared_dataset
 from worker.evaluation.run import run_evaluation
 from worker.evaluation.scoring import BASELINE, COLUMNS, ROWS
 
@@ -165,15 +165,51 @@ def test_only_missing_entries_are_computed(first_run, tmp_path, monkeypatch):
     calls = []
     real = compute._describe_job
 
-    def counting(path, preset, variant, need_descriptor, need_baseline):
+    def counting(path, sha256, preset, variant, need_descriptor, need_baseline, cache_root):
         calls.append((Path(path).name, variant, need_descriptor, need_baseline))
-        return real(path, preset, variant, need_descriptor, need_baseline)
+        return real(path, sha256, preset, variant, need_descriptor, need_baseline, cache_root)
 
     monkeypatch.setattr(compute, "_describe_job", counting)
     meshes = read_labels(first_run["tmp"] / "labels.csv", TOSCA)
     computed = compute.compute_descriptors(meshes, EVAL_PRESET, cache, jobs=1, progress=False)
     assert calls == [("wolf1.off.gz", None, True, False)]
     assert computed.stats["from_cache"] == 7 and computed.stats["computed"] == 1
+
+
+def test_a_remeshed_variant_is_made_once_and_described_again_from_its_stored_mesh(
+    tmp_path, monkeypatch
+):
+    """MeshLab's remeshing is most of the robustness protocol's time: its meshes are
+    stored, so a changed pipeline describes the same variant meshes without remaking
+    them, and gets the very descriptors it would from a freshly made one."""
+    if not TOSCA.is_dir():
+        pytest.skip(f"TOSCA set not found at {TOSCA}")
+    meshes = [LabeledMesh(name="wolf0.off.gz", label="wolf", path=TOSCA / "wolf0.off.gz")]
+    cache = tmp_path / "cache"
+    made = compute.compute_descriptors(
+        meshes, EVAL_PRESET, cache, jobs=1, progress=False, variant="remeshed-8k"
+    )
+    stored = list(cache.glob("variants-*/*.remeshed-8k.npz"))
+    assert [p.name for p in stored] == [f"{file_sha256(TOSCA / 'wolf0.off.gz')}.remeshed-8k.npz"]
+
+    def must_not_remesh(*args, **kwargs):
+        raise AssertionError("a stored variant mesh was made again")
+
+    monkeypatch.setattr(compute, "make_variant", must_not_remesh)
+    for entry in cache.glob(f"{EVAL_PRESET.name}-*/*.npz"):
+        entry.unlink()  # as if the pipeline had changed: descriptors gone, meshes kept
+    again = compute.compute_descriptors(
+        meshes, EVAL_PRESET, cache, jobs=1, progress=False, variant="remeshed-8k"
+    )
+    assert again.stats["computed"] == 1 and not again.failures
+    for modality in ("gdm", "ddt", "spectrum"):
+        assert np.array_equal(
+            again.descriptors[0].vector(modality), made.descriptors[0].vector(modality)
+        )
+    # lapy's eigensolver varies at rounding level between two runs on one mesh
+    np.testing.assert_allclose(
+        again.baselines[0].descriptor, made.baselines[0].descriptor, atol=1e-9
+    )
 
 
 def test_failed_mesh_is_left_out_and_reported(tmp_path):

@@ -85,6 +85,12 @@ def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return areas
 
 
+def tiling_edge(area: float, n_vertices: int) -> float:
+    """Edge of the equilateral tiling of ``area`` by a closed mesh of ``n_vertices``
+    vertices (about ``2 n_vertices`` triangles)."""
+    return float(np.sqrt(area / (2 * n_vertices) * 4 / np.sqrt(3)))
+
+
 def mesh_format(filename: str) -> tuple[str, bool]:
     """Return ``(format, gzipped)`` for a file name, or raise ``UnsupportedFormatError``."""
     name = Path(filename).name.lower()

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from .intrinsic import IntrinsicMesh
-from .mesh_io import Mesh, clean_mesh, face_areas
+from .mesh_io import Mesh, clean_mesh, face_areas, tiling_edge
 from .topology import edge_keys, euler_and_boundary
 
 #: The edge-length bound stops refining before a mesh would pass this many times the
@@ -92,12 +92,6 @@ def split_edges(
 def _subdivide(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Split every triangle into four at its edge midpoints; the surface is unchanged."""
     return split_edges(vertices, faces, np.unique(edge_keys(faces, len(vertices))))
-
-
-def tiling_edge(area: float, n_vertices: int) -> float:
-    """Edge of the equilateral tiling of ``area`` by a closed mesh of ``n_vertices``
-    vertices (about ``2 n_vertices`` triangles)."""
-    return float(np.sqrt(area / (2 * n_vertices) * 4 / np.sqrt(3)))
 
 
 def split_long_edges(mesh: Mesh, max_length: float, max_vertices: int) -> Mesh:

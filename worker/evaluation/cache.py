@@ -1,14 +1,21 @@
-"""The on-disk descriptor cache of the evaluation, keyed by file bytes, preset and engine source."""
+"""The evaluation's on-disk caches: descriptors, keyed by file bytes, preset and engine
+source; and the variant meshes that are slow to make, keyed by file bytes and the
+source that makes them."""
 
 from __future__ import annotations
 
 import ast
 import hashlib
+import io
 import json
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
+from worker.engine.mesh_io import Mesh
 from worker.engine.pipeline import ShapeDescriptor
 from worker.engine.presets import Preset
 
@@ -57,11 +64,11 @@ def _worker_imports(name: str, path: Path) -> set[str]:
     return {m for m in found if m == "worker" or m.startswith("worker.")}
 
 
-def engine_modules() -> dict[str, Path]:
-    """Every ``worker`` module a cached entry depends on: :data:`FINGERPRINT_ROOTS` and,
-    transitively, the ``worker`` modules they import (the engine's)."""
+def worker_modules(roots: Sequence[str]) -> dict[str, Path]:
+    """The ``worker`` modules ``roots`` and, transitively, the ``worker`` modules they
+    import: name -> source file."""
     seen: dict[str, Path] = {}
-    todo = list(FINGERPRINT_ROOTS)
+    todo = list(roots)
     while todo:
         name = todo.pop()
         if name in seen:
@@ -74,6 +81,20 @@ def engine_modules() -> dict[str, Path]:
     return seen
 
 
+def engine_modules() -> dict[str, Path]:
+    """Every ``worker`` module a cached entry depends on: :data:`FINGERPRINT_ROOTS` and
+    what they import (the engine's)."""
+    return worker_modules(FINGERPRINT_ROOTS)
+
+
+def _source_digest(modules: dict[str, Path]) -> str:
+    digest = hashlib.sha256()
+    for name, path in sorted(modules.items()):
+        digest.update(name.encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
 def engine_fingerprint() -> str:
     """sha256 of the source of every module of :func:`engine_modules`.
 
@@ -81,11 +102,14 @@ def engine_fingerprint() -> str:
     serves stale descriptors, while editing the service, the job runner, the
     metrics or this harness keeps the cache.
     """
-    digest = hashlib.sha256()
-    for name, path in sorted(engine_modules().items()):
-        digest.update(name.encode())
-        digest.update(path.read_bytes())
-    return digest.hexdigest()
+    return _source_digest(engine_modules())
+
+
+def variant_mesh_fingerprint() -> str:
+    """sha256 of the source a variant mesh is made by: :mod:`.variants` and what it
+    imports (reading and cleaning the file), not the descriptor pipeline, so editing
+    the resampling or the operators keeps the stored variant meshes."""
+    return _source_digest(worker_modules(["worker.evaluation.variants"]))
 
 
 def cache_namespace(preset: Preset) -> str:
@@ -143,12 +167,47 @@ class DescriptorCache:
         return ShapeDNA.from_npz_bytes(path.read_bytes()) if path.is_file() else None
 
     def store(self, sha256: str, kind: str, data: bytes) -> None:
-        """Write atomically, so an interrupted run never leaves a truncated entry."""
-        path = self._path(sha256, kind)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
+        _write_atomically(self._path(sha256, kind), data)
+
+
+def _write_atomically(path: Path, data: bytes) -> None:
+    """Write so that an interrupted run never leaves a truncated entry."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
+@dataclass
+class VariantMeshCache:
+    """The variant meshes that are slow to make (:data:`.variants.STORED_VARIANTS`), on
+    disk as npz, keyed by sha256(file bytes) and variant name.
+
+    Layout: ``<root>/variants-<digest>/<sha256>.<variant>.npz``, the digest that of
+    :func:`variant_mesh_fingerprint`: a change of the descriptor pipeline describes the
+    same variant meshes again without remaking them.
+    """
+
+    root: Path
+
+    @property
+    def directory(self) -> Path:
+        return Path(self.root) / f"variants-{variant_mesh_fingerprint()[:12]}"
+
+    def _path(self, sha256: str, variant: str) -> Path:
+        return self.directory / f"{sha256}.{variant}.npz"
+
+    def load(self, sha256: str, variant: str) -> Mesh | None:
+        path = self._path(sha256, variant)
+        if not path.is_file():
+            return None
+        with np.load(path) as data:
+            return Mesh(vertices=data["vertices"], faces=data["faces"])
+
+    def store(self, sha256: str, variant: str, mesh: Mesh) -> None:
+        buffer = io.BytesIO()
+        np.savez(buffer, vertices=mesh.vertices, faces=mesh.faces)
+        _write_atomically(self._path(sha256, variant), buffer.getvalue())
 
 
 def file_sha256(path: str | Path) -> str:

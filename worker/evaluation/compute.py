@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from worker.engine.errors import MeshError
-from worker.engine.mesh_io import load_mesh
+from worker.engine.mesh_io import Mesh, load_mesh
 from worker.engine.pipeline import (
     ShapeDescriptor,
     describe_file,
@@ -21,10 +21,10 @@ from worker.engine.pipeline import (
 )
 from worker.engine.presets import MODALITIES, Preset
 
-from .cache import DescriptorCache, file_sha256
+from .cache import DescriptorCache, VariantMeshCache, file_sha256
 from .datasets import LabeledMesh
 from .shapedna import BASELINE, ShapeDNA, shapedna
-from .variants import make_variant
+from .variants import STORED_VARIANTS, make_variant
 
 
 @dataclass
@@ -48,11 +48,29 @@ def _single_threaded_blas() -> None:
     threadpool_limits(limits=1)
 
 
+def _variant_mesh(data: bytes, name: str, sha256: str, variant: str, cache_root: str) -> Mesh:
+    """The variant ``variant`` of the file, from the variant mesh cache when it is one of
+    :data:`.variants.STORED_VARIANTS` (made and stored there the first time)."""
+    store = VariantMeshCache(Path(cache_root)) if variant in STORED_VARIANTS else None
+    mesh = store.load(sha256, variant) if store is not None else None
+    if mesh is None:
+        mesh = make_variant(load_mesh(data, name), variant, name)
+        if store is not None:
+            store.store(sha256, variant, mesh)
+    return mesh
+
+
 def _describe_job(
-    path: str, preset: Preset, variant: str | None, need_descriptor: bool, need_baseline: bool
+    path: str,
+    sha256: str,
+    preset: Preset,
+    variant: str | None,
+    need_descriptor: bool,
+    need_baseline: bool,
+    cache_root: str,
 ) -> _Job:
-    """Describe one mesh file, or its ``variant``; runs in a worker process, so it
-    only takes picklable data."""
+    """Describe one mesh file (``sha256`` its bytes' digest), or its ``variant``; runs
+    in a worker process, so it only takes picklable data."""
     data = Path(path).read_bytes()
     name = Path(path).name
     job = _Job()
@@ -62,7 +80,7 @@ def _describe_job(
                 job.descriptor = describe_file(data, preset, filename=name).to_npz_bytes()
             mesh = load_mesh(data, name)
         else:
-            mesh = make_variant(load_mesh(data, name), variant, name)
+            mesh = _variant_mesh(data, name, sha256, variant, cache_root)
             if need_descriptor:
                 job.descriptor = describe_mesh(mesh, preset).to_npz_bytes()
         if need_baseline:
@@ -137,7 +155,15 @@ def compute_descriptors(
     what = preset.name if variant is None else f"{preset.name}, {variant}"
     bar = tqdm(total=len(todo), desc=f"describe ({what})", unit="mesh", disable=not progress)
     args = [
-        (str(meshes[i].path), preset, variant, descriptors[i] is None, baselines[i] is None)
+        (
+            str(meshes[i].path),
+            hashes[i],
+            preset,
+            variant,
+            descriptors[i] is None,
+            baselines[i] is None,
+            str(cache_root),
+        )
         for i in todo
     ]
     if jobs <= 1 or len(todo) <= 1:
