@@ -185,15 +185,15 @@ class VariantMeshCache:
     sha256(file bytes) and variant name.
 
     Layout: ``<root>/variants-<digest>/<sha256>.<variant>.npz``, the digest that of
-    :func:`variant_mesh_fingerprint`: a change of the descriptor pipeline describes the
-    same variant meshes again without remaking them.
+    :func:`variant_mesh_fingerprint` (:meth:`under`): a change of the descriptor
+    pipeline describes the same variant meshes again without remaking them.
     """
 
-    root: Path
+    directory: Path
 
-    @property
-    def directory(self) -> Path:
-        return Path(self.root) / f"variants-{variant_mesh_fingerprint()[:12]}"
+    @classmethod
+    def under(cls, root: str | Path) -> VariantMeshCache:
+        return cls(Path(root) / f"variants-{variant_mesh_fingerprint()[:12]}")
 
     def _path(self, sha256: str, variant: str) -> Path:
         return self.directory / f"{sha256}.{variant}.npz"

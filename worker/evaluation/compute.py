@@ -48,15 +48,16 @@ def _single_threaded_blas() -> None:
     threadpool_limits(limits=1)
 
 
-def _variant_mesh(data: bytes, name: str, sha256: str, variant: str, cache_root: str) -> Mesh:
-    """The variant ``variant`` of the file, from the variant mesh cache when it is one of
-    :data:`.variants.STORED_VARIANTS` (made and stored there the first time)."""
-    store = VariantMeshCache(Path(cache_root)) if variant in STORED_VARIANTS else None
-    mesh = store.load(sha256, variant) if store is not None else None
+def _variant_mesh(
+    data: bytes, name: str, sha256: str, variant: str, stored: VariantMeshCache | None
+) -> Mesh:
+    """The variant ``variant`` of the file, from ``stored`` when given (made and stored
+    there the first time)."""
+    mesh = stored.load(sha256, variant) if stored is not None else None
     if mesh is None:
         mesh = make_variant(load_mesh(data, name), variant, name)
-        if store is not None:
-            store.store(sha256, variant, mesh)
+        if stored is not None:
+            stored.store(sha256, variant, mesh)
     return mesh
 
 
@@ -67,10 +68,11 @@ def _describe_job(
     variant: str | None,
     need_descriptor: bool,
     need_baseline: bool,
-    cache_root: str,
+    stored: VariantMeshCache | None,
 ) -> _Job:
-    """Describe one mesh file (``sha256`` its bytes' digest), or its ``variant``; runs
-    in a worker process, so it only takes picklable data."""
+    """Describe one mesh file (``sha256`` its bytes' digest), or its ``variant`` (its
+    mesh kept in ``stored`` when given); runs in a worker process, so it only takes
+    picklable data."""
     data = Path(path).read_bytes()
     name = Path(path).name
     job = _Job()
@@ -80,7 +82,7 @@ def _describe_job(
                 job.descriptor = describe_file(data, preset, filename=name).to_npz_bytes()
             mesh = load_mesh(data, name)
         else:
-            mesh = _variant_mesh(data, name, sha256, variant, cache_root)
+            mesh = _variant_mesh(data, name, sha256, variant, stored)
             if need_descriptor:
                 job.descriptor = describe_mesh(mesh, preset).to_npz_bytes()
         if need_baseline:
@@ -132,6 +134,7 @@ def compute_descriptors(
     from tqdm import tqdm
 
     cache = DescriptorCache(Path(cache_root), preset, variant)
+    stored = VariantMeshCache.under(cache_root) if variant in STORED_VARIANTS else None
     start = time.perf_counter()
     hashes = [file_sha256(m.path) for m in meshes]
     descriptors: list[ShapeDescriptor | None] = [cache.load_descriptor(h) for h in hashes]
@@ -162,7 +165,7 @@ def compute_descriptors(
             variant,
             descriptors[i] is None,
             baselines[i] is None,
-            str(cache_root),
+            stored,
         )
         for i in todo
     ]
