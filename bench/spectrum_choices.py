@@ -109,6 +109,8 @@ def main() -> None:
     add_evaluation_cache_arguments(parser)
     args = parser.parse_args()
     preset = get_preset(args.preset)
+    if "spectrum" not in preset.fused_modalities:
+        parser.error(f"{preset.name} does not fuse the spectrum")
     every = replace(preset, spectrum_size=preset.n_eigenpairs - 1)
     computed = compute_descriptors(
         read_labels(TOSCA / "labels.csv", TOSCA), every, args.cache, jobs=args.jobs
@@ -123,31 +125,29 @@ def main() -> None:
         if m != "spectrum"
     }
     weights = {m: preset.weight(m) for m in preset.fused_modalities}
+    # comparison -> size -> all-to-all distances of the first ``size`` eigenvalues
+    spectra = {
+        how: {k: compare(vectors["spectrum"][:, :k]) for k in SIZES}
+        for how, compare in (
+            (preset.dissimilarity, lambda x: modality_dissimilarity(x, preset.dissimilarity)[0]),
+            ("ShapeDNA's", shapedna_style),
+        )
+    }
     print(f"preset {preset.name} v{preset.version}, {len(names)} TOSCA meshes")
     print("| spectrum, k values, compared by | NN | R1RR | EER | mAP |")
     print("|---|---:|---:|---:|---:|")
     for k in SIZES:
-        spectrum = vectors["spectrum"][:, :k]
-        for how, d in (
-            (preset.dissimilarity, modality_dissimilarity(spectrum, preset.dissimilarity)[0]),
-            ("ShapeDNA's", shapedna_style(spectrum)),
-        ):
-            print(row(f"spectrum, {k}, {how}", d, labels, split))
-            fused = fuse({**others, "spectrum": d}, preset.fusion, weights)
+        for how, by_size in spectra.items():
+            print(row(f"spectrum, {k}, {how}", by_size[k], labels, split))
+            fused = fuse({**others, "spectrum": by_size[k]}, preset.fusion, weights)
             print(row(f"the preset's score, {k}, {how}", fused, labels, split))
     baseline = shapedna_dissimilarity(vectors["shapedna"])
     print(row("ShapeDNA (lapy's eigenvalues)", baseline, labels, split))
-    for how in (preset.dissimilarity, "ShapeDNA's"):
-        spectra = {
-            k: modality_dissimilarity(vectors["spectrum"][:, :k], how)[0]
-            if how == preset.dissimilarity
-            else shapedna_style(vectors["spectrum"][:, :k])
-            for k in SIZES
-        }
+    for how, by_size in spectra.items():
         print(f"\nthe spectrum compared by {how}: size (weights {', '.join(others)}, spectrum)")
         print("| split | each fold's choice | test EER | test mAP |")
         print("|---|---|---:|---:|")
-        cross_validate(spectra, others, labels, preset.fusion)
+        cross_validate(by_size, others, labels, preset.fusion)
 
 
 if __name__ == "__main__":
