@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import gzip
+import io
 from pathlib import Path
 
 import numpy as np
@@ -146,3 +148,14 @@ def helical_spring(
     t = np.linspace(0.0, 2 * np.pi * turns, int(turns * rings_per_turn) + 1)
     centre = np.stack([np.cos(t), np.sin(t), 0.4 * t / (2 * np.pi)], axis=1)
     return swept_tube(centre, wire_radius, sides)
+
+
+def with_a_far_half_copy(path: Path) -> tuple[trimesh.Trimesh, bytes]:
+    """The mesh of a gzip'd OFF file, and an OFF file of two separate parts: the mesh
+    and a copy of it at half its size, far away (the mesh is 4/5 of the surface area)."""
+    data = io.BytesIO(gzip.decompress(path.read_bytes()))
+    mesh = trimesh.load(data, file_type="off", process=False)
+    copy = mesh.copy()
+    copy.apply_scale(0.5)
+    copy.apply_translation([1000.0, 0.0, 0.0])
+    return mesh, trimesh.util.concatenate([mesh, copy]).export(file_type="off").encode()

@@ -16,8 +16,11 @@ from worker.engine.mesh_io import (
     Mesh,
     canonical_frame,
     clean_mesh,
+    clean_surface,
+    face_areas,
     load_mesh,
     mesh_format,
+    read_mesh,
 )
 
 
@@ -76,6 +79,31 @@ def test_cleaning_merges_drops_degenerate_and_keeps_largest_component(sphere):
     mesh = clean_mesh(soup, np.arange(len(soup)).reshape(-1, 3))
     assert mesh.n_vertices == len(big.vertices)
     assert mesh.n_faces == len(big.faces)
+
+
+def test_the_share_of_the_surface_left_out_is_measured(tmp_path):
+    """A file of two separate parts: the one with the most triangles is kept (a dense
+    small sphere, not the coarse big one) and the kept share of the file's surface
+    area says that the rest, four fifths of it, was left out."""
+    dense = trimesh.creation.icosphere(subdivisions=4, radius=1.0)
+    coarse = trimesh.creation.icosphere(subdivisions=2, radius=2.0)
+    coarse.apply_translation([10.0, 0.0, 0.0])
+    both = trimesh.util.concatenate([coarse, dense])
+    cleaned = clean_surface(both.vertices, both.faces)
+    assert cleaned.mesh.n_faces == len(dense.faces)
+    expected = dense.area / (dense.area + coarse.area)
+    assert cleaned.kept_area_fraction == pytest.approx(expected, rel=1e-12)
+    assert 0.2 < expected < 0.25
+    # The same through a file, and load_mesh's mesh is read_mesh's.
+    path = tmp_path / "two_parts.off"
+    path.write_bytes(both.export(file_type="off").encode())
+    read = read_mesh(path)
+    assert read.kept_area_fraction == pytest.approx(expected, rel=1e-6)  # OFF's decimals
+    np.testing.assert_array_equal(load_mesh(path).faces, read.mesh.faces)
+    # One part: all of it, exactly.
+    one = clean_surface(dense.vertices, dense.faces)
+    assert one.kept_area_fraction == 1.0
+    assert np.isclose(face_areas(one.mesh.vertices, one.mesh.faces).sum(), dense.area)
 
 
 def test_collinear_face_is_dropped():

@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import trimesh
-from conftest import bent_cylinder, helical_spring, random_rotation
+from conftest import bent_cylinder, helical_spring, random_rotation, with_a_far_half_copy
 
 from worker.engine.compare import mean_normalized_manhattan
 from worker.engine.mesh_io import Mesh, clean_mesh, load_mesh
@@ -97,20 +97,40 @@ def test_bent_cylinder_is_closer_than_a_different_shape(small_preset):
 
 
 def test_descriptor_round_trips(wolf_descriptor):
-    for restored in (
-        ShapeDescriptor.from_json(wolf_descriptor.to_json()),
-        ShapeDescriptor.from_npz_bytes(wolf_descriptor.to_npz_bytes()),
-    ):
-        for m in MODALITIES:
-            np.testing.assert_array_equal(restored.vector(m), wolf_descriptor.vector(m))
-        assert restored.preset == wolf_descriptor.preset
-        assert restored.timings == wolf_descriptor.timings
+    partial = replace(wolf_descriptor, kept_area_fraction=0.625)
+    for original in (wolf_descriptor, partial):
+        for restored in (
+            ShapeDescriptor.from_json(original.to_json()),
+            ShapeDescriptor.from_npz_bytes(original.to_npz_bytes()),
+        ):
+            for m in MODALITIES:
+                np.testing.assert_array_equal(restored.vector(m), original.vector(m))
+            assert restored.preset == original.preset
+            assert restored.timings == original.timings
+            assert restored.kept_area_fraction == original.kept_area_fraction
+    # A descriptor stored before the kept share was recorded reads as not known.
+    old = wolf_descriptor.to_json()
+    del old["kept_area_fraction"]
+    assert ShapeDescriptor.from_json(old).kept_area_fraction is None
 
 
 def test_describe_file_times_every_stage(tosca_dir, small_preset):
     d = describe_file(tosca_dir / "wolf1.off.gz", small_preset)
     assert list(d.timings) == ["load", "resample", "gdm", "eigen_ddt", "modal", "total"]
     assert d.timings["total"] == pytest.approx(sum(v for k, v in d.timings.items() if k != "total"))
+    assert d.kept_area_fraction == 1.0  # one connected surface
+
+
+def test_a_file_of_separate_parts_describes_its_largest_and_says_so(tosca_dir, small_preset):
+    """wolf0 with a far, smaller copy of itself in the same file: the wolf is what is
+    described (the same descriptor as the wolf's own file), and the descriptor says
+    which share of the file's surface that is."""
+    wolf, both = with_a_far_half_copy(tosca_dir / "wolf0.off.gz")
+    d = describe_file(both, small_preset, "two.off")
+    alone = describe_file(wolf.export(file_type="off").encode(), small_preset, "one.off")
+    assert d.kept_area_fraction == pytest.approx(0.8, rel=1e-6)  # 1 / (1 + 0.5^2)
+    for m in MODALITIES:
+        assert _difference(d, alone, m) < 1e-6
 
 
 def _bumpy_ellipsoid(sphere: trimesh.Trimesh, axes=(3.0, 2.0, 1.0)) -> Mesh:

@@ -189,6 +189,22 @@ def _parse(data: bytes, fmt: str) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(vertices), np.concatenate(faces)
 
 
+@dataclass(frozen=True)
+class CleanedMesh:
+    """A cleaned surface and how much of its source it keeps.
+
+    Attributes
+    ----------
+    mesh : the largest connected part of the source's surface (:func:`clean_mesh`).
+    kept_area_fraction : its share of the source's surface area (after duplicate and
+        degenerate triangles are removed); below 1 when the source had other, separate
+        parts, which are not described.
+    """
+
+    mesh: Mesh
+    kept_area_fraction: float
+
+
 def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
     """Merge duplicate vertices, drop degenerate faces, keep the largest component.
 
@@ -201,6 +217,11 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
     -------
     Mesh with only referenced vertices (renumbered).
     """
+    return clean_surface(vertices, faces).mesh
+
+
+def clean_surface(vertices: np.ndarray, faces: np.ndarray) -> CleanedMesh:
+    """:func:`clean_mesh`, also saying what share of the surface area it kept."""
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
 
@@ -216,13 +237,15 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
     )
     faces = faces[~repeated]
     merged = vertices[first]
+    area = face_areas(merged, faces) if len(faces) else np.zeros(0)
     if len(faces):
-        area = face_areas(merged, faces)
-        faces = faces[area > TOL.degenerate_area_fraction * max(area.mean(), np.finfo(float).tiny)]
+        solid = area > TOL.degenerate_area_fraction * max(area.mean(), np.finfo(float).tiny)
+        faces, area = faces[solid], area[solid]
     if len(faces):
         # The same triangle listed twice (in any corner order) is one face.
         first_face, _ = unique_rows(np.sort(faces, axis=1))
-        faces = faces[np.sort(first_face)]
+        kept = np.sort(first_face)
+        faces, area = faces[kept], area[kept]
     if not len(faces):
         raise TooFewVerticesError(
             "After removing duplicate vertices and degenerate triangles no surface is left."
@@ -235,12 +258,15 @@ def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
     _, component = connected_components(graph, directed=False)
     face_component = component[faces[:, 0]]
     largest = np.bincount(face_component).argmax()
-    faces = faces[face_component == largest]
+    in_largest = face_component == largest
+    faces = faces[in_largest]
+    kept_area_fraction = float(area[in_largest].sum() / area.sum())
 
     used = used_vertices(faces, n)
     renumber = np.full(n, -1, dtype=np.int64)
     renumber[used] = np.arange(len(used))
-    return Mesh(vertices=merged[used], faces=renumber[faces])
+    mesh = Mesh(vertices=merged[used], faces=renumber[faces])
+    return CleanedMesh(mesh=mesh, kept_area_fraction=kept_area_fraction)
 
 
 def canonical_frame(mesh: Mesh) -> Mesh:
@@ -306,7 +332,27 @@ def load_mesh(
     max_decompressed_bytes: int = DEFAULT_MAX_DECOMPRESSED_BYTES,
     min_vertices: int = MIN_VERTICES,
 ) -> Mesh:
-    """Read a mesh file and return its cleaned largest connected surface.
+    """Read a mesh file and return its cleaned largest connected surface
+    (:func:`read_mesh`'s mesh)."""
+    return read_mesh(
+        source,
+        filename,
+        max_faces=max_faces,
+        max_decompressed_bytes=max_decompressed_bytes,
+        min_vertices=min_vertices,
+    ).mesh
+
+
+def read_mesh(
+    source: str | Path | bytes,
+    filename: str | None = None,
+    *,
+    max_faces: int = DEFAULT_MAX_FACES,
+    max_decompressed_bytes: int = DEFAULT_MAX_DECOMPRESSED_BYTES,
+    min_vertices: int = MIN_VERTICES,
+) -> CleanedMesh:
+    """Read a mesh file: its cleaned largest connected surface, and the share of the
+    file's surface area that is (other separate parts are left out).
 
     Parameters
     ----------
@@ -355,7 +401,8 @@ def load_mesh(
             "Some vertex coordinates are not finite numbers (NaN, infinity or too large)."
         )
 
-    mesh = clean_mesh(vertices, faces)
+    cleaned = clean_surface(vertices, faces)
+    mesh = cleaned.mesh
     if mesh.n_vertices < min_vertices:
         raise TooFewVerticesError(
             f"After cleaning, the largest connected surface has only {mesh.n_vertices} "
@@ -368,15 +415,18 @@ def load_mesh(
             "The mesh is not a surface: many triangles meet at edges shared by three or more "
             "triangles (non-manifold); upload a manifold triangle mesh."
         )
-    return mesh
+    return cleaned
 
 
 __all__ = [
     "MESH_FORMATS",
+    "CleanedMesh",
     "Mesh",
     "MeshError",
     "canonical_frame",
     "clean_mesh",
+    "clean_surface",
     "load_mesh",
     "mesh_format",
+    "read_mesh",
 ]

@@ -23,7 +23,7 @@ from .diffusion import (
 from .geodesic import farthest_point_samples, geodesic_distance_matrix, sample_distances
 from .holes import close_small_holes
 from .intrinsic import surface_operators
-from .mesh_io import CANONICAL_AREA, DEFAULT_MAX_FACES, Mesh, canonical_frame, load_mesh
+from .mesh_io import CANONICAL_AREA, DEFAULT_MAX_FACES, Mesh, canonical_frame, read_mesh
 from .modal import (
     core_diagonal,
     ddt_core,
@@ -50,6 +50,10 @@ class ShapeDescriptor:
     input_vertices, input_faces : size of the cleaned upload.
     vertices : size after resampling.
     timings : seconds per stage.
+    kept_area_fraction : the described part's share of the file's surface area (below 1
+        when the file has other, separate parts, which are left out;
+        :func:`~worker.engine.mesh_io.read_mesh`); None when the mesh did not come from
+        a file, or for a descriptor stored before this was recorded.
     """
 
     preset: str
@@ -61,6 +65,7 @@ class ShapeDescriptor:
     input_faces: int
     vertices: int
     timings: dict[str, float] = field(default_factory=dict)
+    kept_area_fraction: float | None = None
 
     def vector(self, modality: str) -> np.ndarray:
         """The modality as the flat vector that eqs. (8) and (9) compare."""
@@ -76,6 +81,7 @@ class ShapeDescriptor:
             "input_faces": self.input_faces,
             "vertices": self.vertices,
             "timings": self.timings,
+            "kept_area_fraction": self.kept_area_fraction,
         }
         for name in MODALITIES:
             array = getattr(self, name)
@@ -105,6 +111,7 @@ class ShapeDescriptor:
             input_faces=meta["input_faces"],
             vertices=meta["vertices"],
             timings=timings,
+            kept_area_fraction=meta.get("kept_area_fraction"),
         )
 
     def to_npz_bytes(self) -> bytes:
@@ -258,9 +265,10 @@ def load_and_describe(
     """:func:`describe_file`, also returning the cleaned mesh (for what else is made
     of it, such as previews, without reading the file twice)."""
     start = time.perf_counter()
-    mesh = load_mesh(source, filename, max_faces=max_faces)
+    cleaned = read_mesh(source, filename, max_faces=max_faces)
     load_seconds = time.perf_counter() - start
-    descriptor = describe_mesh(mesh, preset)
+    descriptor = describe_mesh(cleaned.mesh, preset)
+    descriptor.kept_area_fraction = cleaned.kept_area_fraction
     descriptor.timings = {"load": load_seconds, **descriptor.timings}
     descriptor.timings["total"] = sum(descriptor.timings.values())
-    return mesh, descriptor
+    return cleaned.mesh, descriptor
