@@ -37,6 +37,9 @@ import httpx
 DEFAULT_URL = os.environ.get("SHAPES_URL", "http://127.0.0.1:8000")
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl", ".glb", ".gltf")
 TIMEOUT = httpx.Timeout(300.0, connect=10.0)
+#: Below this share of the file's surface described, the answer says the rest was left out
+#: (specks and debris are far smaller; the web page uses the same figure).
+PARTIAL_SURFACE = 0.99
 
 
 class ClientError(RuntimeError):
@@ -284,6 +287,12 @@ def format_matches(body: dict[str, Any]) -> str:
         f"{body['preset']} v{body['preset_version']}, {body['fusion']} of "
         f"{'+'.join(modalities)}, {body['gallery_size']} enrolled (lower score = more alike)"
     )
+    kept = body.get("query", {}).get("kept_area_fraction")
+    if kept is not None and kept < PARTIAL_SURFACE:
+        title += (
+            f"\nOnly {kept:.0%} of the query file's surface was described: it has other, "
+            "separate parts, which were left out (the largest connected part is described)."
+        )
     return "\n".join([title, *lines])
 
 

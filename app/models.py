@@ -82,6 +82,8 @@ class Descriptor(Base):
     input_faces: Mapped[int]
     vertices: Mapped[int]
     timings: Mapped[dict[str, float]] = mapped_column(JSON, default=dict)
+    # The described part's share of the file's surface (None: made before it was kept).
+    kept_area_fraction: Mapped[float | None]
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
     mesh: Mapped[Mesh] = relationship(back_populates="descriptors")

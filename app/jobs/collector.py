@@ -205,6 +205,7 @@ class JobCollector:
                 input_faces=descriptor.input_faces,
                 vertices=descriptor.vertices,
                 timings=descriptor.timings,
+                kept_area_fraction=descriptor.kept_area_fraction,
             ),
         )
         glb, png = preview_bytes(result, "preview"), preview_bytes(result, "thumbnail")

@@ -105,6 +105,7 @@ def mesh_out(mesh: Mesh, descriptor: Descriptor | None) -> MeshOut:
             input_faces=descriptor.input_faces,
             vertices=descriptor.vertices,
             timings=descriptor.timings,
+            kept_area_fraction=descriptor.kept_area_fraction,
         ),
         job_id=job.id if job else None,
         created_at=mesh.created_at,

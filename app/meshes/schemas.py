@@ -26,6 +26,12 @@ class DescriptorInfo(BaseModel):
     input_faces: int
     vertices: int = Field(description="vertices after resampling")
     timings: dict[str, float] = Field(description="seconds per pipeline stage, with 'total'")
+    kept_area_fraction: float | None = Field(
+        None,
+        description="the described surface's share of the file's surface area: below 1 "
+        "when the file has other, separate parts, which are left out (only its largest "
+        "connected part is described); null for descriptors made before it was recorded",
+    )
 
 
 class MeshOut(BaseModel):
@@ -50,6 +56,7 @@ class MeshOut(BaseModel):
                         "input_faces": 8684,
                         "vertices": 2500,
                         "timings": {"load": 0.1, "total": 2.3},
+                        "kept_area_fraction": 1.0,
                     },
                     "job_id": 1,
                     "created_at": "2025-01-01T00:00:00",

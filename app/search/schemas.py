@@ -48,7 +48,12 @@ class QueryOut(BaseModel):
                         }
                     ],
                     "timings": {"describe_wall": 1.3, "search": 0.0004},
-                    "query": {"input_vertices": 4344, "vertices": 2500},
+                    "query": {
+                        "input_vertices": 4344,
+                        "input_faces": 8684,
+                        "vertices": 2500,
+                        "kept_area_fraction": 1.0,
+                    },
                     "descriptor_source": "computed",
                 }
             ]
@@ -66,7 +71,12 @@ class QueryOut(BaseModel):
     timings: dict[str, float] = Field(
         description="seconds: descriptor stages of the query (if computed), 'search', 'total'"
     )
-    query: dict[str, int] = Field(default_factory=dict)
+    query: dict[str, int | float] = Field(
+        default_factory=dict,
+        description="the query's mesh: input_vertices, input_faces (cleaned), vertices "
+        "(described), and kept_area_fraction, the described surface's share of the file's "
+        "surface area (below 1 when the file has other, separate parts, which are left out)",
+    )
     preview: str | None = Field(
         None, description="where the query mesh's 3D preview (GLB) can be fetched"
     )

@@ -84,7 +84,7 @@ class SearchResult:
     gallery_size: int
     matches: list[RankedMatch]
     timings: dict[str, float]
-    query: dict[str, int] = field(default_factory=dict)
+    query: dict[str, int | float] = field(default_factory=dict)
     #: Where the query's descriptor came from: "computed" by a worker now, the
     #: "enrolled" mesh with the same bytes, a "recent" query's, or "stored" (/similar).
     descriptor_source: DescriptorSource = "computed"
@@ -222,6 +222,19 @@ def current_calibration(session: Session, state: AppState) -> GalleryCalibration
         raise ConflictError(str(exc), code="not_calibrated") from None
 
 
+def query_facts(descriptor: ShapeDescriptor) -> dict[str, int | float]:
+    """What the answer says of the query's mesh: its size as cleaned and as described,
+    and (when known) the described part's share of the file's surface area."""
+    facts: dict[str, int | float] = {
+        "input_vertices": descriptor.input_vertices,
+        "input_faces": descriptor.input_faces,
+        "vertices": descriptor.vertices,
+    }
+    if descriptor.kept_area_fraction is not None:
+        facts["kept_area_fraction"] = descriptor.kept_area_fraction
+    return facts
+
+
 def rank(
     session: Session,
     state: AppState,
@@ -230,7 +243,6 @@ def rank(
     *,
     exclude: tuple[int, ...] = (),
     timings: dict[str, float],
-    query_info: dict[str, int],
     descriptor_source: DescriptorSource,
 ) -> SearchResult:
     matches, stats = state.gallery.search(
@@ -268,7 +280,7 @@ def rank(
         gallery_size=len(state.gallery),
         matches=ranked,
         timings={**timings, "search": stats.seconds},
-        query=query_info,
+        query=query_facts(descriptor),
         descriptor_source=descriptor_source,
         threshold=threshold,
     )
@@ -302,11 +314,6 @@ def query_by_upload(
         descriptor,
         options,
         timings=timings,
-        query_info={
-            "input_vertices": descriptor.input_vertices,
-            "input_faces": descriptor.input_faces,
-            "vertices": descriptor.vertices,
-        },
         descriptor_source=source,
     )
     if query_preview(session, state, upload.sha256) is not None:
@@ -378,7 +385,6 @@ def similar_to(
         options,
         exclude=(mesh_id,),
         timings={},
-        query_info={"input_vertices": descriptor.input_vertices, "vertices": descriptor.vertices},
         descriptor_source="stored",
     )
     if meshes.get_preview(session, mesh_id) is not None:

@@ -174,6 +174,14 @@ function viewers() {
 }
 
 // --------------------------------------------------------------------------- cards
+// Below this share of a file's surface described, say that the rest was left out (as
+// the command line's PARTIAL_SURFACE in app/client.py).
+const PARTIAL_SURFACE = 0.99;
+
+function partial(kept) {
+  return kept != null && kept < PARTIAL_SURFACE;
+}
+
 function percent(value) {
   return `${(100 * value).toFixed(value < 0.1 ? 1 : 0)}%`;
 }
@@ -300,7 +308,11 @@ async function search(file) {
     const how = { computed: "described now", enrolled: "enrolled already", recent: "searched recently" };
     progress.textContent = `${file.name}: ${result.matches.length} matches among ${result.gallery_size} `
       + `enrolled (${how[result.descriptor_source] || result.descriptor_source}, `
-      + `${((performance.now() - started) / 1000).toFixed(1)} s).`;
+      + `${((performance.now() - started) / 1000).toFixed(1)} s).`
+      + (partial(result.query.kept_area_fraction)
+        ? ` Only ${percent(result.query.kept_area_fraction)} of the file's surface was described: `
+          + "it has other, separate parts, which were left out (the largest connected part is described)."
+        : "");
     showResults(result, $("search-results"));
   } catch (err) {
     progress.textContent = "";
@@ -405,6 +417,12 @@ async function openDetail(mesh) {
     status: mesh.status === "failed" ? `failed: ${mesh.detail}` : mesh.status,
     file: `${mesh.filename} (${(mesh.size_bytes / 1024).toFixed(0)} kB)`,
     vertices: mesh.descriptor ? `${mesh.descriptor.input_vertices} (described at ${mesh.descriptor.vertices})` : "-",
+    surface: mesh.descriptor && mesh.descriptor.kept_area_fraction != null
+      ? `${percent(mesh.descriptor.kept_area_fraction)} described`
+        + (partial(mesh.descriptor.kept_area_fraction)
+          ? " (its largest connected part; the file's other, separate parts were left out)"
+          : "")
+      : "-",
     described: mesh.descriptor ? `${mesh.descriptor.timings.total.toFixed(2)} s, ${mesh.descriptor.preset} v${mesh.descriptor.preset_version}` : "-",
     metadata: JSON.stringify(mesh.metadata),
     enrolled: new Date(mesh.created_at).toLocaleString(),

@@ -11,8 +11,12 @@ from collections.abc import Iterator
 
 import pytest
 from alembic import command
+from alembic.autogenerate import compare_metadata
+from alembic.runtime.migration import MigrationContext
 from sqlalchemy import create_engine, inspect, text
 
+from app import models  # noqa: F401  (registers the tables on Base.metadata)
+from app.db import Base
 from app.migrations import alembic_config, upgrade_head
 
 from .conftest import TIMEOUT, TOSCA, Service
@@ -57,10 +61,21 @@ def test_the_migrations_upgrade_and_downgrade(backend: str, request, tmp_path):
         url = request.getfixturevalue("postgres").url
     upgrade_head(url)
     assert TABLES <= _tables(url)
+    assert _schema_differences(url) == []  # the migrations make the models' schema
     command.downgrade(alembic_config(url), "base")
     assert not TABLES & _tables(url)
     upgrade_head(url)
     assert TABLES <= _tables(url)
+
+
+def _schema_differences(url: str) -> list:
+    """What the migrated database lacks or has beyond the models (Alembic's comparison)."""
+    engine = create_engine(url)
+    try:
+        with engine.connect() as connection:
+            return compare_metadata(MigrationContext.configure(connection), Base.metadata)
+    finally:
+        engine.dispose()
 
 
 def _descriptor_rows(url: str) -> int:

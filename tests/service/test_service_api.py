@@ -5,7 +5,10 @@ from __future__ import annotations
 import gzip
 
 import numpy as np
+import pytest
+from conftest import with_a_far_half_copy
 
+from app.client import format_matches
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 
 from .conftest import GALLERY, TOSCA, Service
@@ -24,6 +27,7 @@ def test_enrolled_meshes_are_ready_with_descriptor_info(service: Service, galler
     # decimated to the preset's target, long edges split out of its vertices (wolf0: 2,506)
     assert abs(body["descriptor"]["vertices"] - DEFAULT.n_vertices) <= 0.02 * DEFAULT.n_vertices
     assert body["descriptor"]["timings"]["total"] > 0
+    assert body["descriptor"]["kept_area_fraction"] == 1.0  # one connected surface
     job = service.client.get(body["links"]["job"]).json()
     assert job["status"] == "succeeded" and job["mesh_id"] == body["id"]
     assert job["worker"]  # pid@host of the worker that ran it
@@ -46,6 +50,23 @@ def test_query_with_another_pose_ranks_the_right_class_first(service: Service, g
         product = np.prod([m["scores"][k] ** DEFAULT.weight(k) for k in DEFAULT.fused_modalities])
         assert abs(m["score"] - product) <= 1e-9 * m["score"]
     assert body["timings"]["total"] > 0 and body["timings"]["search"] < 1.0
+    assert body["query"]["input_vertices"] > body["query"]["vertices"]
+    assert body["query"]["kept_area_fraction"] == 1.0
+
+
+def test_a_query_of_separate_parts_says_what_was_left_out(service: Service, gallery):
+    """wolf2 and a far copy at half its size in one file: the wolf is described and
+    found, and the answer (and the command line's table) says that a fifth of the
+    file's surface was left out."""
+    _, both = with_a_far_half_copy(TOSCA / "wolf2.off.gz")
+    response = service.client.post("/query", files={"file": ("two.off", both)}, data={"k": "2"})
+    assert response.status_code == 200, response.text
+    body = response.json()
+    assert body["query"]["kept_area_fraction"] == pytest.approx(0.8, rel=1e-6)
+    assert body["matches"][0]["label"] == "wolf"
+    assert "Only 80% of the query file's surface was described" in format_matches(body)
+    whole = service.query("wolf2", k=2).json()
+    assert "left out" not in format_matches(whole)
 
 
 def test_bytes_already_described_answer_without_a_worker(service: Service, gallery):

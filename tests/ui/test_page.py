@@ -14,6 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from conftest import with_a_far_half_copy
 
 from tests.service.conftest import TOSCA, Service, migrated_service, running
 
@@ -130,8 +131,25 @@ def test_the_gallery_lists_and_opens_a_mesh_in_3d(page):
     cards.nth(1).press("Enter")  # keyboard reachable
     page.locator("#detail").wait_for(state="visible")
     page.wait_for_function(f"() => ({DRAWN_PIXELS})('view-detail') > 2000", timeout=60_000)
-    assert "ready" in page.locator("#detail-meta").inner_text()
+    facts = page.locator("#detail-meta").inner_text()
+    assert "ready" in facts and "100% described" in facts
     shoot(page, "gallery")
+
+
+def test_a_search_says_when_part_of_the_file_was_left_out(page, tmp_path):
+    _, both = with_a_far_half_copy(TOSCA / "wolf2.off.gz")
+    path = tmp_path / "wolf2-and-a-copy.off"
+    path.write_bytes(both)
+    page.click("#tab-search")
+    page.set_input_files("#file-search", str(path))
+    page.wait_for_function(
+        "() => document.getElementById('search-progress').textContent"
+        ".startsWith('wolf2-and-a-copy.off: ')",
+        timeout=180_000,
+    )
+    progress = page.locator("#search-progress").inner_text()
+    assert "Only 80% of the file's surface was described" in progress, progress
+    assert page.locator("#search-results .card .label").first.inner_text() == "wolf"
 
 
 def test_an_error_shows_the_services_sentence(page, tmp_path):
