@@ -105,6 +105,8 @@ class ImportResult:
     enrolled: dict[Path, int] = field(default_factory=dict)  # new meshes
     existing: dict[Path, int] = field(default_factory=dict)  # already there (same bytes)
     failed: dict[Path, str] = field(default_factory=dict)  # refused, or failed to describe
+    # described, but only their largest connected part: the share of the surface (--wait)
+    partial: dict[Path, float] = field(default_factory=dict)
 
     @property
     def count(self) -> int:
@@ -239,6 +241,8 @@ def _wait_described(
                     result.failed[path] = f"{body['error']}: {body['detail']}"
                 elif body["status"] != "ready":
                     continue
+                elif _partial(body["descriptor"]["kept_area_fraction"]):
+                    result.partial[path] = body["descriptor"]["kept_area_fraction"]
             del pending[path]
             progress.step()
         if pending:
@@ -288,12 +292,28 @@ def format_matches(body: dict[str, Any]) -> str:
         f"{'+'.join(modalities)}, {body['gallery_size']} enrolled (lower score = more alike)"
     )
     kept = body.get("query", {}).get("kept_area_fraction")
-    if kept is not None and kept < PARTIAL_SURFACE:
+    if _partial(kept):
         title += (
             f"\nOnly {kept:.0%} of the query file's surface was described: it has other, "
             "separate parts, which were left out (the largest connected part is described)."
         )
     return "\n".join([title, *lines])
+
+
+def _partial(kept_area_fraction: float | None) -> bool:
+    """Whether a described file left a noticeable part of its surface out."""
+    return kept_area_fraction is not None and kept_area_fraction < PARTIAL_SURFACE
+
+
+def partial_table(result: ImportResult) -> str:
+    width = max(len(p.name) for p in result.partial)
+    lines = [
+        f"{len(result.partial)} described in part: only their largest connected part, "
+        "their other, separate parts left out",
+        f"{'file'.ljust(width)}  described",
+    ]
+    lines += [f"{p.name.ljust(width)}  {kept:.0%}" for p, kept in sorted(result.partial.items())]
+    return "\n".join(lines)
 
 
 def failure_table(result: ImportResult) -> str:
@@ -360,6 +380,8 @@ def _import_command(args: argparse.Namespace) -> int:
         f"{result.count} files: {len(result.enrolled)} enrolled, "
         f"{len(result.existing)} already enrolled, {len(result.failed)} failed"
     )
+    if result.partial:
+        print(partial_table(result))
     if result.failed:
         print(failure_table(result))
         return 1

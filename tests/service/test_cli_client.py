@@ -10,6 +10,7 @@ import sys
 from collections.abc import Iterator
 
 import pytest
+from conftest import with_a_far_half_copy
 
 from .conftest import REPO, TOSCA, Service, migrated_service, running
 
@@ -127,3 +128,17 @@ def test_an_unreachable_service_is_a_sentence_not_a_traceback(tmp_path):
     assert result.returncode == 2
     assert "no service answers at http://127.0.0.1:9" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_an_import_lists_the_files_described_in_part(served: Service, tmp_path):
+    """(After the query test: the two-part wolf joins the gallery.)"""
+    _, both = with_a_far_half_copy(TOSCA / "wolf2.off.gz")
+    (tmp_path / "wolf2-and-a-copy.off").write_bytes(both)
+    shutil.copy(TOSCA / "horse0.off.gz", tmp_path / "horse0.off.gz")
+    result = shapes(served, "import", str(tmp_path), "--wait")
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert lines[0] == "2 files: 2 enrolled, 0 already enrolled, 0 failed"
+    assert lines[1].startswith("1 described in part: only their largest connected part")
+    assert lines[3].split() == ["wolf2-and-a-copy.off", "80%"]
+    assert len(lines) == 4  # horse0 is one connected surface
