@@ -15,8 +15,8 @@ from worker.engine.errors import MeshError
 from worker.engine.mesh_io import Mesh, load_mesh
 from worker.engine.pipeline import (
     ShapeDescriptor,
-    describe_file,
     describe_mesh,
+    load_and_describe,
     resampled_surface,
 )
 from worker.engine.presets import MODALITIES, Preset
@@ -79,8 +79,10 @@ def _describe_job(
     try:
         if variant is None:  # the file as the service describes an upload
             if need_descriptor:
-                job.descriptor = describe_file(data, preset, filename=name).to_npz_bytes()
-            mesh = load_mesh(data, name)
+                mesh, descriptor = load_and_describe(data, preset, filename=name)
+                job.descriptor = descriptor.to_npz_bytes()
+            else:
+                mesh = load_mesh(data, name)
         else:
             mesh = _variant_mesh(data, name, sha256, variant, stored)
             if need_descriptor:
