@@ -16,6 +16,7 @@ import signal
 import subprocess
 import sys
 import time
+from types import FrameType
 
 from .config import Settings
 from .migrations import upgrade_head
@@ -35,7 +36,7 @@ def _consumer_env(settings: Settings) -> dict[str, str]:
     return env
 
 
-def _stop(processes: list[subprocess.Popen], first_signal: int) -> None:
+def _stop(processes: list[subprocess.Popen[bytes]], first_signal: int) -> None:
     for p in processes:
         if p.poll() is None:
             p.send_signal(first_signal)
@@ -59,7 +60,7 @@ def serve(settings: Settings) -> int:
     upgrade_head(settings.sqlalchemy_url)
     env = _consumer_env(settings)
 
-    def start_consumer(queue: str) -> subprocess.Popen:
+    def start_consumer(queue: str) -> subprocess.Popen[bytes]:
         return subprocess.Popen([sys.executable, "-m", "worker", "--queue", queue], env=env)
 
     queues = ["enroll"] * settings.workers + ["query"] * settings.query_workers
@@ -87,7 +88,7 @@ def serve(settings: Settings) -> int:
     )
     stopping = {"signal": 0}
 
-    def on_signal(signum, _frame) -> None:
+    def on_signal(signum: int, _frame: FrameType | None) -> None:
         stopping["signal"] = signum
 
     signal.signal(signal.SIGINT, on_signal)

@@ -21,7 +21,8 @@ RowId = Annotated[int, Path(ge=1, le=2**63 - 1, description="the row's id")]
 
 
 def get_state(request: Request) -> AppState:
-    return request.app.state.shapes
+    state: AppState = request.app.state.shapes
+    return state
 
 
 StateDep = Annotated[AppState, Depends(get_state)]

@@ -147,7 +147,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     return app
 
 
-def __getattr__(name: str):  # ``uvicorn app.main:app`` builds the app from the environment
+# ``uvicorn app.main:app`` builds the app from the environment.
+def __getattr__(name: str) -> FastAPI:
     if name == "app":
         return create_app()
     raise AttributeError(name)

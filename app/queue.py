@@ -10,8 +10,8 @@ from huey import Huey
 from huey.exceptions import ResultTimeout, TaskException
 from huey.utils import Error
 
+from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.errors import MeshError
-from worker.engine.pipeline import ShapeDescriptor
 from worker.jobs.queue import (
     descriptor_npz,
     heartbeat_key,
@@ -128,10 +128,10 @@ class DescriptorQueue:
                     out[key] = self.huey.serializer.deserialize(value)
         return out
 
-    def results(self, task_ids: list[str]) -> dict[str, dict | Error]:
+    def results(self, task_ids: list[str]) -> dict[str, dict[str, Any] | Error]:
         return self.peek(task_ids)
 
-    def heartbeats(self, task_ids: list[str]) -> dict[str, dict]:
+    def heartbeats(self, task_ids: list[str]) -> dict[str, dict[str, Any]]:
         beats = self.peek([heartbeat_key(t) for t in task_ids])
         return {t: beats[heartbeat_key(t)] for t in task_ids if heartbeat_key(t) in beats}
 
@@ -147,5 +147,5 @@ class DescriptorQueue:
         """Ids of tasks still in the queue or scheduled for a retry."""
         return {t.id for t in self.huey.pending()} | {t.id for t in self.huey.scheduled()}
 
-    def is_stale(self, beat: dict) -> bool:
+    def is_stale(self, beat: dict[str, Any]) -> bool:
         return time.time() - float(beat.get("beat", 0)) > self.settings.stalled_after_seconds

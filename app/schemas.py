@@ -25,12 +25,12 @@ class ErrorOut(BaseModel):
     detail: str = Field(description="what went wrong, as a sentence")
 
 
-ERROR_RESPONSES: dict[int | str, dict] = {
+ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
     422: {"model": ErrorOut, "description": "Invalid input (`invalid_input` or a specific code)"},
 }
 """Responses every router declares, replacing FastAPI's default validation-error schema."""
 
-FILE_RESPONSES: dict[int | str, dict] = {
+FILE_RESPONSES: dict[int | str, dict[str, Any]] = {
     413: {
         "model": ErrorOut,
         "description": "File over the size limit (`too_large`) or with more faces than "
@@ -43,7 +43,7 @@ FILE_RESPONSES: dict[int | str, dict] = {
 }
 """Declared by every request that can carry a mesh file."""
 
-UNAUTHORIZED_RESPONSE: dict[int | str, dict] = {
+UNAUTHORIZED_RESPONSE: dict[int | str, dict[str, Any]] = {
     401: {"model": ErrorOut, "description": "API key missing or wrong (`unauthorized`)"},
 }
 """Declared by every POST and DELETE (they need the API key when one is configured)."""

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session, sessionmaker
 
-from worker.engine.pipeline import ShapeDescriptor
+from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.presets import Preset
 
 from .config import Settings

@@ -8,7 +8,8 @@ import csv
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from worker.engine.pipeline import ShapeDescriptor, describe_file
+from worker.engine.descriptor import ShapeDescriptor
+from worker.engine.pipeline import describe_file
 from worker.engine.presets import DEFAULT_PRESET, Preset, get_preset
 from worker.evaluation.compute import ComputedSet, compute_descriptors
 from worker.evaluation.datasets import DEFAULT_CACHE, read_labels, shared_dataset

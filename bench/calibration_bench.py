@@ -2,7 +2,7 @@
 
     python bench/calibration_bench.py [--preset smeets2010-surface] [--cache DIR] [--far 0.01]
 
-With the calibration the service uses (``worker.evaluation.calibration``, on the
+With the calibration the service uses (``worker.recognition.calibration``, on the
 preset's fused score), on the TOSCA descriptors of the evaluation cache:
 
 1. all pairs: the EER (the one ``shapes evaluate`` reports, and ``GET /calibration``
@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from worker.engine.compare import fuse
-from worker.evaluation.calibration import calibrate
 from worker.evaluation.compute import descriptor_vectors
 from worker.evaluation.scoring import modality_dissimilarity, stratified_folds
+from worker.recognition.calibration import calibrate
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 

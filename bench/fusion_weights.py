@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from worker.engine.compare import fuse
-from worker.evaluation import metrics
 from worker.evaluation.compute import descriptor_vectors
 from worker.evaluation.scoring import modality_dissimilarity, stratified_folds
+from worker.recognition import metrics
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 

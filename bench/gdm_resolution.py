@@ -33,7 +33,7 @@ from worker.engine.mesh_io import CANONICAL_AREA, canonical_frame, load_mesh
 from worker.engine.modal import modal_gdm, voronoi_areas
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.engine.resample import resample_mesh
-from worker.evaluation import metrics
+from worker.recognition import metrics
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 

@@ -32,8 +32,9 @@ from pathlib import Path
 import numpy as np
 
 from worker.engine.compare import dissimilarity
+from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas, load_mesh
-from worker.engine.pipeline import ShapeDescriptor, describe_mesh
+from worker.engine.pipeline import describe_mesh
 from worker.engine.presets import MODALITIES, get_preset
 from worker.evaluation.datasets import shared_dataset
 from worker.evaluation.robustness import protocol_distance

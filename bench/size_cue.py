@@ -32,8 +32,8 @@ from lapy import TriaMesh
 from worker.engine.compare import dissimilarity, fuse
 from worker.engine.mesh_io import load_mesh
 from worker.engine.presets import MODALITIES, get_preset
-from worker.evaluation import metrics
 from worker.evaluation.compute import descriptor_vectors
+from worker.recognition import metrics
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 

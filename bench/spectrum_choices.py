@@ -37,11 +37,11 @@ from lapy.shapedna import reweight_ev
 
 from worker.engine.compare import fuse
 from worker.engine.presets import get_preset
-from worker.evaluation import metrics
 from worker.evaluation.compute import compute_descriptors, descriptor_vectors
 from worker.evaluation.datasets import read_labels
 from worker.evaluation.scoring import modality_dissimilarity, stratified_folds
 from worker.evaluation.shapedna import shapedna_dissimilarity
+from worker.recognition import metrics
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 

@@ -32,8 +32,8 @@ from worker.engine.mesh_io import load_mesh
 from worker.engine.modal import ddt_core, modal_gdm
 from worker.engine.presets import get_preset
 from worker.engine.resample import resample_mesh
-from worker.evaluation import metrics
 from worker.evaluation.datasets import shared_dataset
+from worker.recognition import metrics
 
 TOSCA = shared_dataset("tosca")
 CACHE = Path(__file__).resolve().parents[1] / ".cache" / "experiments"

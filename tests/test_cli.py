@@ -10,7 +10,7 @@ import trimesh
 
 from worker.cli import main
 from worker.engine import presets
-from worker.engine.pipeline import ShapeDescriptor
+from worker.engine.descriptor import ShapeDescriptor
 
 
 @pytest.mark.slow  # describes a mesh

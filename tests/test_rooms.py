@@ -74,9 +74,30 @@ def test_settings_load_neither_the_queue_nor_the_engines_pipeline(settings):
     assert "worker.jobs.queue" not in loaded and "faiss" not in loaded
 
 
-def test_the_calibration_the_service_imports_is_pure_numpy():
-    loaded = modules_loaded_by("import worker.evaluation.calibration")
-    assert {m.split(".")[0] for m in loaded} & {"lapy", "matplotlib", "tqdm", "pymeshlab"} == set()
+RECOGNITION_MODULES = sorted(
+    f"worker.recognition.{p.stem}"
+    for p in (ENGINE_DIR.parent / "recognition").glob("*.py")
+    if p.stem != "__init__"
+)
+
+
+def test_the_recognition_room_is_pure_numpy():
+    loaded = modules_loaded_by("\n".join(f"import {m}" for m in RECOGNITION_MODULES))
+    assert set(RECOGNITION_MODULES) <= loaded
+    assert {m.split(".")[0] for m in loaded} & (NOT_IN_ENGINE | {"pymeshlab"}) == set()
+    assert {m for m in loaded if m.startswith(("app", "worker.jobs", "worker.evaluation"))} == set()
+
+
+def test_the_service_never_imports_the_evaluation_harness():
+    app_dir = Path(worker.__file__).parents[1] / "app"
+    importers = set()
+    for path in app_dir.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").startswith(
+                "worker.evaluation"
+            ):
+                importers.add(path.name)
+    assert importers == set()
 
 
 def test_the_cli_client_loads_nothing_of_the_server():

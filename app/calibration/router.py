@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 from fastapi import APIRouter
 
-from worker.evaluation.calibration import Calibration
+from worker.recognition.calibration import Calibration
 
 from ..deps import WRITE_ACCESS, MultipartDep, ReadSessionDep, SessionDep, StateDep, require_file
 from ..errors import InvalidInputError

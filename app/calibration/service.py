@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 from sqlalchemy.orm import Session
 
-from worker.evaluation.calibration import OPERATING_FARS, Calibration
+from worker.recognition.calibration import OPERATING_FARS, Calibration
 
 from ..errors import InvalidInputError, NotFoundError
 from ..gallery.calibration import FUSED, GalleryCalibration

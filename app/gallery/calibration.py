@@ -2,7 +2,7 @@
 
 Every pair of enrolled shapes that both carry a label is genuine (same label) or
 impostor (different labels); their dissimilarities under the preset, fused and per
-modality, calibrated by :func:`worker.evaluation.calibration.calibrate` (the code
+modality, calibrated by :func:`worker.recognition.calibration.calibrate` (the code
 ``shapes evaluate`` reports its ROC and EER with), answer "is this the same
 object?" at a chosen false acceptance rate, and give each match a confidence.
 
@@ -23,7 +23,7 @@ import numpy as np
 
 from worker.engine.compare import fuse, paired_dissimilarity
 from worker.engine.presets import Preset
-from worker.evaluation.calibration import Calibration, calibrate
+from worker.recognition.calibration import Calibration, calibrate
 
 from .index import GalleryIndex
 

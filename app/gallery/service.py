@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from sqlalchemy.orm import Session, sessionmaker
 
-from worker.engine.pipeline import ShapeDescriptor
+from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.presets import MODALITIES, Preset
 
 from ..errors import UnavailableError

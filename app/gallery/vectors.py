@@ -143,4 +143,5 @@ class GalleryVectors:
             table = np.full(int(self.ids[: self.n].max(initial=-1)) + 1, -1, dtype=np.int64)
             table[self.ids[: self.n]] = np.arange(self.n)
             self._pos_table = table
-        return self._pos_table[ids]
+        positions: np.ndarray = self._pos_table[ids]
+        return positions

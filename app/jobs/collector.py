@@ -29,12 +29,13 @@ import logging
 import threading
 import time
 from datetime import UTC, datetime
+from typing import Any
 
 from huey.utils import Error
 from sqlalchemy.exc import SQLAlchemyError
 from sqlalchemy.orm import Session
 
-from worker.engine.pipeline import ShapeDescriptor
+from worker.engine.descriptor import ShapeDescriptor
 from worker.jobs.queue import descriptor_npz, preview_bytes
 
 from ..db import unit_of_work
@@ -167,7 +168,9 @@ class JobCollector:
             enqueue_job(state, job)
         return changed
 
-    def _finish(self, session: Session, job: Job, result: dict | Error) -> ShapeDescriptor | None:
+    def _finish(
+        self, session: Session, job: Job, result: dict[str, Any] | Error
+    ) -> ShapeDescriptor | None:
         state, mesh = self.state, job.mesh
         job.finished_at = utcnow()
         state.metrics.job_seconds.observe((job.finished_at - job.created_at).total_seconds())
@@ -219,7 +222,7 @@ class JobCollector:
         state.metrics.describe_seconds.observe(descriptor.timings.get("total", 0.0))
         return descriptor
 
-    def _track(self, job: Job, beat: dict, requeue: list[Job]) -> int:
+    def _track(self, job: Job, beat: dict[str, Any], requeue: list[Job]) -> int:
         """Follow a running job's heartbeat; re-enqueue or fail it if its worker died."""
         state = self.state
         changed = 0

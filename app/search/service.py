@@ -15,10 +15,10 @@ from typing import Literal
 
 from sqlalchemy.orm import Session
 
+from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.mesh_io import mesh_format
-from worker.engine.pipeline import ShapeDescriptor
 from worker.engine.presets import MODALITIES, PRESETS, Preset
-from worker.evaluation.calibration import Calibration
+from worker.recognition.calibration import Calibration
 
 from ..errors import ConflictError, InvalidInputError
 from ..gallery.calibration import FUSED, GalleryCalibration, NotEnoughPairs

@@ -17,8 +17,9 @@ import trimesh
 from conftest import bent_cylinder, helical_spring, random_rotation, with_a_far_half_copy
 
 from worker.engine.compare import mean_normalized_manhattan
+from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.mesh_io import Mesh, clean_mesh, load_mesh
-from worker.engine.pipeline import ShapeDescriptor, describe_file, describe_mesh
+from worker.engine.pipeline import describe_file, describe_mesh
 from worker.engine.presets import get_preset
 
 pytestmark = pytest.mark.slow  # whole pipelines on TOSCA and generated meshes

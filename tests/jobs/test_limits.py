@@ -10,7 +10,8 @@ import sys
 import numpy as np
 import pytest
 
-from worker.engine.pipeline import ShapeDescriptor, describe_file
+from worker.engine.descriptor import ShapeDescriptor
+from worker.engine.pipeline import describe_file
 from worker.engine.presets import get_preset
 from worker.evaluation.datasets import shared_dataset
 from worker.jobs.limits import describe_limited

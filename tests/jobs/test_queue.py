@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 import trimesh
 
-from worker.engine.pipeline import ShapeDescriptor
+from worker.engine.descriptor import ShapeDescriptor
 from worker.jobs.queue import descriptor_npz, heartbeat_key, make_huey
 from worker.jobs.settings import QueueSettings
 

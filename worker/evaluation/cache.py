@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.mesh_io import Mesh
-from worker.engine.pipeline import ShapeDescriptor
 from worker.engine.presets import Preset
 
 from .shapedna import BASELINE, SHAPEDNA_K, ShapeDNA

@@ -11,14 +11,10 @@ from typing import Any
 
 import numpy as np
 
+from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.errors import MeshError
 from worker.engine.mesh_io import Mesh, load_mesh
-from worker.engine.pipeline import (
-    ShapeDescriptor,
-    describe_mesh,
-    load_and_describe,
-    resampled_surface,
-)
+from worker.engine.pipeline import describe_mesh, load_and_describe, resampled_surface
 from worker.engine.presets import MODALITIES, Preset
 
 from .cache import DescriptorCache, VariantMeshCache, file_sha256

@@ -10,8 +10,7 @@ from pathlib import Path
 
 from worker.engine.errors import MeshError
 from worker.engine.mesh_io import mesh_format
-
-from .metrics import natural_sort_key
+from worker.recognition.metrics import natural_sort_key
 
 #: Environment variable naming the directory that holds the shared data sets.
 DATASETS_ENV = "SHAPES_DATASETS_DIR"

@@ -33,7 +33,7 @@ def _save(fig: Figure, path: Path) -> None:
     fig.savefig(path, dpi=120, bbox_inches="tight")
 
 
-def plot_cmc(rows: Mapping[str, Mapping], path: str | Path, title: str = "") -> None:
+def plot_cmc(rows: Mapping[str, Mapping[str, Any]], path: str | Path, title: str = "") -> None:
     """Recognition rate against rank, one curve per report row (Fig. 5a).
 
     Parameters
@@ -57,7 +57,7 @@ def plot_cmc(rows: Mapping[str, Mapping], path: str | Path, title: str = "") -> 
     _save(fig, Path(path))
 
 
-def plot_roc(rows: Mapping[str, Mapping], path: str | Path, title: str = "") -> None:
+def plot_roc(rows: Mapping[str, Mapping[str, Any]], path: str | Path, title: str = "") -> None:
     """FRR against FAR on a log FAR axis, one curve per report row (Fig. 5b).
 
     The dotted diagonal FRR = FAR crosses each curve at its EER.
@@ -91,7 +91,7 @@ def plot_roc(rows: Mapping[str, Mapping], path: str | Path, title: str = "") -> 
     _save(fig, Path(path))
 
 
-def plot_report(report: Mapping, out_dir: str | Path) -> None:
+def plot_report(report: Mapping[str, Any], out_dir: str | Path) -> None:
     """Write ``cmc.png`` and ``roc.png`` of a report into ``out_dir``."""
     out = Path(out_dir)
     name = f"{report['preset']['name']} v{report['preset']['version']}"

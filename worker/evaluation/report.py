@@ -6,19 +6,22 @@ import platform
 import time
 from collections import Counter
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from worker.engine.presets import MODALITIES, Preset
+from worker.recognition import metrics
 
-from . import metrics
 from .cache import engine_fingerprint
 from .compute import ComputedSet, descriptor_vectors
 from .scoring import COLUMNS, ROWS, dissimilarity_matrices, score_dissimilarity
 from .shapedna import BASELINE, SHAPEDNA_K
 
 
-def protocol_text(preset: Preset, n_objects: int, n_classes: int, gallery: Sequence[str]) -> dict:
+def protocol_text(
+    preset: Preset, n_objects: int, n_classes: int, gallery: Sequence[str]
+) -> dict[str, Any]:
     """The protocol in words, for report.json and report.md."""
     sigma = (
         "D2 (eq. 9), sigma_i = standard deviation of descriptor element i over all "
@@ -70,7 +73,7 @@ def build_report(
     command: str = "",
     environment: Mapping[str, str] | None = None,
     dataset: str = "",
-) -> tuple[dict, dict[str, np.ndarray]]:
+) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Dissimilarities and metrics of every row, as one JSON-ready dict.
 
     Parameters
@@ -143,7 +146,7 @@ def _confusion_summary(errors: Sequence[Mapping[str, str]], true_key: str, got_k
     return ", ".join(f"{a}->{b} x{c}" for (a, b), c in sorted(pairs.items(), key=lambda x: -x[1]))
 
 
-def render_markdown(report: Mapping) -> str:
+def render_markdown(report: Mapping[str, Any]) -> str:
     """report.md: the protocol, the table (percent) and which classes were confused."""
     protocol = report["protocol"]
     preset = report["preset"]
@@ -209,7 +212,7 @@ def environment_info() -> dict[str, str]:
     }
 
 
-def render_robustness_markdown(report: Mapping) -> str:
+def render_robustness_markdown(report: Mapping[str, Any]) -> str:
     """robustness.md: per row, class and self retrieval of the variants and the gap."""
     preset = report["preset"]
     titles = report["rows"]

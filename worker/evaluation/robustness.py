@@ -37,6 +37,7 @@ compared with a modality's, nor between two choices of weights.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -108,7 +109,7 @@ def tessellation_scores(
     labels: Sequence[str],
     variants: Mapping[str, tuple[np.ndarray, Mapping[str, np.ndarray]]],
     preset: Preset,
-) -> dict[str, dict]:
+) -> dict[str, dict[str, Any]]:
     """The protocol's numbers per row.
 
     Parameters
@@ -134,11 +135,11 @@ def tessellation_scores(
     cross = {}
     for name, (sources, vectors) in variants.items():
         cross[name] = (np.asarray(sources), _cross(vectors, originals, preset))
-    scores: dict[str, dict] = {}
+    scores: dict[str, dict[str, Any]] = {}
     for row, matrix in among.items():
         nearest_other = np.where(other_class, matrix, np.inf).min(axis=1)
         scale = float(np.median(nearest_other))
-        per_variant: dict[str, dict] = {}
+        per_variant: dict[str, dict[str, Any]] = {}
         all_self, all_class, all_distance = [], [], []
         for name, (sources, matrices) in cross.items():
             d = matrices[row]
@@ -178,7 +179,7 @@ def pose_invariance(
     preset: Preset,
     pose_names: Sequence[str],
     names: Sequence[str],
-) -> dict[str, dict]:
+) -> dict[str, dict[str, Any]]:
     """Poses of one object against a labelled collection, in one gallery.
 
     Parameters
@@ -202,7 +203,7 @@ def pose_invariance(
     p = len(next(iter(poses.values())))
     labels_arr = np.asarray([str(x) for x in labels])
     between = labels_arr[:, None] != labels_arr[None, :]
-    out: dict[str, dict] = {}
+    out: dict[str, dict[str, Any]] = {}
     for row, d in matrices.items():
         d = 0.5 * (d + d.T)
         within = d[:p, :p][np.triu_indices(p, 1)]
@@ -222,7 +223,7 @@ def pose_invariance(
 
 def cross_resolution(
     first: Mapping[str, np.ndarray], second: Mapping[str, np.ndarray], preset: Preset
-) -> dict[str, dict]:
+) -> dict[str, dict[str, Any]]:
     """The same poses at two resolutions: each queries the poses at the other one.
 
     Parameters
@@ -246,7 +247,7 @@ def cross_resolution(
         (_cross(first, second, preset), _cross(first, first, preset)),
         (_cross(second, first, preset), _cross(second, second, preset)),
     ]
-    out: dict[str, dict] = {}
+    out: dict[str, dict[str, Any]] = {}
     for row in directions[0][0]:
         hits, ratios = [], []
         for across, same in directions:

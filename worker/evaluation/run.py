@@ -7,6 +7,7 @@ import json
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -43,8 +44,8 @@ def run_evaluation(
     command: str = "",
     environment: Mapping[str, str] | None = None,
     progress: bool = True,
-    plot: Callable[[Mapping, Path], None] | None = None,
-) -> dict:
+    plot: Callable[[Mapping[str, Any], Path], None] | None = None,
+) -> dict[str, Any]:
     """Describe, compare and score a labelled collection; write the report to ``out_dir``.
 
     Writes ``report.json``, ``report.md``, ``cmc.png`` and ``roc.png``.
@@ -91,7 +92,7 @@ def run_robustness(
     command: str = "",
     environment: Mapping[str, str] | None = None,
     progress: bool = True,
-) -> dict:
+) -> dict[str, Any]:
     """The tessellation-robustness protocol (:mod:`.robustness`); writes
     ``robustness.json`` and ``robustness.md`` to ``out_dir``.
 
@@ -126,7 +127,7 @@ def run_robustness(
         sources = np.array([index[m.name] for m in done.meshes], dtype=np.int64)
         described[variant] = (sources, descriptor_vectors(done))
     labels = [m.label for m in computed.meshes]
-    report: dict = {
+    report: dict[str, Any] = {
         "dataset": str(dataset_dir),
         "command": command,
         "preset": preset.to_dict(),

@@ -10,14 +10,15 @@ gallery. The paper does not say which set it used.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from worker.engine.compare import dissimilarity, fuse, gallery_sigma
 from worker.engine.presets import MODALITIES, Preset
+from worker.recognition import metrics
+from worker.recognition.calibration import calibrate
 
-from . import metrics
-from .calibration import calibrate
 from .shapedna import BASELINE, shapedna_dissimilarity
 
 #: Rows of the report, in table order: key -> (title, members, fusion rule).
@@ -68,7 +69,7 @@ def stratified_folds(labels: np.ndarray, k: int, seed: int = 0) -> np.ndarray:
     return fold
 
 
-def modality_dissimilarity(vectors: np.ndarray, kind: str) -> tuple[np.ndarray, dict]:
+def modality_dissimilarity(vectors: np.ndarray, kind: str) -> tuple[np.ndarray, dict[str, Any]]:
     """All-to-all dissimilarity of one modality with D1 (eq. 8) or D2 (eq. 9).
 
     Parameters
@@ -83,7 +84,7 @@ def modality_dissimilarity(vectors: np.ndarray, kind: str) -> tuple[np.ndarray, 
         deviation over all ``n`` objects (the all-to-all protocol's gallery).
     """
     x = np.atleast_2d(np.asarray(vectors, dtype=np.float64))
-    info: dict = {"dissimilarity": kind}
+    info: dict[str, Any] = {"dissimilarity": kind}
     sigma = None
     if kind == "D2":  # recorded in the report, so computed here rather than inside
         sigma = gallery_sigma(x)
@@ -98,7 +99,7 @@ def dissimilarity_matrices(
     vectors: Mapping[str, np.ndarray],
     preset: Preset,
     baseline: np.ndarray | None = None,
-) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
+) -> tuple[dict[str, np.ndarray], dict[str, dict[str, Any]]]:
     """Every row of the report as an all-to-all dissimilarity matrix.
 
     Parameters
@@ -121,7 +122,7 @@ def dissimilarity_matrices(
     """
     per_modality: dict[str, np.ndarray] = {}
     matrices: dict[str, np.ndarray] = {}
-    info: dict[str, dict] = {}
+    info: dict[str, dict[str, Any]] = {}
     for modality in MODALITIES:
         per_modality[modality], info[modality] = modality_dissimilarity(
             vectors[modality], preset.dissimilarity
@@ -157,7 +158,7 @@ def score_dissimilarity(
     names: Sequence[str],
     gallery_idx: np.ndarray,
     probe_idx: np.ndarray,
-) -> dict:
+) -> dict[str, Any]:
     """Every metric of one all-to-all dissimilarity matrix.
 
     Parameters

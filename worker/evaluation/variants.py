@@ -66,7 +66,10 @@ def subdivided(mesh: Mesh) -> Mesh:
     """One step of Loop subdivision (four times the faces, a slightly smoothed surface)."""
     import trimesh
 
-    vertices, faces = trimesh.remesh.subdivide_loop(mesh.vertices, mesh.faces, iterations=1)
+    # no-untyped-call: trimesh's subdivide_loop carries no annotations.
+    vertices, faces = trimesh.remesh.subdivide_loop(  # type: ignore[no-untyped-call]
+        mesh.vertices, mesh.faces, iterations=1
+    )
     return clean_mesh(vertices, faces)
 
 

@@ -35,6 +35,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from huey import Huey, PriorityRedisHuey, SqliteHuey
+from huey.api import Task
 
 from .limits import describe_limited, start_fork_server
 from .settings import Queue, QueueSettings
@@ -95,7 +96,8 @@ def make_huey(settings: QueueSettings, queue: Queue = "enroll") -> Huey:
     time_limit = settings.job_time_limit_seconds
     memory_limit = settings.job_memory_limit_mb * 1024 * 1024
 
-    @huey.task(
+    # untyped-decorator: huey ships no types, so its task decorator is Any to mypy.
+    @huey.task(  # type: ignore[untyped-decorator]
         retries=TASK_RETRIES, retry_delay=TASK_RETRY_DELAY_SECONDS, context=True, name=TASK_NAME
     )
     def describe_upload(
@@ -104,13 +106,14 @@ def make_huey(settings: QueueSettings, queue: Queue = "enroll") -> Huey:
         preset_name: str,
         max_faces: int,
         data: str | None = None,
-        task=None,
-    ) -> dict:
+        task: Task | None = None,
+    ) -> dict[str, Any]:
         """Describe one uploaded mesh file; see the module docstring for the result.
 
         ``source``: a path relative to this worker's data directory (or absolute), or
         ``db:<sha256>``; ``data``: the file itself (base64) instead, for a query.
         """
+        assert task is not None  # context=True: Huey passes the running task
         key = heartbeat_key(task.id)
         started = time.time()
         done = threading.Event()

@@ -61,7 +61,9 @@ E_MEASURE_CUTOFF = 32
 # --------------------------------------------------------------------------- validation
 
 
-def _validate(dissimilarity: ArrayLike, labels: ArrayLike) -> tuple[NDArray[np.float64], NDArray]:
+def _validate(
+    dissimilarity: ArrayLike, labels: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """Check the common inputs and convert labels to integer class codes.
 
     Parameters
@@ -428,7 +430,8 @@ def _ranked_relevance(dissimilarity: ArrayLike, labels: ArrayLike) -> NDArray[np
     others = cols + (cols >= rows)  # (n, n-1): row i lists j != i in increasing order
     order = np.argsort(d[rows, others], axis=1, kind="stable")  # stable: index breaks ties
     retrieved = np.take_along_axis(others, order, axis=1)
-    return codes[retrieved] == codes[:, None]
+    relevant: NDArray[np.bool_] = codes[retrieved] == codes[:, None]
+    return relevant
 
 
 def _nearest_neighbor(relevant: NDArray[np.bool_]) -> float:

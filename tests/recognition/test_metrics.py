@@ -1,4 +1,4 @@
-"""Unit tests for worker.evaluation.metrics against small hand-computed cases.
+"""Unit tests for worker.recognition.metrics against small hand-computed cases.
 
 Every expected number below is derived by hand in the accompanying comment.
 """
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from worker.evaluation import metrics as m
+from worker.recognition import metrics as m
 
 
 def symmetric(n: int, pairs: dict[tuple[int, int], float]) -> np.ndarray:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from worker.evaluation import metrics
-from worker.evaluation.calibration import calibrate, isotonic_decreasing
+from worker.recognition import metrics
+from worker.recognition.calibration import calibrate, isotonic_decreasing
 
 
 def test_separated_scores_have_no_error_and_certain_confidences():

@@ -36,7 +36,7 @@ class Calibration:
     Attributes
     ----------
     genuine, impostor : number of pairs of each kind.
-    far, frr, thresholds : the ROC (:func:`worker.evaluation.metrics.pair_roc`).
+    far, frr, thresholds : the ROC (:func:`worker.recognition.metrics.pair_roc`).
     eer : equal error rate.
     knots, probabilities : the isotonic map from score to the probability that the
         pair is genuine (non-increasing; linear in between, constant outside).
