@@ -28,8 +28,9 @@ import numpy as np
 
 from worker.engine.compare import fuse
 from worker.evaluation.compute import descriptor_vectors
-from worker.evaluation.scoring import modality_dissimilarity, stratified_folds
+from worker.evaluation.scoring import modality_dissimilarity
 from worker.recognition import metrics
+from worker.recognition.fusion import stratified_folds
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 

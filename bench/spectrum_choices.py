@@ -39,9 +39,10 @@ from worker.engine.compare import fuse
 from worker.engine.presets import get_preset
 from worker.evaluation.compute import compute_descriptors, descriptor_vectors
 from worker.evaluation.datasets import read_labels
-from worker.evaluation.scoring import modality_dissimilarity, stratified_folds
+from worker.evaluation.scoring import modality_dissimilarity
 from worker.evaluation.shapedna import shapedna_dissimilarity
 from worker.recognition import metrics
+from worker.recognition.fusion import stratified_folds
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
