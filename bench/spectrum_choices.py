@@ -16,8 +16,8 @@ once more under the preset with every eigenvalue its eigenproblem computes
   :func:`~worker.evaluation.shapedna.shapedna_dissimilarity`: eigenvalue ``i`` of
   ``0, lambda_1 A, lambda_2 A, ...`` divided by ``i``).
 
-Then, per comparison, the size chosen with the fusion weights by
-``bench/fusion_weights.py``'s class-stratified cross-validation (the size with the
+Then, per comparison, the size chosen with the fusion weights by the class-stratified
+cross-validation of ``shapes tune`` (:mod:`worker.recognition.fusion`; the size with the
 lowest loss among its weight choices, on four folds; tested on the fifth), for three
 splits into folds, and the choice on all meshes.
 
@@ -42,12 +42,11 @@ from worker.evaluation.datasets import read_labels
 from worker.evaluation.scoring import modality_dissimilarity
 from worker.evaluation.shapedna import shapedna_dissimilarity
 from worker.recognition import metrics
-from worker.recognition.fusion import stratified_folds
+from worker.recognition.fusion import FOLDS, choose_weights, fusion_scores, stratified_folds
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench._tosca import TOSCA, add_evaluation_cache_arguments  # noqa: E402
-from bench.fusion_weights import FOLDS, choose, loss, scores  # noqa: E402
 
 SIZES = (10, 15, 20, 25, 30, 40, 50, 70, 99)
 SEEDS = (0, 1, 2)
@@ -74,9 +73,7 @@ def choose_size(
     smaller size)."""
     best: tuple[float, int, dict[str, float]] | None = None
     for k, spectrum in spectra.items():
-        mats = {**others, "spectrum": spectrum}
-        weights = choose(mats, labels, rule)
-        value = loss(scores(fuse(mats, rule, weights), labels))
+        weights, value = choose_weights({**others, "spectrum": spectrum}, labels, rule)
         if best is None or value < best[0]:
             best = (value, k, weights)
     assert best is not None
@@ -96,9 +93,9 @@ def cross_validate(
                 sub, {m: d[np.ix_(train, train)] for m, d in others.items()}, labels[train], rule
             )
             fused = fuse({**others, "spectrum": spectra[k]}, rule, weights)
-            tests.append(scores(fused, labels, test))
+            tests.append(fusion_scores(fused, labels, test))
             chosen.append(f"{k} ({', '.join(f'{w:g}' for w in weights.values())})")
-        eer, map_ = np.mean([t["eer"] for t in tests]), np.mean([t["map"] for t in tests])
+        eer, map_ = np.mean([t.eer for t in tests]), np.mean([t.map for t in tests])
         print(f"| {seed} | {'; '.join(chosen)} | {eer:.2%} | {map_:.1%} |")
     value, k, weights = choose_size(spectra, others, labels, rule)
     shown = ", ".join(f"{m} {w:g}" for m, w in weights.items())
