@@ -1,6 +1,6 @@
 """GDM accuracy: heat-method geodesics against exact ones.
 
-    python bench/geodesic_accuracy.py [--sources 10] [--time-factors 1,16]
+    python -m experiments.geodesic_accuracy [--sources 10] [--time-factors 1,16]
 
 Sphere: great-circle distances (exact for the sphere the mesh approximates).
 TOSCA meshes, resampled to 2,500 vertices: the exact polyhedral geodesics of the
@@ -18,16 +18,16 @@ import numpy as np
 import trimesh
 from pygeodesic.geodesic import PyGeodesicAlgorithmExact
 
+from benchmarks.common import TOSCA
 from worker.engine.geodesic import geodesic_distance_matrix
 from worker.engine.intrinsic import IntrinsicMesh, fem_operators, surface_operators
 from worker.engine.mesh_io import load_mesh
 from worker.engine.resample import resample_mesh
-from worker.evaluation.datasets import shared_dataset
-
-TOSCA = shared_dataset("tosca")
 
 
-def _gdm(vertices, faces, time_factor, delaunay=True):
+def _gdm(
+    vertices: np.ndarray, faces: np.ndarray, time_factor: float, delaunay: bool = True
+) -> np.ndarray:
     if delaunay:
         mesh, ops = surface_operators(vertices, faces)
     else:
@@ -36,7 +36,7 @@ def _gdm(vertices, faces, time_factor, delaunay=True):
     return geodesic_distance_matrix(mesh, ops, time_factor)
 
 
-def _row(name, errors):
+def _row(name: str, errors: list[np.ndarray]) -> str:
     e = np.concatenate(errors)
     return f"| {name} | {np.median(e):.2%} | {np.mean(e):.2%} | {np.percentile(e, 95):.2%} |"
 

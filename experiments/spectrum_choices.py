@@ -1,7 +1,7 @@
 """The spectrum modality's two free choices, measured on TOSCA: how many eigenvalues,
 and how they are compared.
 
-    python bench/spectrum_choices.py [--preset smeets2010-surface] [--cache DIR] [--jobs 2]
+    python -m experiments.spectrum_choices [--preset smeets2010-surface] [--cache DIR] [--jobs 2]
 
 The preset keeps ``spectrum_size`` (50, lapy's ``compute_shapedna`` default) non-zero
 eigenvalues and compares them with its dissimilarity (D1, eq. 8). This describes TOSCA
@@ -28,13 +28,12 @@ What the tessellation does to the same choices is the robustness protocol's to s
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 from lapy.shapedna import reweight_ev
 
+from benchmarks.common import TOSCA, add_evaluation_cache_arguments
 from worker.engine.compare import fuse
 from worker.engine.presets import get_preset
 from worker.evaluation.compute import compute_descriptors, descriptor_vectors
@@ -43,10 +42,6 @@ from worker.evaluation.scoring import modality_dissimilarity
 from worker.evaluation.shapedna import shapedna_dissimilarity
 from worker.recognition import metrics
 from worker.recognition.fusion import FOLDS, choose_weights, fusion_scores, stratified_folds
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from bench._tosca import TOSCA, add_evaluation_cache_arguments  # noqa: E402
 
 SIZES = (10, 15, 20, 25, 30, 40, 50, 70, 99)
 SEEDS = (0, 1, 2)
@@ -59,7 +54,7 @@ def shapedna_style(spectrum: np.ndarray) -> np.ndarray:
     return shapedna_dissimilarity(np.stack([reweight_ev(row) for row in with_zero]))
 
 
-def row(name: str, d: np.ndarray, labels: np.ndarray, split: tuple) -> str:
+def row(name: str, d: np.ndarray, labels: np.ndarray, split: tuple[np.ndarray, np.ndarray]) -> str:
     r = metrics.retrieval_scores(d, labels)
     r1 = metrics.rank1_rate(d, labels, *split)
     eer = metrics.equal_error_rate(d, labels)
