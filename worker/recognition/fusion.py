@@ -195,15 +195,14 @@ def choose_weights(
     loss : their :attr:`FusionScores.loss`.
     """
     names = list(dissimilarities)
-    best: tuple[float, dict[str, float]] | None = None
+    if not names:
+        raise ValueError("no dissimilarity to weigh")
+    scored = []
     for w in itertools.product(grid, repeat=len(names) - 1):
         weights = dict(zip(names, (*w, 1.0), strict=True))
-        loss = fusion_scores(fuse(dissimilarities, rule, weights), labels).loss
-        if best is None or loss < best[0]:
-            best = (loss, weights)
-    if best is None:
-        raise ValueError("no dissimilarity to weigh")
-    return best[1], best[0]
+        scored.append((fusion_scores(fuse(dissimilarities, rule, weights), labels).loss, weights))
+    loss, weights = min(scored, key=lambda item: item[0])  # the first of equal losses
+    return weights, loss
 
 
 def tune_fusion(
