@@ -104,3 +104,33 @@ def test_the_cli_client_loads_nothing_of_the_server():
     loaded = modules_loaded_by("import app.client")
     assert {m.split(".")[0] for m in loaded} & {"fastapi", "sqlalchemy", "faiss", "huey"} == set()
     assert {m for m in loaded if m.startswith(("app.", "worker."))} == {"app.client"}
+
+
+#: Packages of the repository that are not installed: the scripts' and the tests'.
+SCRIPT_PACKAGES = {"benchmarks", "experiments", "tests"}
+
+
+def _top_level_imports(path: Path) -> set[str]:
+    """Every absolute module name ``path`` imports."""
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names.add(node.module)
+    return names
+
+
+def test_benchmarks_and_experiments_share_only_benchmarks_common_and_no_tests():
+    """No script imports another (what two share is in benchmarks.common or the
+    library), nor the tests, nor edits sys.path: all run as modules from the root."""
+    repo = Path(worker.__file__).parents[1]
+    scripts = sorted([*repo.glob("benchmarks/*.py"), *repo.glob("experiments/*.py")])
+    assert scripts
+    reaching = {}
+    for path in scripts:
+        names = {n for n in _top_level_imports(path) if n.split(".")[0] in SCRIPT_PACKAGES}
+        if names - {"benchmarks.common"}:
+            reaching[path.name] = sorted(names - {"benchmarks.common"})
+    assert reaching == {}
+    assert [path.name for path in scripts if "sys.path" in path.read_text()] == []

@@ -1,5 +1,5 @@
-"""The ``shapes`` command: ``describe``, ``evaluate`` and ``robustness`` (the engine and
-its evaluation harness), ``import`` and ``query`` (the service's HTTP client,
+"""The ``shapes`` command: ``describe``, ``evaluate``, ``robustness`` and ``tune`` (the
+engine and its evaluation harness), ``import`` and ``query`` (the service's HTTP client,
 :mod:`app.client`)."""
 
 from __future__ import annotations
@@ -11,11 +11,13 @@ import shlex
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 from .engine.errors import MeshError
 from .engine.pipeline import describe_file
-from .engine.presets import DEFAULT_PRESET, PRESETS, get_preset
+from .engine.presets import DEFAULT_PRESET, PRESETS, Preset, get_preset
 from .evaluation.datasets import DEFAULT_CACHE
+from .recognition.fusion import FOLDS
 
 
 def _describe(args: argparse.Namespace) -> int:
@@ -63,7 +65,7 @@ def _git_revision() -> str:
 def _evaluate(args: argparse.Namespace) -> int:
     # The harness (lapy, matplotlib, tqdm) is loaded only by the command that needs it.
     from .evaluation.datasets import EvaluationError
-    from .evaluation.run import run_evaluation
+    from .evaluation.run import run_evaluation, weighted_preset
     from .evaluation.scoring import COLUMNS
 
     preset = get_preset(args.preset)
@@ -71,6 +73,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     labels = Path(args.labels) if args.labels else dataset / "labels.csv"
     out = Path(args.out) if args.out else Path("evaluation-out") / preset.name
     try:
+        if args.weights:
+            preset = weighted_preset(preset, args.weights)
         report = run_evaluation(
             dataset,
             labels,
@@ -147,8 +151,70 @@ def _robustness(args: argparse.Namespace) -> int:
     return 1 if report["failures"] else 0
 
 
+def _tune(args: argparse.Namespace) -> int:
+    from .evaluation.datasets import EvaluationError
+    from .evaluation.run import run_tuning
+
+    preset = get_preset(args.preset)
+    dataset = Path(args.dataset_dir)
+    labels = Path(args.labels) if args.labels else dataset / "labels.csv"
+    out = Path(args.out) if args.out else Path("evaluation-out") / preset.name / "weights.json"
+    try:
+        tuned = run_tuning(
+            dataset,
+            labels,
+            preset,
+            out_path=out,
+            cache_root=Path(args.cache),
+            folds=args.folds,
+            jobs=args.jobs,
+            per_class_limit=args.limit,
+        )
+    except (EvaluationError, OSError) as exc:
+        print(f"shapes tune: {exc}", file=sys.stderr)
+        return 2
+    _print_tuning(tuned, preset, args.folds)
+    for name, why in tuned["failures"].items():
+        print(f"left out {name}: {why}", file=sys.stderr)
+    print(f"weights written to {out}", file=sys.stderr)
+    return 1 if tuned["failures"] else 0
+
+
+def _print_tuning(tuned: dict[str, Any], preset: Preset, folds: int) -> None:
+    """The folds of ``shapes tune`` as a table, the weights chosen on all meshes, and
+    the loss with each weight moved over the grid (how sharply the collection decides)."""
+    names = list(tuned["weights"])
+    grid = tuned["grid"]
+
+    def figures(scores: dict[str, float]) -> str:
+        return f"{scores['eer']:.2%} | {scores['nn']:.1%} | {scores['map']:.1%}"
+
+    print(
+        f"preset {preset.name} v{preset.version}, {preset.fusion} rule, {tuned['meshes']} "
+        f"meshes, {folds} class-stratified folds; weights of {', '.join(names[:-1])} from "
+        f"({', '.join(f'{w:g}' for w in grid)}), {names[-1]} 1\n"
+    )
+    print(f"| fold | held-out meshes | weights ({', '.join(names)}) | EER | NN | mAP |")
+    print("|---|---:|---|---:|---:|---:|")
+    for f, fold in enumerate(tuned["folds"]):
+        shown = ", ".join(f"{fold['weights'][m]:g}" for m in names)
+        scores = figures(fold["held_out"]["tuned"])
+        print(f"| {f} | {fold['held_out_objects']} | {shown} | {scores} |")
+    held_out = tuned["held_out"]
+    own = ", ".join(f"{held_out['preset']['weights'][m]:g}" for m in names)
+    print(f"| mean over the folds | | each fold's | {figures(held_out['tuned'])} |")
+    print(f"| mean over the folds, the preset's | | {own} | {figures(held_out['preset'])} |")
+    chosen = ", ".join(f"{m} {w:g}" for m, w in tuned["weights"].items())
+    print(f"\nchosen on all meshes: {chosen} (loss {tuned['loss']:.5f})\n")
+    points = " | ".join(f"{w:g}" for w in grid)
+    print(f"| loss on all meshes, the others as chosen | {points} |")
+    print("|---|" + "---:|" * len(grid))
+    for m, losses in tuned["sensitivity"].items():
+        print(f"| {m} weight | " + " | ".join(f"{x:.5f}" for x in losses) + " |")
+
+
 def _add_collection_arguments(parser: argparse.ArgumentParser) -> None:
-    """What ``evaluate`` and ``robustness`` both take: a labelled collection, the preset,
+    """What ``evaluate``, ``robustness`` and ``tune`` take: a labelled collection, the preset,
     the worker processes, the descriptor cache and a per-class limit."""
     parser.add_argument("dataset_dir", help="directory holding the mesh files")
     parser.add_argument(
@@ -193,6 +259,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_collection_arguments(evaluate)
     evaluate.add_argument("--out", help="report directory (default: evaluation-out/PRESET)")
+    evaluate.add_argument(
+        "--weights", help="fuse with the weights of this file of shapes tune (for the same preset)"
+    )
     evaluate.set_defaults(run=_evaluate)
 
     robustness = sub.add_parser(
@@ -216,6 +285,26 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", help="report directory (default: evaluation-out/robustness/PRESET)"
     )
     robustness.set_defaults(run=_robustness)
+
+    tune = sub.add_parser(
+        "tune",
+        help="choose the preset's fusion weights on a labelled collection",
+        description="Describe every mesh of labels.csv and choose one fusion weight per "
+        "fused modality under the preset's rule (the last keeps 1) by class-stratified "
+        "cross-validation: on the meshes of the other folds, the weights of a grid with "
+        "the lowest mean of EER and 1 - mAP; measured on the held-out fold's pairs (EER) "
+        "and with its meshes as queries (NN, mAP), beside the preset's own weights. Prints "
+        "the folds and the weights chosen on all meshes, and writes them as JSON that "
+        "shapes evaluate --weights takes.",
+    )
+    _add_collection_arguments(tune)
+    tune.add_argument(
+        "--folds", type=int, default=FOLDS, help=f"cross-validation folds (default: {FOLDS})"
+    )
+    tune.add_argument(
+        "--out", help="weights file to write (default: evaluation-out/PRESET/weights.json)"
+    )
+    tune.set_defaults(run=_tune)
 
     # The service's HTTP client (httpx only): shapes import, shapes query.
     from app.client import add_subcommands

@@ -8,7 +8,7 @@ faiss index: an exact scan (``IndexFlatL2``) below ``IVF_MIN_SHAPES``; above, an
 inverted file (``IndexIVFFlat``: k-means cells, the query's ``IVF_PROBES`` nearest
 cells scanned), trained on the transformed gallery at every refit. IVF rather than
 HNSW: it supports deletion (a gallery shrinks) and builds in seconds, not minutes,
-at a million shapes (``bench/index_bench.py``, ``docs/benchmarks.md``). Its
+at a million shapes (``benchmarks/index.py``, ``docs/benchmarks.md``). Its
 candidate distances are exact L2 of the transformed vectors, but a shape in an
 unprobed cell is missed, so certificates (:mod:`.index`) hold only for what was
 scanned; recall@10 at a million shapes is measured instead.

@@ -27,7 +27,7 @@ rule (``worker.engine.compare``).
   Otherwise the answer is best effort: on descriptors shaped like TOSCA's the
   whitened DDT has too much independent per-element variation for the 64-D
   bound to be tight, so certification is rare there, and recall@10 is
-  *measured* instead (``bench/index_bench.py``, ``docs/benchmarks.md``).
+  *measured* instead (``benchmarks/index.py``, ``docs/benchmarks.md``).
 * D1 has no cheap bound. Its candidates come from the L2 distance of
   log-descriptors (eq. 8's terms are ``2 tanh(|log a - log b| / 2)``, close
   to ``|log a - log b|`` for similar shapes) projected the same way, with
@@ -408,5 +408,5 @@ class GalleryIndex:
                 stats.certified = True
                 return out
             if not exact_in_union or count >= self.max_candidates or count >= n:
-                return out  # best effort: recall measured in bench/index_bench.py
+                return out  # best effort: recall measured in benchmarks/index.py
             count *= 4

@@ -14,7 +14,6 @@ from worker.evaluation.scoring import (
     dissimilarity_matrices,
     modality_dissimilarity,
     score_dissimilarity,
-    stratified_folds,
 )
 
 PRESET = Preset(name="test-scoring", version=0, n_vertices=500, n_eigenpairs=100)
@@ -86,12 +85,3 @@ def test_score_dissimilarity_names_the_confusions():
     assert scores["cmc"] == [0.5, 1.0]
     # genuine 0.5, 0.1; impostors 0.9, 0.2, 0.9, 0.9: FRR = FAR = 1/4 between 0.2 and 0.5
     assert scores["eer"] == pytest.approx(0.25)
-
-
-def test_stratified_folds_spread_every_class_evenly():
-    labels = np.repeat(np.arange(4), [13, 7, 5, 3])
-    fold = stratified_folds(labels, 5)
-    for c in range(4):
-        counts = np.bincount(fold[labels == c], minlength=5)
-        assert counts.max() - counts.min() <= 1
-    np.testing.assert_array_equal(fold, stratified_folds(labels, 5))  # seeded

@@ -13,7 +13,8 @@ from collections.abc import Iterator
 
 import pytest
 
-from tests.service.conftest import Service, migrated_service, running
+from benchmarks.common import Service
+from tests.service.conftest import migrated_service, running
 
 MAX_FACES = 10_000  # over wolf0's 8,684 faces
 ENROLLED = {"wolf0": "wolf", "wolf1": "wolf"}
@@ -51,10 +52,6 @@ def db_rows(service: Service, mesh_ids) -> dict[str, list[tuple]]:
             ).fetchall()
             for table, key in (("meshes", "id"), ("descriptors", "mesh_id"), ("jobs", "mesh_id"))
         }
-
-
-def index_size(service: Service) -> str:
-    return service.client.get("/ready").json()["checks"]["index"]
 
 
 def integrity_check(service: Service) -> str:

@@ -6,7 +6,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from tests.service.conftest import TOSCA, Service
+from benchmarks.common import TOSCA, Service
 
 from .conftest import make_service
 

@@ -16,7 +16,7 @@ from collections.abc import Iterator
 import httpx
 import pytest
 
-from tests.service.conftest import Service
+from benchmarks.common import Service
 
 from .conftest import integrity_check, make_service
 

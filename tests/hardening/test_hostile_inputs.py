@@ -16,9 +16,9 @@ import time
 import httpx
 import pytest
 
-from tests.service.conftest import Service
+from benchmarks.common import Service
 
-from .conftest import MAX_FACES, db_rows, index_size, integrity_check
+from .conftest import MAX_FACES, db_rows, integrity_check
 from .make_corpus import build_corpus
 
 CASES = build_corpus(MAX_FACES)
@@ -51,7 +51,7 @@ def test_every_hostile_file_is_refused_with_its_code_and_nothing_else_changes(
     hardened: Service, enrolled: dict[str, int]
 ):
     rows_before = db_rows(hardened, enrolled.values())
-    size_before = index_size(hardened)
+    size_before = hardened.index_size()
     total_before = hardened.client.get("/meshes").json()["total"]
     accepted: dict[str, tuple[int, dict]] = {}
     for case in CASES:
@@ -76,7 +76,7 @@ def test_every_hostile_file_is_refused_with_its_code_and_nothing_else_changes(
     # Exactly the accepted uploads became (failed) rows; the enrolled meshes did not move.
     assert hardened.client.get("/meshes").json()["total"] == total_before + len(accepted)
     assert db_rows(hardened, enrolled.values()) == rows_before
-    assert index_size(hardened) == size_before
+    assert hardened.index_size() == size_before
     assert not list((hardened.data_dir / "tmp").glob("upload-*"))  # no leftovers
     assert integrity_check(hardened) == "ok"
 

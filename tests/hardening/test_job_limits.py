@@ -7,7 +7,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from tests.service.conftest import Service
+from benchmarks.common import Service
 
 from .conftest import make_service
 

@@ -23,7 +23,7 @@ from schemathesis import Case, Response
 from schemathesis.checks import positive_data_acceptance
 from schemathesis.specs.openapi.checks import ensure_resource_availability
 
-from tests.service.conftest import Service
+from benchmarks.common import Service
 
 from .conftest import make_service
 

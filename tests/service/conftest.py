@@ -3,151 +3,18 @@
 The database is created by ``alembic upgrade head`` (so the migrations are
 tested), the API runs in its own process on a free loopback port, and the
 descriptor jobs run in real ``python -m worker`` processes that tests may
-kill and restart.
+kill and restart (:class:`benchmarks.common.Service`, which the benchmarks run too).
 """
 
 from __future__ import annotations
 
-import os
-import signal
-import socket
-import subprocess
-import sys
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from pathlib import Path
 
-import httpx
 import pytest
 
 from app.migrations import upgrade_head
-from worker.evaluation.datasets import shared_dataset
-
-REPO = Path(__file__).resolve().parents[2]
-TOSCA = shared_dataset("tosca")
-TIMEOUT = 120.0
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class Service:
-    """The API process, its worker processes and an HTTP client."""
-
-    def __init__(self, data_dir: Path) -> None:
-        self.data_dir = data_dir
-        self.port = _free_port()
-        self.url = f"http://127.0.0.1:{self.port}"
-        self.env = dict(
-            os.environ,
-            SHAPES_DATA_DIR=str(data_dir),
-            SHAPES_HEARTBEAT_SECONDS="1",
-            # Long enough that a slow job on a loaded CI machine never looks dead.
-            SHAPES_STALLED_AFTER_SECONDS="15",
-            SHAPES_COLLECTOR_INTERVAL_SECONDS="0.2",
-            SHAPES_MAX_UPLOAD_BYTES=str(1_000_000),
-            SHAPES_QUERY_TIMEOUT_SECONDS="90",
-            OMP_NUM_THREADS="1",
-            OPENBLAS_NUM_THREADS="1",
-        )
-        self.api: subprocess.Popen | None = None
-        self.workers: dict[str, list[subprocess.Popen]] = {"enroll": [], "query": []}
-        self.client = httpx.Client(base_url=self.url, timeout=TIMEOUT)
-        self._logs = data_dir / "logs"
-        self._logs.mkdir(parents=True, exist_ok=True)
-
-    def _spawn(self, args: list[str], name: str) -> subprocess.Popen:
-        log = open(self._logs / f"{name}-{time.monotonic_ns()}.log", "wb")  # noqa: SIM115
-        return subprocess.Popen(
-            [sys.executable, *args], cwd=REPO, env=self.env, stdout=log, stderr=subprocess.STDOUT
-        )
-
-    def start_api(self) -> None:
-        self.api = self._spawn(
-            ["-m", "uvicorn", "app.main:app", "--host", "127.0.0.1", "--port", str(self.port)],
-            "api",
-        )
-        self.wait_ready()
-
-    def wait_ready(self) -> None:
-        deadline = time.monotonic() + TIMEOUT
-        while time.monotonic() < deadline:
-            assert self.api is not None and self.api.poll() is None, self.logs()
-            try:
-                if self.client.get("/ready").status_code == 200:
-                    return
-            except httpx.TransportError:
-                pass
-            time.sleep(0.2)
-        raise AssertionError("the API did not become ready\n" + self.logs())
-
-    def stop_api(self) -> None:
-        if self.api is not None and self.api.poll() is None:
-            self.api.send_signal(signal.SIGTERM)
-            self.api.wait(60)
-        self.api = None
-
-    def start_worker(self, queue: str = "enroll") -> subprocess.Popen:
-        """A ``python -m worker`` consumer of the enrollment or the query queue."""
-        worker = self._spawn(["-m", "worker", "--queue", queue], f"worker-{queue}")
-        self.workers[queue].append(worker)
-        return worker
-
-    def stop_workers(self, queue: str | None = None) -> None:
-        """Stop the consumers of ``queue`` (default: all), gracefully (SIGINT)."""
-        stopping = [w for q, ws in self.workers.items() if queue in (None, q) for w in ws]
-        for worker in stopping:
-            if worker.poll() is None:
-                worker.send_signal(signal.SIGINT)
-        for worker in stopping:
-            try:
-                worker.wait(60)
-            except subprocess.TimeoutExpired:
-                worker.kill()
-                worker.wait()
-        for q in self.workers:
-            if queue in (None, q):
-                self.workers[q] = []
-
-    def logs(self) -> str:
-        out = []
-        for path in sorted(self._logs.glob("*.log")):
-            out.append(f"--- {path.name}\n{path.read_text(errors='replace')[-3000:]}")
-        return "\n".join(out)
-
-    # -- helpers ----------------------------------------------------------
-    def upload(self, name: str, label: str | None = None, **fields) -> httpx.Response:
-        path = TOSCA / f"{name}.off.gz"
-        data = {k: v for k, v in {"label": label, **fields}.items() if v is not None}
-        with open(path, "rb") as fh:
-            return self.client.post("/meshes", files={"file": (path.name, fh)}, data=data)
-
-    def wait_mesh(self, mesh_id: int, statuses=("ready", "failed")) -> dict:
-        deadline = time.monotonic() + TIMEOUT
-        while time.monotonic() < deadline:
-            body = self.client.get(f"/meshes/{mesh_id}").json()
-            if body["status"] in statuses:
-                return body
-            time.sleep(0.2)
-        raise AssertionError(f"mesh {mesh_id} stuck at {body['status']}\n" + self.logs())
-
-    def query(self, name: str, **fields) -> httpx.Response:
-        path = TOSCA / f"{name}.off.gz"
-        with open(path, "rb") as fh:
-            return self.client.post(
-                "/query",
-                files={"file": (path.name, fh)},
-                data={k: str(v) for k, v in fields.items()},
-            )
-
-    def close(self) -> None:
-        self.stop_api()
-        self.stop_workers()
-        self.client.close()
+from benchmarks.common import Service
 
 
 def migrated_service(tmp_path_factory, name: str, **env: str) -> Service:

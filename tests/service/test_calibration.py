@@ -7,7 +7,9 @@ from itertools import combinations
 
 import pytest
 
-from .conftest import TOSCA, Service, migrated_service, running
+from benchmarks.common import TOSCA, Service
+
+from .conftest import migrated_service, running
 
 #: Four classes, 3-4 poses each: 18 genuine and 48 impostor pairs once all are ready.
 LABELLED = {

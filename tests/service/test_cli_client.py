@@ -12,7 +12,9 @@ from collections.abc import Iterator
 import pytest
 from conftest import with_a_far_half_copy
 
-from .conftest import REPO, TOSCA, Service, migrated_service, running
+from benchmarks.common import REPO, TOSCA, Service
+
+from .conftest import migrated_service, running
 
 
 @pytest.fixture(scope="module")

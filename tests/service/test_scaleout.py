@@ -18,9 +18,7 @@ from sqlalchemy import create_engine, inspect, text
 from app import models  # noqa: F401  (registers the tables on Base.metadata)
 from app.db import Base
 from app.migrations import alembic_config, upgrade_head
-
-from .conftest import TIMEOUT, TOSCA, Service
-from .servers import Postgres, Redis
+from benchmarks.common import TIMEOUT, TOSCA, Postgres, Redis, Service
 
 pytestmark = [pytest.mark.scaleout, pytest.mark.service, pytest.mark.slow]
 
@@ -147,15 +145,10 @@ def test_the_service_on_postgresql_and_redis_survives_kill_9(
         service.close()
 
 
-def _index_size(service: Service) -> int:
-    check = service.client.get("/ready").json()["checks"]["index"]
-    return int(check.removeprefix("ok (").split()[0])
-
-
 def _wait_index_size(service: Service, size: int) -> None:
     deadline = time.monotonic() + TIMEOUT
-    while _index_size(service) != size:
-        assert time.monotonic() < deadline, f"index stuck at {_index_size(service)}, not {size}"
+    while service.index_size() != size:
+        assert time.monotonic() < deadline, f"index stuck at {service.index_size()}, not {size}"
         time.sleep(0.1)
 
 
@@ -195,7 +188,7 @@ def test_two_api_replicas_and_two_workers_share_nothing_but_the_servers(
         assert ids[0] not in [m["mesh_id"] for m in a.query("centaur2", k=5).json()["matches"]]
         assert a.client.get(f"/meshes/{ids[0]}/file").status_code == 404
         rows = _descriptor_rows(postgres.url)
-        assert _index_size(a) == _index_size(b) == rows == start + 2
+        assert a.index_size() == b.index_size() == rows == start + 2
         assert not list((tmp_path / "api-a").glob("uploads/*/*"))  # nothing on a disk
     finally:
         for process in (b, a, enroller, searcher):

@@ -9,9 +9,10 @@ import pytest
 from conftest import with_a_far_half_copy
 
 from app.client import format_matches
+from benchmarks.common import TOSCA, Service
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 
-from .conftest import GALLERY, TOSCA, Service
+from .conftest import GALLERY
 
 DEFAULT = get_preset(DEFAULT_PRESET)
 

@@ -8,9 +8,10 @@ import signal
 import sqlite3
 import time
 
+from benchmarks.common import TIMEOUT, Service
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 
-from .conftest import TIMEOUT, Service, migrated_service, running
+from .conftest import migrated_service, running
 
 
 def _wait_processing(service: Service, job_id: int) -> dict:

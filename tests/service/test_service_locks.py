@@ -6,10 +6,9 @@ from __future__ import annotations
 import time
 from concurrent.futures import ThreadPoolExecutor
 
+from benchmarks.common import TIMEOUT, Service
 from worker.jobs.queue import make_huey
 from worker.jobs.settings import QueueSettings
-
-from .conftest import TIMEOUT, Service
 
 
 def _wait_queued_query(service: Service) -> None:

@@ -10,13 +10,13 @@ import time
 import httpx
 import pytest
 
-from .conftest import REPO, _free_port
+from benchmarks.common import REPO, free_port
 
 pytestmark = [pytest.mark.service, pytest.mark.slow]  # runs python -m app itself
 
 
 def test_serve_starts_api_and_worker_and_stops_cleanly(tmp_path):
-    port = _free_port()
+    port = free_port()
     log = open(tmp_path / "serve.log", "wb")  # noqa: SIM115
     serve = subprocess.Popen(
         [

@@ -16,7 +16,8 @@ from pathlib import Path
 import pytest
 from conftest import with_a_far_half_copy
 
-from tests.service.conftest import TOSCA, Service, migrated_service, running
+from benchmarks.common import TOSCA, Service
+from tests.service.conftest import migrated_service, running
 
 pytestmark = [pytest.mark.slow, pytest.mark.service]
 

@@ -215,7 +215,7 @@ PRESETS: dict[str, Preset] = {
             dissimilarity="D1",
             fusion="product",
             fused_modalities=("gdm", "ddt", "spectrum"),
-            # bench/fusion_weights.py (v9): the GDM gets 0 in every fold, the DDT 0.5, 0.25,
+            # shapes tune on TOSCA (v9): the GDM gets 0 in every fold, the DDT 0.5, 0.25,
             # 0.125, 0.25, 0.5 in the five folds and 0.5 on all meshes (loss 0.04036; 0.04107
             # at 1, 0.04201 at 0); v7 and v8 kept 1 where the folds chose 1 twice and all
             # meshes' losses differed by 0.2%. On the robustness protocol 0.5 moves the

@@ -1,17 +1,21 @@
-"""``shapes evaluate`` and ``shapes robustness``: describe, compare and score a labelled
-collection (and variants of its meshes), write the reports."""
+"""``shapes evaluate``, ``shapes robustness`` and ``shapes tune``: describe, compare and
+score a labelled collection (and variants of its meshes), write the reports, choose the
+fusion weights."""
 
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from worker.engine.presets import Preset
+from worker.engine.presets import MODALITIES, Preset
+from worker.recognition.fusion import FOLDS, tune_fusion
 
 from .compute import compute_descriptors, descriptor_vectors
 from .datasets import EvaluationError, LabeledMesh, pose_set, read_labels
@@ -29,6 +33,7 @@ from .robustness import (
     row_titles,
     tessellation_scores,
 )
+from .scoring import modality_dissimilarity
 from .variants import VARIANTS
 
 
@@ -76,6 +81,133 @@ def run_evaluation(
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
     (out / "report.md").write_text(render_markdown(report))
     return report
+
+
+def run_tuning(
+    dataset_dir: str | Path,
+    labels_csv: str | Path,
+    preset: Preset,
+    *,
+    out_path: str | Path,
+    cache_root: str | Path,
+    folds: int = FOLDS,
+    jobs: int = 1,
+    per_class_limit: int | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """Choose the preset's fusion weights on a labelled collection; write them as JSON.
+
+    The collection is described through the cache, each fused modality compared all to
+    all with the preset's dissimilarity, and the weights chosen by class-stratified
+    cross-validation under the preset's rule (:func:`worker.recognition.fusion.tune_fusion`;
+    the preset's own weights are scored on the same folds).
+
+    Returns
+    -------
+    The document written to ``out_path``, which ``shapes evaluate --weights`` takes
+    (:func:`weighted_preset`): ``preset``, ``preset_version``, ``fusion`` (the rule),
+    ``weights`` (modality -> weight, chosen on every mesh), ``grid``, ``loss`` (of the
+    weights on every mesh), ``sensitivity`` (modality -> the loss on every mesh at each
+    grid point), ``folds`` (each fold's held-out meshes, choice and held-out scores),
+    ``held_out`` (the mean over the folds: ``tuned`` and ``preset``, each ``eer``,
+    ``nn``, ``map``), ``dataset``, ``meshes`` and ``failures`` (meshes left out, and
+    why).
+
+    Raises
+    ------
+    EvaluationError
+        When the preset fuses a single modality, or the collection cannot fill the
+        folds (:func:`~worker.recognition.fusion.tune_fusion`'s conditions).
+    """
+    if len(preset.fused_modalities) < 2:
+        raise EvaluationError(
+            f"{preset.name} fuses {list(preset.fused_modalities)} only: no weights to choose"
+        )
+    meshes = read_labels(labels_csv, dataset_dir, per_class_limit)
+    computed = compute_descriptors(meshes, preset, cache_root, jobs=jobs, progress=progress)
+    vectors = descriptor_vectors(computed)
+    dissimilarities = {
+        m: modality_dissimilarity(vectors[m], preset.dissimilarity)[0]
+        for m in preset.fused_modalities
+    }
+    labels = np.array([m.label for m in computed.meshes])
+    own = {m: preset.weight(m) for m in preset.fused_modalities}
+    try:
+        tuning = tune_fusion(dissimilarities, labels, preset.fusion, own, folds=folds)
+    except ValueError as exc:
+        raise EvaluationError(str(exc)) from exc
+    document = {
+        "preset": preset.name,
+        "preset_version": preset.version,
+        "fusion": preset.fusion,
+        "weights": tuning.weights,
+        "grid": list(tuning.grid),
+        "loss": tuning.loss,
+        "sensitivity": {m: list(losses) for m, losses in tuning.sensitivity.items()},
+        "folds": [
+            {
+                "held_out_objects": fold.held_out_objects,
+                "weights": fold.weights,
+                "held_out": {"tuned": asdict(fold.held_out), "preset": asdict(fold.preset)},
+            }
+            for fold in tuning.folds
+        ],
+        "held_out": {
+            "tuned": asdict(tuning.held_out),
+            "preset": {"weights": own, **asdict(tuning.preset_held_out)},
+        },
+        "dataset": str(dataset_dir),
+        "meshes": len(computed.meshes),
+        "failures": computed.failures,
+    }
+    out = Path(out_path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(document, indent=1) + "\n")
+    return document
+
+
+def weighted_preset(preset: Preset, weights_json: str | Path) -> Preset:
+    """``preset`` fusing with the weights of a ``shapes tune`` file (:func:`run_tuning`).
+
+    Raises
+    ------
+    EvaluationError
+        When the file cannot be read or holds no weights, was tuned for another preset,
+        preset version or fusion rule, or weighs other modalities than the preset fuses,
+        or a weight is not a finite number >= 0.
+    """
+    path = Path(weights_json)
+    try:
+        document = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise EvaluationError(f"cannot read fusion weights from {path}: {exc}") from exc
+    if not isinstance(document, dict) or not isinstance(document.get("weights"), dict):
+        raise EvaluationError(f"{path} holds no 'weights' object (as shapes tune writes)")
+    tuned_for = (document.get("preset"), document.get("preset_version"), document.get("fusion"))
+    if tuned_for != (preset.name, preset.version, preset.fusion):
+        raise EvaluationError(
+            f"{path} holds weights for {tuned_for[0]} v{tuned_for[1]} ({tuned_for[2]} rule), "
+            f"not for {preset.name} v{preset.version} ({preset.fusion} rule)"
+        )
+    weights: dict[str, Any] = document["weights"]
+    unknown = sorted(set(weights) - set(MODALITIES))
+    if unknown:
+        raise EvaluationError(
+            f"{path} weighs unknown modalities {unknown}; known: {', '.join(MODALITIES)}"
+        )
+    if set(weights) != set(preset.fused_modalities):
+        raise EvaluationError(
+            f"{path} weighs {sorted(weights)}; {preset.name} fuses "
+            f"{sorted(preset.fused_modalities)}"
+        )
+    bad = {
+        m: w
+        for m, w in weights.items()
+        if isinstance(w, bool) or not isinstance(w, int | float) or not math.isfinite(w) or w < 0
+    }
+    if bad:
+        raise EvaluationError(f"{path} has weights that are not numbers >= 0: {bad}")
+    return replace(preset, fusion_weights={m: float(w) for m, w in weights.items()})
 
 
 def run_robustness(

@@ -57,18 +57,6 @@ FAR_OPERATING_POINTS = (0.001, 0.01, 0.05, 0.1)
 ROC_POINTS_STORED = 400
 
 
-def stratified_folds(labels: np.ndarray, k: int, seed: int = 0) -> np.ndarray:
-    """Fold of each object for class-stratified cross-validation: every class spread
-    evenly over the ``k`` folds, from a random fold onwards (``bench/fusion_weights.py``,
-    ``bench/calibration_bench.py``)."""
-    rng = np.random.default_rng(seed)
-    fold = np.empty(len(labels), dtype=int)
-    for c in np.unique(labels):
-        idx = rng.permutation(np.flatnonzero(labels == c))
-        fold[idx] = (np.arange(len(idx)) + rng.integers(k)) % k
-    return fold
-
-
 def modality_dissimilarity(vectors: np.ndarray, kind: str) -> tuple[np.ndarray, dict[str, Any]]:
     """All-to-all dissimilarity of one modality with D1 (eq. 8) or D2 (eq. 9).
 

@@ -8,5 +8,7 @@ pairs:
 * :mod:`.metrics`: verification (ROC, EER), identification (CMC, R1RR) and retrieval
   (NN, tiers, E-measure, DCG, mAP) of a dissimilarity matrix (sec. 4);
 * :mod:`.calibration`: from genuine and impostor scores to thresholds at a false
-  acceptance rate and a calibrated confidence.
+  acceptance rate and a calibrated confidence;
+* :mod:`.fusion`: one fusion weight per modality, chosen on labelled objects by
+  class-stratified cross-validation (``shapes tune``).
 """

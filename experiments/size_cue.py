@@ -1,6 +1,6 @@
 """How much of the default's remaining TOSCA error is the size it throws away.
 
-    python bench/size_cue.py [--preset smeets2010-surface] [--cache DIR] [--jobs 2]
+    python -m experiments.size_cue [--preset smeets2010-surface] [--cache DIR] [--jobs 2]
 
 Every descriptor of the service is scale-free (a file in millimetres and the same
 file in metres must answer the same; the robustness protocol rescales by up to
@@ -22,22 +22,18 @@ over the threshold at the EER point.
 from __future__ import annotations
 
 import argparse
-import sys
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
 from lapy import TriaMesh
 
+from benchmarks.common import add_evaluation_cache_arguments, evaluated_tosca
 from worker.engine.compare import dissimilarity, fuse
 from worker.engine.mesh_io import load_mesh
 from worker.engine.presets import MODALITIES, get_preset
 from worker.evaluation.compute import descriptor_vectors
 from worker.recognition import metrics
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from bench._tosca import add_evaluation_cache_arguments, evaluated_tosca  # noqa: E402
 
 
 def surface_area(path: Path) -> float:

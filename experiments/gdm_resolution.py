@@ -1,6 +1,6 @@
 """Is the GDM's confusion of TOSCA's human figures the resampling's? Geodesics on finer surfaces.
 
-    python bench/gdm_resolution.py [--jobs 2] [--sizes 2500 5000 10000 0]
+    python -m experiments.gdm_resolution [--jobs 2] [--sizes 2500 5000 10000 0]
 
 For every TOSCA mesh, the default preset's surface (canonical frame, small holes
 closed) is resampled to each size (0: the file's own vertices, up to 52,565) and
@@ -19,12 +19,11 @@ with two jobs, most of it the full-resolution solves.
 from __future__ import annotations
 
 import argparse
-import sys
 from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 
 import numpy as np
 
+from benchmarks.common import TOSCA, tosca_labels
 from worker.engine.compare import dissimilarity
 from worker.engine.geodesic import HeatMethod, farthest_point_samples
 from worker.engine.holes import close_small_holes
@@ -34,10 +33,6 @@ from worker.engine.modal import modal_gdm, voronoi_areas
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.engine.resample import resample_mesh
 from worker.recognition import metrics
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from bench._tosca import TOSCA, tosca_labels  # noqa: E402
 
 PRESET = get_preset(DEFAULT_PRESET)
 HUMANS = ("david", "michael", "victoria")

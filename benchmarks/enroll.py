@@ -1,7 +1,7 @@
 """End-to-end enrollment of all 83 TOSCA meshes through the HTTP API.
 
-    python bench/enroll_tosca.py                      # starts `python -m app` on a fresh data dir
-    python bench/enroll_tosca.py --url http://127.0.0.1:8000   # against a running service
+    python -m benchmarks.enroll                       # starts `python -m app` on a fresh data dir
+    python -m benchmarks.enroll --url http://127.0.0.1:8000    # against a running service
 
 Uploads every mesh (with its class label), polls ``GET /meshes`` until all are
 ready or failed, and prints the total wall time (first upload to last ready),
@@ -15,49 +15,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
 import statistics
-import subprocess
-import sys
-import tempfile
 import time
 from datetime import datetime
-from pathlib import Path
 
 import httpx
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from bench._tosca import TOSCA, tosca_labels  # noqa: E402
-
-REPO = Path(__file__).resolve().parents[1]
-
-
-def start_service(port: int, workers: int | None, data_dir: Path) -> subprocess.Popen:
-    """``python -m app`` on a fresh data dir (``workers`` enrollment consumers, or its
-    default), returned once it answers ``/ready``."""
-    extra = [] if workers is None else ["--workers", str(workers)]
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "app", "--port", str(port), "--data-dir", str(data_dir), *extra],
-        cwd=REPO,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline:
-        try:
-            if httpx.get(f"http://127.0.0.1:{port}/ready", timeout=2).status_code == 200:
-                return proc
-        except httpx.TransportError:
-            pass
-        time.sleep(0.3)
-    proc.terminate()
-    raise SystemExit("the service did not start")
-
-
-def stop_service(proc: subprocess.Popen) -> None:
-    proc.send_signal(signal.SIGTERM)
-    proc.wait(60)
+from benchmarks.common import REPO, TOSCA, serving, tosca_labels
 
 
 def run(url: str) -> None:
@@ -143,14 +107,10 @@ def main() -> None:
     if args.url:
         run(args.url)
         return
-    with tempfile.TemporaryDirectory() as tmp:
-        proc = start_service(args.port, args.workers, Path(tmp) / "data")
-        try:
-            shown = "" if args.workers is None else f" --workers {args.workers}"
-            print(f"service: python -m app{shown} (fresh data dir)")
-            run(f"http://127.0.0.1:{args.port}")
-        finally:
-            stop_service(proc)
+    with serving(args.port, args.workers) as url:
+        shown = "" if args.workers is None else f" --workers {args.workers}"
+        print(f"service: python -m app{shown} (fresh data dir)")
+        run(url)
 
 
 if __name__ == "__main__":

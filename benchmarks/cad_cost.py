@@ -1,6 +1,6 @@
 """What the resample's edge bound costs on CAD-style cylinders, side by side.
 
-    OPENBLAS_NUM_THREADS=1 python bench/cad_cost.py [--preset smeets2010-surface]
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.cad_cost [--preset smeets2010-surface]
 
 Each file (trimesh's cylinders: few long strips, two fans whose centres have one
 neighbour per side) is described once in a fresh process with the preset as it is and
@@ -30,7 +30,7 @@ CYLINDERS = {
 }
 
 
-def _measure(preset_name: str, label: str, bounded: bool) -> dict:
+def _measure(preset_name: str, label: str, bounded: bool) -> dict[str, float]:
     import trimesh
 
     from worker.engine.mesh_io import clean_mesh
@@ -67,7 +67,8 @@ def main() -> None:
     print("|---|---|---:|---:|---:|---:|")
     for label in CYLINDERS:
         for bounded in (False, True):
-            command = [sys.executable, __file__, "--preset", args.preset, "--child", label]
+            command = [sys.executable, "-m", "benchmarks.cad_cost", "--preset", args.preset]
+            command += ["--child", label]
             if not bounded:
                 command.append("--unbounded")
             out = subprocess.run(command, check=True, capture_output=True, text=True)

@@ -1,6 +1,6 @@
 """Do the descriptors see the shape or the triangles of CAD-style files?
 
-    python bench/cad_tessellations.py [--preset smeets2010-surface]
+    python -m experiments.cad_tessellations [--preset smeets2010-surface]
 
 The robustness protocol (``shapes robustness``) re-tessellates TOSCA's organic,
 finely triangulated files. Files exported from CAD tools look different: a cylinder
@@ -105,8 +105,8 @@ def main() -> None:
     ratio, _ = gaps(rows["fused"], solid)
     print("\n| solid | tessellation | input vertices | resampled vertices | fused gap |")
     print("|---|---|---:|---:|---:|")
-    for (s, label, mesh), d, r in zip(meshes, described, ratio, strict=True):
-        print(f"| {s} | {label} | {mesh.n_vertices:,} | {d.vertices:,} | {r:.2f} |")
+    for (s, label, mesh), descriptor, r in zip(meshes, described, ratio, strict=True):
+        print(f"| {s} | {label} | {mesh.n_vertices:,} | {descriptor.vertices:,} | {r:.2f} |")
 
 
 if __name__ == "__main__":

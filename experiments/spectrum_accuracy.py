@@ -1,6 +1,6 @@
 """Spectrum accuracy: the 2,500-vertex resample's eigenvalues against the surface's.
 
-    python bench/spectrum_accuracy.py [--variants decimated-20,remeshed-8k,noisy]
+    python -m experiments.spectrum_accuracy [--variants decimated-20,remeshed-8k,noisy]
 
 For the first mesh of every TOSCA class, the reference is the full-resolution
 file's spectrum (its first 50 non-zero eigenvalues times its area, with the
@@ -15,44 +15,18 @@ Relative errors: median over the 50 eigenvalues, and the 50th's.
 from __future__ import annotations
 
 import argparse
-import csv
 from dataclasses import replace
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as sla
 
-from worker.engine.intrinsic import averaged_mass, surface_operators
+from benchmarks.common import TOSCA, first_of_each_class, full_resolution_spectra
 from worker.engine.mesh_io import Mesh, load_mesh
 from worker.engine.pipeline import describe_mesh
 from worker.engine.presets import get_preset
-from worker.evaluation.datasets import shared_dataset
 from worker.evaluation.variants import make_variant
 
-TOSCA = shared_dataset("tosca")
 PRESET = get_preset("smeets2010-surface")
 SIZE = PRESET.spectrum_size
-
-
-def full_resolution_spectra(
-    mesh: Mesh, names: tuple[str, ...] = ("lumped", "averaged")
-) -> dict[str, np.ndarray]:
-    """The file's own spectrum with each mass named, by shift-invert Lanczos."""
-    intrinsic, ops = surface_operators(mesh.vertices, mesh.faces)
-    area = float(ops.face_areas.sum())
-    masses = {
-        "lumped": lambda: sp.diags(ops.vertex_areas),
-        "averaged": lambda: averaged_mass(intrinsic, ops.face_areas),
-    }
-    start = np.random.default_rng(0).standard_normal(intrinsic.n_vertices)
-    shift = -1e-3 * 4 * np.pi / area  # below the spectrum, as in LaplaceBeltrami.shift
-    spectra = {}
-    for name in names:
-        mass = masses[name]()
-        stiffness = ops.stiffness.tocsc()
-        values = sla.eigsh(stiffness, k=SIZE + 1, M=mass.tocsc(), sigma=shift, v0=start)[0]
-        spectra[name] = np.sort(values)[1:] * area
-    return spectra
 
 
 def resampled_spectra(mesh: Mesh) -> dict[str, np.ndarray]:
@@ -73,16 +47,12 @@ def main() -> None:
     parser.add_argument("--variants", default="decimated-20,remeshed-8k,noisy")
     args = parser.parse_args()
     variants = [None, *args.variants.split(",")]
-    with open(TOSCA / "labels.csv") as f:
-        firsts = {}
-        for row in csv.DictReader(f):
-            firsts.setdefault(row["class"], row["file"])
     print("| mesh (vertices) | input | lumped: median | 50th | averaged: median | 50th |")
     print("|---|---|---:|---:|---:|---:|")
     summary: dict[str, list[float]] = {"lumped": [], "averaged": []}
-    for name in firsts.values():
+    for name in first_of_each_class():
         mesh = load_mesh(TOSCA / name)
-        reference = full_resolution_spectra(mesh)
+        reference = full_resolution_spectra(mesh, SIZE)
         own = errors(reference["lumped"], reference["averaged"])
         label = f"{name.split('.')[0]} ({mesh.n_vertices:,})"
         print(f"| {label} | full resolution, lumped | {own[0]:.2%} | {own[1]:.2%} | | |")

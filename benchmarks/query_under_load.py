@@ -1,6 +1,6 @@
 """Query latency on an idle service and during a bulk enrollment, side by side.
 
-    python bench/query_under_load.py [--gallery 20] [--bulk 332] [--clients 4] [--queries 12]
+    python -m benchmarks.query_under_load [--gallery 20] [--bulk 332] [--clients 4] [--queries 12]
 
 Starts ``python -m app`` (its default consumers: two enrollment workers and two
 query workers) on a fresh data directory, enrolls a small TOSCA gallery and waits
@@ -31,19 +31,13 @@ import concurrent.futures
 import itertools
 import statistics
 import struct
-import sys
-import tempfile
 import threading
 import time
-from pathlib import Path
 from typing import NamedTuple
 
 import httpx
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from bench._tosca import TOSCA, tosca_labels  # noqa: E402
-from bench.enroll_tosca import start_service, stop_service  # noqa: E402
+from benchmarks.common import TOSCA, serving, tosca_labels
 
 _variant = itertools.count(1)
 GZIP_MAGIC = b"\x1f\x8b"
@@ -103,9 +97,8 @@ def main() -> None:
     names = sorted(labels)
     gallery = names[:: len(names) // args.gallery][: args.gallery]
     probes = [n for n in names if n not in gallery]
-    with tempfile.TemporaryDirectory(prefix="shapes-bench-") as tmp:
-        service = start_service(args.port, None, Path(tmp) / "data")
-        url = f"http://127.0.0.1:{args.port}"
+    stop = threading.Event()
+    with serving(args.port) as url:
         try:
             client = httpx.Client(base_url=url, timeout=300)
             ids = [
@@ -134,8 +127,6 @@ def main() -> None:
 
             idle_concurrent = concurrent_clients()
 
-            stop = threading.Event()
-
             def enroll_bulk() -> None:
                 with httpx.Client(base_url=url, timeout=300) as bulk:
                     for i in range(args.bulk):
@@ -161,7 +152,6 @@ def main() -> None:
             processing = client.get("/meshes", params={"status": "processing"}).json()["total"]
         finally:
             stop.set()
-            stop_service(service)
 
     base = statistics.median(t.total for t in idle)
     print(

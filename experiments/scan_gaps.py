@@ -1,6 +1,6 @@
 """Scan gaps: how far small holes in a surface move each modality of the default.
 
-    python bench/scan_gaps.py [--holes 3:0.002,10:0.001]
+    python -m experiments.scan_gaps [--holes 3:0.002,10:0.001]
 
 Real scans have gaps where the scanner did not see the surface. The robustness
 protocol (``shapes robustness``) changes only the triangles; this measures the
@@ -15,7 +15,7 @@ the protocol's scale, :func:`worker.evaluation.robustness.protocol_distance`) is
 divided by the median distance from a TOSCA mesh to the nearest mesh of another
 class, read from the preset's robustness report, as the protocol's *gap* is (bar
 there: below 0.1). As a reference for the spectrum, the same ratio for the
-full-resolution files' own spectra (averaged mass, ``bench/spectrum_accuracy.py``),
+full-resolution files' own spectra (averaged mass, as ``experiments.spectrum_accuracy``),
 once as the descriptor scales them (by each file's area) and once both scaled by
 the intact file's area: the part of the movement that is the area the holes took.
 """
@@ -23,35 +23,22 @@ the intact file's area: the part of the movement that is the area the holes took
 from __future__ import annotations
 
 import argparse
-import csv
 import json
-import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
+from benchmarks.common import REPO, TOSCA, first_of_each_class, full_resolution_spectra
 from worker.engine.compare import dissimilarity
 from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas, load_mesh
 from worker.engine.pipeline import describe_mesh
 from worker.engine.presets import MODALITIES, get_preset
-from worker.evaluation.datasets import shared_dataset
 from worker.evaluation.robustness import protocol_distance
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from bench.spectrum_accuracy import full_resolution_spectra  # noqa: E402
-
-TOSCA = shared_dataset("tosca")
 PRESET = get_preset("smeets2010-surface")
 LEFT_OPEN = replace(PRESET, max_hole_perimeter=None)
-REPORT = (
-    Path(__file__).resolve().parents[1]
-    / "docs/evaluation/robustness"
-    / PRESET.name
-    / "robustness.json"
-)
+REPORT = REPO / "docs/evaluation/robustness" / PRESET.name / "robustness.json"
 
 
 def punch_holes(mesh: Mesh, count: int, fraction: float, seed: int = 0) -> Mesh:
@@ -89,10 +76,6 @@ def main() -> None:
     tessellation = json.loads(REPORT.read_text())["tessellation"]
     rows = (*MODALITIES, "preset")
     nearest = {row: tessellation[row]["nearest_other_class_median"] for row in rows}
-    with open(TOSCA / "labels.csv") as f:
-        firsts: dict[str, str] = {}
-        for line in csv.DictReader(f):
-            firsts.setdefault(line["class"], line["file"])
 
     print(
         "| mesh | holes | area removed | GDM | DDT | Spectrum | fused (the preset's score) "
@@ -102,10 +85,10 @@ def main() -> None:
     closing = {"open": LEFT_OPEN, "closed": PRESET}
     gaps: dict[str, dict[str, list[float]]] = {row: {way: [] for way in closing} for row in rows}
     full_gaps: dict[str, list[float]] = {"full": [], "full_area": []}
-    for name in firsts.values():
+    for name in first_of_each_class():
         mesh = load_mesh(TOSCA / name)
         intact = {way: describe_mesh(mesh, preset) for way, preset in closing.items()}
-        reference = full_resolution_spectra(mesh, ("averaged",))["averaged"]
+        reference = full_resolution_spectra(mesh, PRESET.spectrum_size, ("averaged",))["averaged"]
         intact_area = face_areas(mesh.vertices, mesh.faces).sum()
         for count, fraction in settings:
             holed = punch_holes(mesh, count, fraction)
@@ -115,7 +98,7 @@ def main() -> None:
                 for way in closing:
                     gaps[row][way].append(gap(described[way], intact[way], row) / nearest[row])
                 cells.append(f"{gaps[row]['open'][-1]:.3f} / {gaps[row]['closed'][-1]:.3f}")
-            full = full_resolution_spectra(holed, ("averaged",))["averaged"]
+            full = full_resolution_spectra(holed, PRESET.spectrum_size, ("averaged",))["averaged"]
             kept = face_areas(holed.vertices, holed.faces).sum() / intact_area
             full_gaps["full"].append(d1(full, reference) / nearest["spectrum"])
             full_gaps["full_area"].append(d1(full / kept, reference) / nearest["spectrum"])

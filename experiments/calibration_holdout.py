@@ -1,6 +1,7 @@
 """Does the calibration hold on pairs it was not fitted on? TOSCA, the service's code.
 
-    python bench/calibration_bench.py [--preset smeets2010-surface] [--cache DIR] [--far 0.01]
+    python -m experiments.calibration_holdout [--preset smeets2010-surface] [--cache DIR]
+        [--far 0.01]
 
 With the calibration the service uses (``worker.recognition.calibration``, on the
 preset's fused score), on the TOSCA descriptors of the evaluation cache:
@@ -23,19 +24,16 @@ preset's fused score), on the TOSCA descriptors of the evaluation cache:
 from __future__ import annotations
 
 import argparse
-import sys
-from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from benchmarks.common import add_evaluation_cache_arguments, evaluated_tosca
 from worker.engine.compare import fuse
 from worker.evaluation.compute import descriptor_vectors
-from worker.evaluation.scoring import modality_dissimilarity, stratified_folds
+from worker.evaluation.scoring import modality_dissimilarity
 from worker.recognition.calibration import calibrate
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from bench._tosca import add_evaluation_cache_arguments, evaluated_tosca  # noqa: E402
+from worker.recognition.fusion import stratified_folds
 
 FOLDS = 5
 
@@ -119,7 +117,7 @@ def _held_out(
     labels: np.ndarray,
     far: float,
     seed: int,
-) -> dict:
+) -> dict[str, Any]:
     """Calibrate on the pairs among four folds, measure on the pairs that involve the
     fifth, for one split into folds: per-fold FAR and FRR at ``far``, and the
     reliability bins ``(bin, pairs, mean predicted, observed genuine rate)``."""

@@ -1,8 +1,8 @@
 """Index benchmark: recall@10 against the exhaustive fused ranking, and search latency.
 
-    python bench/index_bench.py                       # TOSCA + 1k/10k/100k synthetic
-    python bench/index_bench.py --sizes 1000 10000    # fewer sizes
-    python bench/index_bench.py --tosca-presets --sizes 1000000 --queries 100
+    python -m benchmarks.index                        # TOSCA + 1k/10k/100k synthetic
+    python -m benchmarks.index --sizes 1000 10000     # fewer sizes
+    python -m benchmarks.index --tosca-presets --sizes 1000000 --queries 100
 
 * TOSCA: every mesh is a query against the other 82 (leave-one-out), under the
   default preset and any other ``--tosca-presets``.
@@ -30,23 +30,27 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from app.gallery.index import GalleryIndex, SearchStats  # noqa: E402
-from bench._tosca import tosca_descriptors, tosca_labels  # noqa: E402
-from worker.engine.compare import dissimilarity, fuse, gallery_sigma  # noqa: E402
-from worker.engine.presets import DEFAULT_PRESET, MODALITIES, get_preset  # noqa: E402
+from app.gallery.index import GalleryIndex, SearchStats
+from benchmarks.common import tosca_descriptors, tosca_labels
+from worker.engine.compare import dissimilarity, fuse, gallery_sigma
+from worker.engine.presets import DEFAULT_PRESET, MODALITIES, Preset, get_preset
 
 K = 10
+#: Modality -> (N, M) float descriptors of a gallery, or -> (M,) of one query.
+Vectors = dict[str, np.ndarray]
+#: A table row: what :func:`measure` measured, and ``data`` (what was searched).
+Row = dict[str, Any]
 
 
-def exhaustive_topk(preset, gallery: dict, sigma: dict | None, queries: list[dict], k: int):
+def exhaustive_topk(
+    preset: Preset, gallery: Vectors, sigma: Vectors | None, queries: list[Vectors], k: int
+) -> np.ndarray:
     """(p, k) positions of the best gallery rows per query by the exact fused score,
     computed with ``worker.engine.compare`` alone over the whole gallery."""
     per = {}
@@ -59,7 +63,7 @@ def exhaustive_topk(preset, gallery: dict, sigma: dict | None, queries: list[dic
     return np.stack([np.lexsort((np.arange(n), row))[:k] for row in fused])
 
 
-def build(preset, gallery: dict, ids: np.ndarray) -> GalleryIndex:
+def build(preset: Preset, gallery: Vectors, ids: np.ndarray) -> GalleryIndex:
     index = GalleryIndex(preset, preset.modality_sizes())
     index.add_many((int(i), {m: gallery[m][j] for m in MODALITIES}) for j, i in enumerate(ids))
     return index
@@ -74,8 +78,11 @@ def resident_mb() -> float:
 
 
 def measure(
-    preset, gallery: dict, queries: list[dict], exclude: list[tuple[int, ...]] | None = None
-):
+    preset: Preset,
+    gallery: Vectors,
+    queries: list[Vectors],
+    exclude: list[tuple[int, ...]] | None = None,
+) -> Row:
     """recall@K, latency percentiles (ms), mean candidates and certified fraction."""
     n = len(next(iter(gallery.values())))
     ids = np.arange(n, dtype=np.int64)
@@ -133,7 +140,7 @@ def measure(
     }
 
 
-def synthetic_model(preset_name: str):
+def synthetic_model(preset_name: str) -> dict[str, Vectors]:
     """Log-space class structure of the real TOSCA descriptors, per modality."""
     descriptors = tosca_descriptors(preset_name)
     labels = tosca_labels()
@@ -161,7 +168,9 @@ def synthetic_model(preset_name: str):
     return model
 
 
-def synthetic(model: dict, n_classes: int, per_class: int, rng: np.random.Generator) -> dict:
+def synthetic(
+    model: dict[str, Vectors], n_classes: int, per_class: int, rng: np.random.Generator
+) -> Vectors:
     """``n_classes * per_class`` descriptors (modality -> (N, M)), class by class."""
     n = n_classes * per_class
     nb = len(next(iter(model.values()))["between"])
@@ -177,7 +186,7 @@ def synthetic(model: dict, n_classes: int, per_class: int, rng: np.random.Genera
     return out
 
 
-def tosca_rows(preset_name: str) -> list[dict]:
+def tosca_rows(preset_name: str) -> list[Row]:
     preset = get_preset(preset_name)
     descriptors = tosca_descriptors(preset_name)
     names = sorted(descriptors)
@@ -189,7 +198,7 @@ def tosca_rows(preset_name: str) -> list[dict]:
     return [row]
 
 
-def synthetic_rows(preset_name: str, sizes: list[int], n_queries: int, seed: int) -> list[dict]:
+def synthetic_rows(preset_name: str, sizes: list[int], n_queries: int, seed: int) -> list[Row]:
     preset = get_preset(preset_name)
     model = synthetic_model(preset_name)
     rows = []
@@ -219,7 +228,7 @@ HEADER = (
 )
 
 
-def _format(row: dict) -> str:
+def _format(row: Row) -> str:
     return (
         f"| {row['data']} | {row['n']:,} | {row['recall']:.4f} | {row['p50']:.2f} | "
         f"{row['p95']:.2f} | {row['max']:.2f} | {row['candidates']:.0f} | {row['scored']:.0f} | "

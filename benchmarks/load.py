@@ -1,6 +1,6 @@
 """Load: 16 clients enrolling and querying concurrently against a running service.
 
-    python bench/load.py --url http://127.0.0.1:8000 --clients 16 --seconds 60
+    python -m benchmarks.load --url http://127.0.0.1:8000 --clients 16 --seconds 60
 
 Loopback only, bounded in time (``--seconds``, at most 600) and in requests
 (``--max-requests``); it stops by itself. Each client loops: with probability
@@ -26,9 +26,7 @@ from urllib.parse import urlparse
 
 import httpx
 
-from worker.evaluation.datasets import shared_dataset
-
-TOSCA = shared_dataset("tosca")
+from benchmarks.common import TOSCA
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -39,7 +37,7 @@ def percentile(values: list[float], q: float) -> float:
 
 
 class Load:
-    def __init__(self, args) -> None:
+    def __init__(self, args: argparse.Namespace) -> None:
         self.args = args
         self.files = sorted(TOSCA.glob("*.off.gz"))
         self.raw = {p: gzip.decompress(p.read_bytes()) for p in self.files}

@@ -1,41 +1,35 @@
 """How long API replica B takes to see what was enrolled or deleted through replica A.
 
-    python bench/replica_lag.py [--meshes 10]
+    python -m benchmarks.replica_lag [--meshes 10]
 
-Starts a real PostgreSQL and redis-server (the scale-out tests' servers,
-``tests/service/servers.py``), two API processes on them with uploads in the
-database, one enrollment and one query worker. Then, one mesh at a time: enroll
-through A, poll A until the mesh is ready and B (every 10 ms) until its index has
-one more shape; then delete each through B and poll A until it has one fewer.
-Prints the median and maximum lag over the meshes, with the collector interval
-they run with (the design bound: a replica applies the change log once per round).
+Starts a real PostgreSQL and redis-server (the scale-out tests' throwaway servers,
+:mod:`benchmarks.common`), two API processes on them with uploads in the database, one
+enrollment and one query worker. Then, one mesh at a time: enroll through A, poll A
+until the mesh is ready and B (every 10 ms) until its index has one more shape; then,
+once A's own index holds every enrolled mesh, delete each through B and poll A until
+its index has one fewer. Prints the median and maximum lag over the meshes, with the
+collector interval they run with (the design bound: a replica applies the change log
+once per round).
 """
 
 from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from app.migrations import upgrade_head  # noqa: E402
-from bench._tosca import tosca_labels  # noqa: E402
-from tests.service.conftest import Service  # noqa: E402
-from tests.service.servers import Postgres, Redis  # noqa: E402
+from app.migrations import upgrade_head
+from benchmarks.common import Postgres, Redis, Service, tosca_labels
 
 POLL = 0.01
+#: The service's default: a replica applies the change log once per round.
+COLLECTOR_INTERVAL = 0.5
 
 
-def index_size(service: Service) -> int:
-    check = service.client.get("/ready").json()["checks"]["index"]
-    return int(check.removeprefix("ok (").split()[0])
-
-
-def wait(condition, timeout: float = 120.0) -> float:
+def wait(condition: Callable[[], bool], timeout: float = 120.0) -> float:
     """Poll ``condition`` until true; the time it became true."""
     deadline = time.monotonic() + timeout
     while not condition():
@@ -43,6 +37,16 @@ def wait(condition, timeout: float = 120.0) -> float:
             raise TimeoutError
         time.sleep(POLL)
     return time.monotonic()
+
+
+def is_ready(service: Service, mesh_id: int) -> Callable[[], bool]:
+    """Whether ``service`` says the mesh is ready (its database's word)."""
+    return lambda: bool(service.client.get(f"/meshes/{mesh_id}").json()["status"] == "ready")
+
+
+def holds(service: Service, size: int) -> Callable[[], bool]:
+    """Whether ``service``'s own index holds ``size`` shapes."""
+    return lambda: service.index_size() == size
 
 
 def main() -> None:
@@ -53,6 +57,8 @@ def main() -> None:
     names = [n.removesuffix(".off.gz") for n in sorted(labels)][:: 83 // args.meshes][: args.meshes]
     postgres, redis_server = Postgres().start(), Redis().start()
     processes: list[Service] = []
+    added: list[float] = []
+    removed: list[float] = []
     try:
         upgrade_head(postgres.url)
         with tempfile.TemporaryDirectory(prefix="shapes-lag-") as tmp:
@@ -60,7 +66,7 @@ def main() -> None:
                 "SHAPES_DATABASE_URL": postgres.url,
                 "SHAPES_REDIS_URL": redis_server.url,
                 "SHAPES_UPLOADS": "database",
-                "SHAPES_COLLECTOR_INTERVAL_SECONDS": "0.5",  # the service's defaults
+                "SHAPES_COLLECTOR_INTERVAL_SECONDS": str(COLLECTOR_INTERVAL),
                 "SHAPES_MAX_UPLOAD_BYTES": str(64 * 1024 * 1024),
             }
             a, b, workers = (Service(Path(tmp) / d) for d in ("a", "b", "workers"))
@@ -71,26 +77,33 @@ def main() -> None:
             workers.start_worker("query")
             a.start_api()
             b.start_api()
-            added, removed, ids = [], [], []
+            ids = []
             for name in names:
-                before = index_size(b)
+                before = b.index_size()
                 mesh_id = a.upload(name, labels[f"{name}.off.gz"]).json()["id"]
                 ids.append(mesh_id)
-                url = f"/meshes/{mesh_id}"
-                on_a = wait(lambda u=url: a.client.get(u).json()["status"] == "ready")
-                on_b = wait(lambda n=before: index_size(b) == n + 1)
+                on_a = wait(is_ready(a, mesh_id))
+                on_b = wait(holds(b, before + 1))
                 added.append(on_b - on_a)
+            # "Ready" is the database's word: the last mesh enters A's index when a
+            # collector or change-log round of A's gets to it. A delete timed from before
+            # that round lands in the same round as the add, and A's index never shows
+            # one fewer.
+            wait(holds(a, len(ids)))
             for mesh_id in ids:
-                before = index_size(a)
+                before = a.index_size()
                 start = time.monotonic()
                 b.client.delete(f"/meshes/{mesh_id}")
-                removed.append(wait(lambda n=before: index_size(a) == n - 1) - start)
+                removed.append(wait(holds(a, before - 1)) - start)
     finally:
         for process in processes:
             process.close()
         redis_server.stop()
         postgres.stop()
-    print(f"{len(names)} meshes; collector interval 0.5 s; polled every {POLL * 1000:.0f} ms\n")
+    print(
+        f"{len(names)} meshes; collector interval {COLLECTOR_INTERVAL} s; "
+        f"polled every {POLL * 1000:.0f} ms\n"
+    )
     print("| change | median s | max s |")
     print("|---|---:|---:|")
     print(

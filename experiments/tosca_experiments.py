@@ -1,6 +1,6 @@
 """Accuracy experiments on TOSCA: what limits each modality, and weighted fusion.
 
-    python bench/tosca_experiments.py [--cache .cache/experiments] [--n 2500]
+    python -m experiments.tosca_experiments [--cache .cache/experiments] [--n 2500]
 
 Stage 1 caches, per mesh, the expensive intermediates of the default pipeline
 (resampled mesh, GDM, 150 eigenpairs of eq. 3, vertex areas). Stage 2 varies only
@@ -14,12 +14,13 @@ is measured on the pairs of the fifth, so no weight ever sees its test pairs.
 from __future__ import annotations
 
 import argparse
-import csv
 import itertools
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from benchmarks.common import REPO, TOSCA, tosca_labels
 from worker.engine.compare import dissimilarity, fuse
 from worker.engine.diffusion import (
     LaplaceBeltrami,
@@ -32,24 +33,21 @@ from worker.engine.mesh_io import load_mesh
 from worker.engine.modal import ddt_core, modal_gdm
 from worker.engine.presets import get_preset
 from worker.engine.resample import resample_mesh
-from worker.evaluation.datasets import shared_dataset
 from worker.recognition import metrics
 
-TOSCA = shared_dataset("tosca")
-CACHE = Path(__file__).resolve().parents[1] / ".cache" / "experiments"
+CACHE = REPO / ".cache" / "experiments"
 WEIGHTS = (0.0, 0.25, 0.5, 1.0)
 
 
-def cache_intermediates(cache: Path, n: int) -> list[dict]:
+def cache_intermediates(cache: Path, n: int) -> list[dict[str, Any]]:
     preset = get_preset("smeets2010-shrec")
-    rows = list(csv.DictReader(open(TOSCA / "labels.csv")))
-    rows.sort(key=lambda r: metrics.natural_sort_key(r["file"]))
+    labels = tosca_labels()
     out = []
     cache.mkdir(parents=True, exist_ok=True)
-    for row in rows:
-        path = cache / f"{row['file'].split('.')[0]}-n{n}.npz"
+    for name in sorted(labels, key=metrics.natural_sort_key):
+        path = cache / f"{name.split('.')[0]}-n{n}.npz"
         if not path.exists():
-            mesh = resample_mesh(load_mesh(TOSCA / row["file"]), n)
+            mesh = resample_mesh(load_mesh(TOSCA / name), n)
             intrinsic = intrinsic_delaunay(IntrinsicMesh.from_mesh(mesh.vertices, mesh.faces))
             ops = fem_operators(intrinsic)
             op = LaplaceBeltrami.from_fem(ops)
@@ -67,7 +65,7 @@ def cache_intermediates(cache: Path, n: int) -> list[dict]:
                 spectrum_no_flips=normalized_spectrum(extrinsic, raw_values, 50),
             )
         data = dict(np.load(path))
-        data["name"], data["label"] = row["file"], row["class"]
+        data["name"], data["label"] = name, labels[name]
         out.append(data)
     return out
 
@@ -98,6 +96,9 @@ def row(name: str, s: dict[str, float]) -> str:
 
 
 def stratified_folds(labels: np.ndarray, k: int, seed: int = 0) -> np.ndarray:
+    """The folds this experiment's recorded table was made with: every class dealt out
+    from fold 0 (:func:`worker.recognition.fusion.stratified_folds`, which ``shapes tune``
+    uses, starts each class at a random fold, so small classes do not pile up in fold 0)."""
     rng = np.random.default_rng(seed)
     fold = np.empty(len(labels), dtype=int)
     for c in np.unique(labels):
@@ -106,14 +107,16 @@ def stratified_folds(labels: np.ndarray, k: int, seed: int = 0) -> np.ndarray:
     return fold
 
 
-def cross_validated_fusion(mats: dict[str, np.ndarray], labels, rule: str, k: int = 5):
+def cross_validated_fusion(
+    mats: dict[str, np.ndarray], labels: np.ndarray, rule: str, k: int = 5
+) -> tuple[float, list[dict[str, float]]]:
     """Mean test-fold EER with weights chosen on the training folds, and the weights."""
     fold = stratified_folds(labels, k)
     names = list(mats)
     test_eers, chosen = [], []
     for f in range(k):
         train, test = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
-        best = None
+        best: tuple[float, dict[str, float]] | None = None
         for w in itertools.product(WEIGHTS, repeat=len(names) - 1):
             weights = dict(zip(names, (*w, 1.0), strict=True))
             if not any(weights.values()):
@@ -122,6 +125,7 @@ def cross_validated_fusion(mats: dict[str, np.ndarray], labels, rule: str, k: in
             eer = metrics.equal_error_rate(fused, labels[train])
             if best is None or eer < best[0]:
                 best = (eer, weights)
+        assert best is not None  # the grid holds combinations that are not all zero
         fused = fuse({m: d[np.ix_(test, test)] for m, d in mats.items()}, rule, best[1])
         test_eers.append(metrics.equal_error_rate(fused, labels[test]))
         chosen.append(best[1])

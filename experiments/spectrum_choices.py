@@ -1,7 +1,7 @@
 """The spectrum modality's two free choices, measured on TOSCA: how many eigenvalues,
 and how they are compared.
 
-    python bench/spectrum_choices.py [--preset smeets2010-surface] [--cache DIR] [--jobs 2]
+    python -m experiments.spectrum_choices [--preset smeets2010-surface] [--cache DIR] [--jobs 2]
 
 The preset keeps ``spectrum_size`` (50, lapy's ``compute_shapedna`` default) non-zero
 eigenvalues and compares them with its dissimilarity (D1, eq. 8). This describes TOSCA
@@ -16,8 +16,8 @@ once more under the preset with every eigenvalue its eigenproblem computes
   :func:`~worker.evaluation.shapedna.shapedna_dissimilarity`: eigenvalue ``i`` of
   ``0, lambda_1 A, lambda_2 A, ...`` divided by ``i``).
 
-Then, per comparison, the size chosen with the fusion weights by
-``bench/fusion_weights.py``'s class-stratified cross-validation (the size with the
+Then, per comparison, the size chosen with the fusion weights by the class-stratified
+cross-validation of ``shapes tune`` (:mod:`worker.recognition.fusion`; the size with the
 lowest loss among its weight choices, on four folds; tested on the fifth), for three
 splits into folds, and the choice on all meshes.
 
@@ -28,25 +28,20 @@ What the tessellation does to the same choices is the robustness protocol's to s
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 from lapy.shapedna import reweight_ev
 
+from benchmarks.common import TOSCA, add_evaluation_cache_arguments
 from worker.engine.compare import fuse
 from worker.engine.presets import get_preset
 from worker.evaluation.compute import compute_descriptors, descriptor_vectors
 from worker.evaluation.datasets import read_labels
-from worker.evaluation.scoring import modality_dissimilarity, stratified_folds
+from worker.evaluation.scoring import modality_dissimilarity
 from worker.evaluation.shapedna import shapedna_dissimilarity
 from worker.recognition import metrics
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from bench._tosca import TOSCA, add_evaluation_cache_arguments  # noqa: E402
-from bench.fusion_weights import FOLDS, choose, loss, scores  # noqa: E402
+from worker.recognition.fusion import FOLDS, choose_weights, fusion_scores, stratified_folds
 
 SIZES = (10, 15, 20, 25, 30, 40, 50, 70, 99)
 SEEDS = (0, 1, 2)
@@ -59,7 +54,7 @@ def shapedna_style(spectrum: np.ndarray) -> np.ndarray:
     return shapedna_dissimilarity(np.stack([reweight_ev(row) for row in with_zero]))
 
 
-def row(name: str, d: np.ndarray, labels: np.ndarray, split: tuple) -> str:
+def row(name: str, d: np.ndarray, labels: np.ndarray, split: tuple[np.ndarray, np.ndarray]) -> str:
     r = metrics.retrieval_scores(d, labels)
     r1 = metrics.rank1_rate(d, labels, *split)
     eer = metrics.equal_error_rate(d, labels)
@@ -73,9 +68,7 @@ def choose_size(
     smaller size)."""
     best: tuple[float, int, dict[str, float]] | None = None
     for k, spectrum in spectra.items():
-        mats = {**others, "spectrum": spectrum}
-        weights = choose(mats, labels, rule)
-        value = loss(scores(fuse(mats, rule, weights), labels))
+        weights, value = choose_weights({**others, "spectrum": spectrum}, labels, rule)
         if best is None or value < best[0]:
             best = (value, k, weights)
     assert best is not None
@@ -95,9 +88,9 @@ def cross_validate(
                 sub, {m: d[np.ix_(train, train)] for m, d in others.items()}, labels[train], rule
             )
             fused = fuse({**others, "spectrum": spectra[k]}, rule, weights)
-            tests.append(scores(fused, labels, test))
+            tests.append(fusion_scores(fused, labels, test))
             chosen.append(f"{k} ({', '.join(f'{w:g}' for w in weights.values())})")
-        eer, map_ = np.mean([t["eer"] for t in tests]), np.mean([t["map"] for t in tests])
+        eer, map_ = np.mean([t.eer for t in tests]), np.mean([t.map for t in tests])
         print(f"| {seed} | {'; '.join(chosen)} | {eer:.2%} | {map_:.1%} |")
     value, k, weights = choose_size(spectra, others, labels, rule)
     shown = ", ".join(f"{m} {w:g}" for m, w in weights.items())

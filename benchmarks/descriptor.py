@@ -1,6 +1,6 @@
 """Descriptor engine benchmark: median seconds per stage and peak memory, vs ShapeDNA.
 
-    OPENBLAS_NUM_THREADS=1 python bench/descriptor_bench.py [--preset smeets2010-surface]
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.descriptor [--preset smeets2010-surface]
         [--sizes 1000 2500 5000] [--repeats 2]
 
 For each size N, a fresh process describes one TOSCA mesh of every class with the
@@ -25,6 +25,8 @@ from dataclasses import replace
 from worker.engine.presets import DEFAULT_PRESET
 from worker.evaluation.datasets import shared_dataset
 
+# Not benchmarks.common's: a child's memory is measured after its imports, which stay
+# the engine's and lapy's.
 TOSCA = shared_dataset("tosca")
 #: One mesh of each TOSCA class (4,344 to 52,565 vertices).
 MESHES = (
@@ -41,7 +43,7 @@ MESHES = (
 STAGES = ("load", "resample", "gdm", "eigen_ddt", "modal")
 
 
-def _measure(preset_name: str, n: int, repeats: int) -> dict:
+def _measure(preset_name: str, n: int, repeats: int) -> dict[str, float]:
     import numpy as np
     from lapy import TriaMesh
     from lapy.shapedna import compute_shapedna
@@ -93,7 +95,8 @@ def main() -> None:
         out = subprocess.run(
             [
                 sys.executable,
-                __file__,
+                "-m",
+                "benchmarks.descriptor",
                 "--preset",
                 args.preset,
                 "--child",

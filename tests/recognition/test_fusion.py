@@ -1,0 +1,135 @@
+"""Fusion weights by cross-validation, on small dissimilarities whose right weights are known."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from worker.engine.compare import fuse
+from worker.recognition.fusion import (
+    GRID,
+    FusionScores,
+    choose_weights,
+    fusion_scores,
+    stratified_folds,
+    tune_fusion,
+)
+
+#: Four classes of six objects: five folds leave at least four of each to choose on.
+LABELS = np.repeat(np.arange(4), 6)
+PERFECT = FusionScores(eer=0.0, nn=1.0, map=1.0)
+
+
+def distances(points: np.ndarray) -> np.ndarray:
+    """(n, n) Euclidean distances of (n, d) points."""
+    return np.linalg.norm(points[:, None] - points[None], axis=-1)
+
+
+def clustered(labels: np.ndarray, spread: float, rng: np.random.Generator) -> np.ndarray:
+    """Distances of points scattered by ``spread`` around their class's centre (the
+    centres 10 apart): at 0.1 every object's own class is nearer than any other, at 5
+    the classes overlap."""
+    centres = 10.0 * np.eye(labels.max() + 1)
+    return distances(centres[labels] + spread * rng.standard_normal((len(labels), len(centres))))
+
+
+def noise(n: int, rule: str, rng: np.random.Generator) -> np.ndarray:
+    """Symmetric positive dissimilarities that know nothing of the classes, spread wide
+    enough on the rule's scale (a factor of e^+-6 for the product, 0 to 100 for the sum)
+    to bury the separated classes at weight 1."""
+    x = np.exp(rng.normal(0.0, 3.0, (n, n))) if rule == "product" else rng.uniform(0, 100, (n, n))
+    return np.triu(x, 1) + np.triu(x, 1).T
+
+
+def test_stratified_folds_spread_every_class_evenly():
+    labels = np.repeat(np.arange(4), [13, 7, 5, 3])
+    fold = stratified_folds(labels, 5)
+    for c in range(4):
+        counts = np.bincount(fold[labels == c], minlength=5)
+        assert counts.max() - counts.min() <= 1
+    np.testing.assert_array_equal(fold, stratified_folds(labels, 5))  # seeded
+
+
+@pytest.mark.parametrize("rule", ["product", "sum"])
+def test_a_modality_of_pure_noise_gets_weight_zero(rule):
+    rng = np.random.default_rng(0)
+    mats = {"noise": noise(len(LABELS), rule, rng), "signal": clustered(LABELS, 0.1, rng)}
+    tuning = tune_fusion(mats, LABELS, rule, {"noise": 1.0, "signal": 1.0})
+    assert tuning.weights == {"noise": 0.0, "signal": 1.0}
+    assert [f.weights for f in tuning.folds] == [tuning.weights] * 5
+    assert tuning.loss == 0.0 and tuning.held_out == PERFECT
+    # The noise's equal weight (the preset's here) costs on the held-out objects ...
+    assert tuning.preset_held_out.loss > 0.1
+    # ... and on every object the loss only grows with the noise's weight.
+    assert tuning.sensitivity["noise"][0] == 0.0
+    assert np.all(np.diff(tuning.sensitivity["noise"]) >= 0.0)
+    assert tuning.sensitivity["noise"][-1] > 0.1
+    assert sum(f.held_out_objects for f in tuning.folds) == len(LABELS)
+
+
+def test_held_out_figures_read_only_the_pairs_and_queries_of_held_out_objects():
+    labels = np.repeat(np.arange(3), 4)
+    held = np.array([0, 5, 10])
+    # Every pair among the other objects is wrong: impostors at 0.1, genuine pairs at 9.
+    same = labels[:, None] == labels[None]
+    d = np.where(same, 9.0, 0.1)
+    # Every pair involving a held-out object is right: genuine 1, impostor 5.
+    touching = np.isin(np.arange(12), held)
+    touching = touching[:, None] | touching[None]
+    d[touching] = np.where(same, 1.0, 5.0)[touching]
+    np.fill_diagonal(d, 0.0)
+    # Perfect although every pair among the others is wrong: none of them was read.
+    assert fusion_scores(d, labels, held) == PERFECT
+    everyone = fusion_scores(d, labels)
+    assert everyone.eer > 0.5 and everyone.nn < 0.5
+
+
+def test_each_folds_weights_are_chosen_without_its_objects():
+    rng = np.random.default_rng(0)
+    # Two modalities of overlapping classes: the folds choose different weights.
+    mats = {"a": clustered(LABELS, 5.0, rng), "b": clustered(LABELS, 5.0, rng)}
+    preset = {"a": 1.0, "b": 1.0}
+    tuning = tune_fusion(mats, LABELS, "product", preset)
+    assert len({f.weights["a"] for f in tuning.folds}) > 1
+    fold = stratified_folds(LABELS, 5)
+    for f, result in enumerate(tuning.folds):
+        train, held = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
+        sub = {m: d[np.ix_(train, train)] for m, d in mats.items()}
+        assert result.weights == choose_weights(sub, LABELS[train], "product")[0]
+        fused = fuse(mats, "product", result.weights)
+        assert result.held_out == fusion_scores(fused, LABELS, held)
+        assert result.preset == fusion_scores(fuse(mats, "product", preset), LABELS, held)
+    assert tuning.held_out.eer == pytest.approx(np.mean([r.held_out.eer for r in tuning.folds]))
+    # Whatever fold 0's objects look like, fold 0's weights stay the same.
+    scrambled = {m: d.copy() for m, d in mats.items()}
+    zero = fold == 0
+    touching = zero[:, None] | zero[None]
+    scrambled["a"][touching] = noise(len(LABELS), "sum", rng)[touching]
+    again = tune_fusion(scrambled, LABELS, "product", preset)
+    assert again.folds[0].weights == tuning.folds[0].weights
+    # ... while the same pairs do make its held-out figures.
+    assert again.folds[0].held_out != tuning.folds[0].held_out
+
+
+def test_the_grid_is_searched_for_every_modality_but_the_last():
+    rng = np.random.default_rng(1)
+    mats = {m: clustered(LABELS, 0.1, rng) for m in ("gdm", "ddt", "spectrum")}
+    weights, loss = choose_weights(mats, LABELS, "product")
+    assert weights["spectrum"] == 1.0 and {weights["gdm"], weights["ddt"]} <= set(GRID)
+    assert loss == fusion_scores(fuse(mats, "product", weights), LABELS).loss
+
+
+def test_too_small_a_class_or_a_single_modality_is_refused():
+    rng = np.random.default_rng(2)
+    labels = np.repeat(np.arange(3), [6, 6, 2])
+    mats = {"a": clustered(labels, 0.1, rng), "b": clustered(labels, 0.1, rng)}
+    with pytest.raises(ValueError, match=r"classes \['2'\] keep fewer than two"):
+        tune_fusion(mats, labels, "product", {})
+    with pytest.raises(ValueError, match="at least two modalities"):
+        tune_fusion({"a": mats["a"]}, labels, "product", {})
+    larger = np.repeat(np.arange(3), [6, 6, 3])
+    with pytest.raises(ValueError, match=r"15 labels need \(15, 15\) dissimilarities"):
+        tune_fusion(mats, larger, "product", {})
+    mats = {"a": clustered(larger, 0.1, rng), "b": clustered(larger, 0.1, rng)}
+    with pytest.raises(ValueError, match="15 objects cannot fill 20 folds"):
+        tune_fusion(mats, larger, "product", {}, folds=20)
