@@ -155,9 +155,7 @@ class Preset:
 PRESETS: dict[str, Preset] = {
     p.name: p
     for p in (
-        # Sec. 4.1: TOSCA meshes of about 3,000 vertices, D1, sum rule. (v2: the
-        # engine's numerics changed under it: canonical frame, mollified triangles,
-        # eigensolver shift, so its descriptors moved in the last digits.)
+        # Sec. 4.1: TOSCA meshes of about 3,000 vertices, D1, sum rule.
         Preset(
             name="smeets2010-tosca",
             version=2,
@@ -176,29 +174,8 @@ PRESETS: dict[str, Preset] = {
             fusion="sum",
             fused_modalities=("spectrum",),
         ),
-        # The paper's GDM and DDT as operators of the surface rather than of the
-        # vertex set, fused with the spectrum by a weighted product (the weights are
-        # the paper's future work, chosen by class-stratified cross-validation on
-        # TOSCA: docs/evaluation.md). Every choice is measured in docs/evaluation.md.
-        # v2: the GDM from 500 farthest-point samples and eq. (4) truncated at 100
-        # eigenpairs instead of every vertex and 150 (0.85 s -> 0.38 s per mesh at
-        # 2,500 vertices; TOSCA and the robustness protocol measured before and
-        # after in docs/evaluation.md). v3: the DDT's core from its two vertex modes
-        # only, each diffusion time its own slice (robustness gap 0.119 -> 0.094, TOSCA
-        # EER 11.14 -> 9.82% for the DDT alone; docs/evaluation.md). v4: the spectrum's
-        # eigenvalues with the averaged mass (variant class retrieval 98.6 -> 100% and
-        # tessellation gap 0.082 -> 0.055 for the spectrum alone; docs/evaluation.md).
-        # v5: holes of at most 2% of the area closed before resampling (scan gaps;
-        # docs/evaluation.md, sec. "Scan gaps"). v6: the DDT as each diffusion time's
-        # singular values instead of its core's diagonal (docs/evaluation.md, sec.
-        # "The default's version 6"). v7: the DDT's eigenpairs with the averaged mass,
-        # as the spectrum's since v4 (docs/evaluation.md, sec. "The default's version 7").
-        # v8: no resampled edge longer than three tiling edges (a CAD cylinder's strips were
-        # one element long: CAD files' fused gap 0.36 -> 0.06, TOSCA's variants' 0.041 ->
-        # 0.035; docs/evaluation.md, sec. "The default's version 8"). v9: the vertices the
-        # bound adds taken out of the decimation's, so a resample keeps about 2,500 (TOSCA's
-        # median 2,713 -> about 2,510: v7's time at v8's bound; docs/evaluation.md, sec.
-        # "The default's version 9").
+        # The paper's GDM and DDT as operators of the surface, fused with the spectrum.
+        # Its versions, what each changed and why: docs/decisions.md.
         Preset(
             name="smeets2010-surface",
             version=9,
@@ -215,12 +192,7 @@ PRESETS: dict[str, Preset] = {
             dissimilarity="D1",
             fusion="product",
             fused_modalities=("gdm", "ddt", "spectrum"),
-            # shapes tune on TOSCA (v9): the GDM gets 0 in every fold, the DDT 0.5, 0.25,
-            # 0.125, 0.25, 0.5 in the five folds and 0.5 on all meshes (loss 0.04036; 0.04107
-            # at 1, 0.04201 at 0); v7 and v8 kept 1 where the folds chose 1 twice and all
-            # meshes' losses differed by 0.2%. On the robustness protocol 0.5 moves the
-            # fused gap 0.036 -> 0.039 and SCAPE's pose ratio 0.270 -> 0.257
-            # (docs/evaluation.md, sec. "The default's version 9").
+            # Chosen by cross-validation on TOSCA (shapes tune; docs/evaluation.md).
             fusion_weights={"gdm": 0.0, "ddt": 0.5, "spectrum": 1.0},
         ),
     )
