@@ -206,7 +206,7 @@ def averaged_mass_eigenpairs(
     With the lumped mass of eq. (3) the 50 eigenvalues of a 2,500-vertex resample of a
     TOSCA figure are a median 1.45% off those of the full-resolution file (0.8-2.7% per
     input, the 50th up to 9%), by amounts that follow the triangulation; with the
-    averaged mass 0.91% (0.1-1.6%; ``bench/spectrum_accuracy.py``, docs/evaluation.md).
+    averaged mass 0.91% (0.1-1.6%; ``python -m experiments.spectrum_accuracy``, docs/evaluation.md).
     The eigenvectors of eq. (3) span nearly the same low-frequency space, so the
     averaged-mass pairs are taken as Rayleigh-Ritz pairs in their span (the values
     within 0.2% of a full solve at the 50th of 100; tested) instead of by a second

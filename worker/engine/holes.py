@@ -4,7 +4,7 @@ A scan leaves gaps where the scanner did not see (armpits, the soles of feet), a
 every descriptor here is an operator of the surface with its boundary: the heat
 method's geodesics go around a hole, and the Laplace-Beltrami operator of eq. (3)
 has Neumann conditions on it, so a hole of 0.1% of the area moves the spectrum of
-the full-resolution surface itself (measured: ``bench/scan_gaps.py``). The same body
+the full-resolution surface itself (measured: ``python -m experiments.scan_gaps``). The same body
 scanned with and without a gap is one shape; closing the gap makes it one surface.
 
 Which openings are holes: a boundary loop of length ``p`` spans a surface of area at
