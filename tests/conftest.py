@@ -1,4 +1,5 @@
-"""Shared fixtures: generated meshes, the TOSCA set, a small preset for fast tests."""
+"""Shared fixtures: generated meshes, the bundled examples, the TOSCA set, a small preset
+for fast tests."""
 
 from __future__ import annotations
 
@@ -14,6 +15,9 @@ from worker.engine.presets import Preset
 from worker.evaluation.datasets import shared_dataset
 
 TOSCA_DIR = shared_dataset("tosca")
+#: The sample meshes the project owns (``shapes samples examples``): five classes
+#: (biped, quadruped, spider, bird, hand), ``<class>-<pose>.off.gz``, poses 0 to 3.
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 #: Fixtures that start real service processes. A test using one is marked ``service``
 #: and ``slow`` here, so ``-m "not slow"`` never waits for an API or a worker.
@@ -30,6 +34,11 @@ SERVICE_FIXTURES = {
     "served",
     "site",
 }
+
+
+def example(name: str) -> Path:
+    """Path of a bundled example, e.g. ``example("quadruped-0")``."""
+    return EXAMPLES / f"{name}.off.gz"
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

@@ -1,5 +1,5 @@
-"""The ``shapes`` command: ``describe``, ``evaluate`` and ``robustness`` (the engine and
-its evaluation harness), ``import`` and ``query`` (the service's HTTP client,
+"""The ``shapes`` command: ``describe``, ``evaluate``, ``robustness`` and ``samples`` (the
+engine and its evaluation harness), ``import`` and ``query`` (the service's HTTP client,
 :mod:`app.client`)."""
 
 from __future__ import annotations
@@ -147,6 +147,18 @@ def _robustness(args: argparse.Namespace) -> int:
     return 1 if report["failures"] else 0
 
 
+def _samples(args: argparse.Namespace) -> int:
+    from .evaluation.samples import write_samples
+
+    try:
+        written = write_samples(args.out_dir)
+    except (OSError, RuntimeError) as exc:
+        print(f"shapes samples: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {len(written) - 1} meshes and {written[-1]}")
+    return 0
+
+
 def _add_collection_arguments(parser: argparse.ArgumentParser) -> None:
     """What ``evaluate`` and ``robustness`` both take: a labelled collection, the preset,
     the worker processes, the descriptor cache and a per-class limit."""
@@ -216,6 +228,17 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", help="report directory (default: evaluation-out/robustness/PRESET)"
     )
     robustness.set_defaults(run=_robustness)
+
+    samples = sub.add_parser(
+        "samples",
+        help="write the project's sample meshes (the examples/ folder) into a directory",
+        description="Generate the sample collection: five articulated figures (biped, "
+        "quadruped, spider, bird, hand) in four poses each, as <class>-<pose>.off.gz, and "
+        "labels.csv. Deterministic: it rewrites the repository's examples/ folder. Needs "
+        "the eval extra (MeshLab's decimation).",
+    )
+    samples.add_argument("out_dir", help="directory to write the meshes and labels.csv in")
+    samples.set_defaults(run=_samples)
 
     # The service's HTTP client (httpx only): shapes import, shapes query.
     from app.client import add_subcommands
