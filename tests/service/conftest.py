@@ -20,12 +20,11 @@ from pathlib import Path
 
 import httpx
 import pytest
+from conftest import example
 
 from app.migrations import upgrade_head
-from worker.evaluation.datasets import shared_dataset
 
 REPO = Path(__file__).resolve().parents[2]
-TOSCA = shared_dataset("tosca")
 TIMEOUT = 120.0
 
 
@@ -121,7 +120,8 @@ class Service:
 
     # -- helpers ----------------------------------------------------------
     def upload(self, name: str, label: str | None = None, **fields) -> httpx.Response:
-        path = TOSCA / f"{name}.off.gz"
+        """Enroll the bundled example ``name`` (e.g. ``"quadruped-0"``)."""
+        path = example(name)
         data = {k: v for k, v in {"label": label, **fields}.items() if v is not None}
         with open(path, "rb") as fh:
             return self.client.post("/meshes", files={"file": (path.name, fh)}, data=data)
@@ -136,7 +136,8 @@ class Service:
         raise AssertionError(f"mesh {mesh_id} stuck at {body['status']}\n" + self.logs())
 
     def query(self, name: str, **fields) -> httpx.Response:
-        path = TOSCA / f"{name}.off.gz"
+        """Search with the bundled example ``name``."""
+        path = example(name)
         with open(path, "rb") as fh:
             return self.client.post(
                 "/query",
@@ -180,21 +181,21 @@ def service(tmp_path_factory) -> Iterator[Service]:
 
 
 GALLERY = {
-    "wolf0": "wolf",
-    "wolf1": "wolf",
-    "centaur0": "centaur",
-    "centaur1": "centaur",
-    "horse0": "horse",
-    "horse5": "horse",
+    "quadruped-0": "quadruped",
+    "quadruped-1": "quadruped",
+    "biped-0": "biped",
+    "biped-1": "biped",
+    "hand-0": "hand",
+    "hand-1": "hand",
 }
 
 
 @pytest.fixture(scope="session")
 def gallery(service: Service) -> dict[str, int]:
-    """The small TOSCA gallery, enrolled and ready: name -> mesh id."""
+    """A small gallery of the bundled examples, enrolled and ready: name -> mesh id."""
     ids = {}
     for name, label in GALLERY.items():
-        response = service.upload(name, label, metadata='{"source": "TOSCA"}')
+        response = service.upload(name, label, metadata='{"source": "examples"}')
         assert response.status_code in (200, 202), response.text
         ids[name] = response.json()["id"]
     for name, mesh_id in ids.items():
