@@ -670,7 +670,7 @@ THUMB_AZIMUTH = 56.0
 
 
 def hand() -> Figure:
-    """A left hand, palm down, fingers spread: wrist, palm, four fingers of three
+    """A right hand, palm down, fingers spread: wrist, palm, four fingers of three
     phalanges, a thumb of three bones."""
     bones = [
         Bone("wrist", None, 0.0, (40.0, 0.0, 0.0), (22.0, 20.0)),
@@ -720,10 +720,9 @@ def hand() -> Figure:
             **curl("little", 55.0, 60.0, 40.0),
             "thumb1": _bend(directions["thumb"], 30.0),
         },
-        {  # waving: the hand bent up at the wrist, fingers spread, the little one bent
+        {  # waving: the hand bent up at the wrist, the index spread, the little finger bent
             "palm": (0.0, -25.0, 0.0),
             "index1": _spin(8.0),
-            "little1": _spin(-8.0),
             **curl("little", 15.0, 20.0, 15.0),
             "thumb_root": _spin(15.0),
         },
