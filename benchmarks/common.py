@@ -47,6 +47,8 @@ from worker.evaluation.datasets import DEFAULT_CACHE, read_labels, shared_datase
 
 REPO = Path(__file__).resolve().parents[1]
 TOSCA = shared_dataset("tosca")
+#: The sample collection the repository bundles (``shapes samples`` writes it).
+EXAMPLES = REPO / "examples"
 CACHE = REPO / ".cache" / "tosca-descriptors"
 #: Seconds the service gets to start, and a request or a mesh to finish.
 TIMEOUT = 120.0
@@ -200,8 +202,9 @@ class Service:
     to ``data_dir/logs``; :meth:`logs` gives their tails.
     """
 
-    def __init__(self, data_dir: Path) -> None:
+    def __init__(self, data_dir: Path, meshes: Path = EXAMPLES) -> None:
         self.data_dir = data_dir
+        self.meshes = meshes  # where :meth:`upload` and :meth:`query` find a mesh by name
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         self.env = dict(
@@ -284,8 +287,8 @@ class Service:
         return "\n".join(out)
 
     def upload(self, name: str, label: str | None = None, **fields: str) -> httpx.Response:
-        """Enroll the TOSCA mesh ``name`` (e.g. ``"wolf0"``)."""
-        path = TOSCA / f"{name}.off.gz"
+        """Enroll the mesh ``name`` of :attr:`meshes` (e.g. ``"quadruped-0"``)."""
+        path = self.meshes / f"{name}.off.gz"
         data = {k: v for k, v in {"label": label, **fields}.items() if v is not None}
         with open(path, "rb") as fh:
             return self.client.post("/meshes", files={"file": (path.name, fh)}, data=data)
@@ -304,8 +307,8 @@ class Service:
         raise AssertionError(f"mesh {mesh_id} stuck at {body.get('status')}\n" + self.logs())
 
     def query(self, name: str, **fields: object) -> httpx.Response:
-        """``POST /query`` with the TOSCA mesh ``name``."""
-        path = TOSCA / f"{name}.off.gz"
+        """``POST /query`` with the mesh ``name`` of :attr:`meshes`."""
+        path = self.meshes / f"{name}.off.gz"
         with open(path, "rb") as fh:
             return self.client.post(
                 "/query",

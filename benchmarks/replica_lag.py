@@ -22,7 +22,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from app.migrations import upgrade_head
-from benchmarks.common import Postgres, Redis, Service, tosca_labels
+from benchmarks.common import TOSCA, Postgres, Redis, Service, tosca_labels
 
 POLL = 0.01
 #: The service's default: a replica applies the change log once per round.
@@ -69,7 +69,7 @@ def main() -> None:
                 "SHAPES_COLLECTOR_INTERVAL_SECONDS": str(COLLECTOR_INTERVAL),
                 "SHAPES_MAX_UPLOAD_BYTES": str(64 * 1024 * 1024),
             }
-            a, b, workers = (Service(Path(tmp) / d) for d in ("a", "b", "workers"))
+            a, b, workers = (Service(Path(tmp) / d, TOSCA) for d in ("a", "b", "workers"))
             processes = [a, b, workers]
             for process in processes:
                 process.env.update(env)

@@ -1,19 +1,20 @@
-"""Shared fixtures: generated meshes, the TOSCA set, a small preset for fast tests."""
+"""Shared fixtures: generated meshes, the bundled examples, the shared data sets (tests
+marked ``dataset``), a small preset for fast tests."""
 
 from __future__ import annotations
 
 import gzip
 import io
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
 
+from benchmarks.common import EXAMPLES
 from worker.engine.presets import Preset
-from worker.evaluation.datasets import shared_dataset
-
-TOSCA_DIR = shared_dataset("tosca")
+from worker.evaluation.datasets import DATASETS_ENV, shared_dataset
 
 #: Fixtures that start real service processes. A test using one is marked ``service``
 #: and ``slow`` here, so ``-m "not slow"`` never waits for an API or a worker.
@@ -30,20 +31,68 @@ SERVICE_FIXTURES = {
     "served",
     "site",
 }
+#: Fixtures that give a shared data set's directory: a test using one is marked
+#: ``dataset`` with that set's name.
+DATASET_FIXTURES = {"tosca_dir": "tosca"}
+#: The skip reasons given to ``dataset`` tests whose set is absent.
+DATASET_SKIP_REASONS: set[str] = set()
+#: How many tests skipped for each of them, counted as they run (a deselected test is
+#: not counted), for the terminal summary.
+SKIPPED_DATASETS: Counter[str] = Counter()
+
+
+def example(name: str) -> Path:
+    """Path of a bundled example, e.g. ``example("quadruped-0")``: the sample meshes the
+    project owns (``shapes samples examples``), five classes (biped, quadruped, spider,
+    bird, hand), ``<class>-<pose>.off.gz``, poses 0 to 3."""
+    return EXAMPLES / f"{name}.off.gz"
+
+
+def missing_dataset(name: str) -> str | None:
+    """Why the shared data set ``name`` cannot be read (a sentence saying where it was
+    looked for and how to give its place), or None when it is there."""
+    directory = shared_dataset(name)
+    if directory.is_dir():
+        return None
+    return (
+        f"the {name.upper()} set is not at {directory}: set {DATASETS_ENV} to the folder "
+        "holding tosca/ and scape/"
+    )
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
-        if SERVICE_FIXTURES & set(getattr(item, "fixturenames", ())):
+        fixtures = set(getattr(item, "fixturenames", ()))
+        if SERVICE_FIXTURES & fixtures:
             item.add_marker(pytest.mark.service)
             item.add_marker(pytest.mark.slow)
+        for fixture in sorted(DATASET_FIXTURES.keys() & fixtures):
+            item.add_marker(pytest.mark.dataset(DATASET_FIXTURES[fixture]))
+        for marker in item.iter_markers("dataset"):
+            reason = missing_dataset(marker.args[0])
+            if reason is not None:
+                DATASET_SKIP_REASONS.add(reason)
+                item.add_marker(pytest.mark.skip(reason=reason))
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    if report.skipped and report.when == "setup" and isinstance(report.longrepr, tuple):
+        reason = report.longrepr[2].removeprefix("Skipped: ")
+        if reason in DATASET_SKIP_REASONS:
+            SKIPPED_DATASETS[reason] += 1
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    for reason, count in SKIPPED_DATASETS.items():
+        tests = "test" if count == 1 else "tests"
+        terminalreporter.write_line(f"{count} dataset {tests} skipped: {reason}", yellow=True)
 
 
 @pytest.fixture(scope="session")
 def tosca_dir() -> Path:
-    if not TOSCA_DIR.is_dir():
-        pytest.skip(f"TOSCA set not found at {TOSCA_DIR}")
-    return TOSCA_DIR
+    """The TOSCA set's directory (a test using it is marked ``dataset`` and skipped
+    when the set is absent)."""
+    return shared_dataset("tosca")
 
 
 @pytest.fixture(scope="session")

@@ -1,6 +1,6 @@
-"""The ``shapes`` command: ``describe``, ``evaluate``, ``robustness`` and ``tune`` (the
-engine and its evaluation harness), ``import`` and ``query`` (the service's HTTP client,
-:mod:`app.client`)."""
+"""The ``shapes`` command: ``describe``, ``evaluate``, ``robustness``, ``tune`` and
+``samples`` (the engine and its evaluation harness), ``import`` and ``query`` (the
+service's HTTP client, :mod:`app.client`)."""
 
 from __future__ import annotations
 
@@ -213,6 +213,18 @@ def _print_tuning(tuned: dict[str, Any], preset: Preset, folds: int) -> None:
         print(f"| {m} weight | " + " | ".join(f"{x:.5f}" for x in losses) + " |")
 
 
+def _samples(args: argparse.Namespace) -> int:
+    from .evaluation.samples import write_samples
+
+    try:
+        written = write_samples(args.out_dir)
+    except (OSError, RuntimeError) as exc:
+        print(f"shapes samples: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {len(written) - 1} meshes and {written[-1]}")
+    return 0
+
+
 def _add_collection_arguments(parser: argparse.ArgumentParser) -> None:
     """What ``evaluate``, ``robustness`` and ``tune`` take: a labelled collection, the preset,
     the worker processes, the descriptor cache and a per-class limit."""
@@ -305,6 +317,17 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", help="weights file to write (default: evaluation-out/PRESET/weights.json)"
     )
     tune.set_defaults(run=_tune)
+
+    samples = sub.add_parser(
+        "samples",
+        help="write the project's sample meshes (the examples/ folder) into a directory",
+        description="Generate the sample collection: five articulated figures (biped, "
+        "quadruped, spider, bird, hand) in four poses each, as <class>-<pose>.off.gz, and "
+        "labels.csv. Deterministic: it rewrites the repository's examples/ folder. Needs "
+        "the eval extra (MeshLab's decimation).",
+    )
+    samples.add_argument("out_dir", help="directory to write the meshes and labels.csv in")
+    samples.set_defaults(run=_samples)
 
     # The service's HTTP client (httpx only): shapes import, shapes query.
     from app.client import add_subcommands

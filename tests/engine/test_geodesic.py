@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.sparse.linalg as sla
 import trimesh
-from conftest import swept_tube
+from conftest import example, swept_tube
 
 from worker.engine.geodesic import (
     MAX_BANDWIDTH,
@@ -150,14 +150,14 @@ def test_farthest_point_samples_cover_the_surface_whatever_the_vertex_order():
         assert first[i] == np.argmax(distances[:, :i].min(axis=1))
 
 
-def test_a_wide_band_takes_superlu_and_a_tosca_resample_the_banded_factor(tosca_dir):
+def test_a_wide_band_takes_superlu_and_a_resampled_figure_the_banded_factor():
     """A CAD cylinder's cap fans (512 triangles round one vertex) leave the heat
     system's band wider than MAX_BANDWIDTH, where the banded factor costs far more
     than SuperLU (docs/benchmarks.md); the distances are then the reference path's."""
     c = trimesh.creation.cylinder(radius=0.5, height=2.0, sections=512)
     fan = clean_mesh(c.vertices, c.faces)
-    tosca = resample_mesh(load_mesh(tosca_dir / "wolf0.off.gz"), 2500)
-    for mesh, wide in ((fan, True), (tosca, False)):
+    figure = resample_mesh(load_mesh(example("quadruped-0")), 2500)
+    for mesh, wide in ((fan, True), (figure, False)):
         intrinsic, ops = surface_operators(mesh.vertices, mesh.faces)
         solver = HeatMethod(intrinsic, ops, 12.0, 2500)
         assert isinstance(solver._heat, sla.SuperLU if wide else BandedCholesky)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import robust_laplacian
 import trimesh
+from conftest import example
 
 from worker.engine.intrinsic import IntrinsicMesh, fem_operators, intrinsic_delaunay, mollify
 from worker.engine.mesh_io import load_mesh
@@ -46,8 +47,8 @@ def test_stiffness_equals_textbook_cotangent_laplacian():
 
 
 @pytest.fixture(scope="module")
-def decimated(tosca_dir):
-    return resample_mesh(load_mesh(tosca_dir / "wolf0.off.gz"), 1000)
+def decimated():
+    return resample_mesh(load_mesh(example("quadruped-0")), 1000)
 
 
 def test_flips_keep_the_surface_and_remove_obtuse_pairs(decimated):

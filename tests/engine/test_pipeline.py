@@ -14,7 +14,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import trimesh
-from conftest import bent_cylinder, helical_spring, random_rotation, with_a_far_half_copy
+from conftest import (
+    bent_cylinder,
+    example,
+    helical_spring,
+    random_rotation,
+    with_a_far_half_copy,
+)
 
 from worker.engine.compare import mean_normalized_manhattan
 from worker.engine.descriptor import ShapeDescriptor
@@ -22,7 +28,7 @@ from worker.engine.mesh_io import Mesh, clean_mesh, load_mesh
 from worker.engine.pipeline import describe_file, describe_mesh
 from worker.engine.presets import get_preset
 
-pytestmark = pytest.mark.slow  # whole pipelines on TOSCA and generated meshes
+pytestmark = pytest.mark.slow  # whole pipelines on the examples and generated meshes
 
 MODALITIES = ("gdm", "ddt", "spectrum")
 EXACT = 1e-6  # vertex permutation
@@ -36,17 +42,17 @@ def _difference(a: ShapeDescriptor, b: ShapeDescriptor, modality: str) -> float:
 
 
 @pytest.fixture(scope="module")
-def wolf(tosca_dir) -> Mesh:
-    return load_mesh(tosca_dir / "wolf0.off.gz")
+def figure() -> Mesh:
+    return load_mesh(example("quadruped-0"))
 
 
 @pytest.fixture(scope="module")
-def wolf_descriptor(wolf, small_preset) -> ShapeDescriptor:
-    return describe_mesh(wolf, small_preset)
+def figure_descriptor(figure, small_preset) -> ShapeDescriptor:
+    return describe_mesh(figure, small_preset)
 
 
-def test_descriptor_shapes_and_record(wolf_descriptor, small_preset):
-    d = wolf_descriptor
+def test_descriptor_shapes_and_record(figure_descriptor, small_preset):
+    d = figure_descriptor
     assert d.gdm.shape == (small_preset.gdm_singular_values,)
     assert d.ddt.shape == small_preset.ddt_core_shape
     assert d.spectrum.shape == (small_preset.spectrum_size,)
@@ -56,33 +62,33 @@ def test_descriptor_shapes_and_record(wolf_descriptor, small_preset):
     assert set(d.timings) == {"resample", "gdm", "eigen_ddt", "modal"}
 
 
-def test_vertex_permutation(wolf, wolf_descriptor, small_preset):
-    perm = np.random.default_rng(0).permutation(wolf.n_vertices)
-    permuted = Mesh(wolf.vertices[perm], np.argsort(perm)[wolf.faces])
+def test_vertex_permutation(figure, figure_descriptor, small_preset):
+    perm = np.random.default_rng(0).permutation(figure.n_vertices)
+    permuted = Mesh(figure.vertices[perm], np.argsort(perm)[figure.faces])
     d = describe_mesh(permuted, small_preset)
     for m in MODALITIES:
-        assert _difference(wolf_descriptor, d, m) <= EXACT
+        assert _difference(figure_descriptor, d, m) <= EXACT
 
 
 @pytest.mark.parametrize("scale", [1e-30, 0.2, 1.0, 5.0, 1e30])
-def test_rigid_motion_and_scale(wolf, wolf_descriptor, small_preset, scale):
+def test_rigid_motion_and_scale(figure, figure_descriptor, small_preset, scale):
     """The canonical frame makes them exact: the same surface in other units or
     another orientation is the same descriptor (before it, quadric decimation picked
     other vertices: up to 3% at x5, 8% at 1e30)."""
     rng = np.random.default_rng(1)
-    rotated = wolf.vertices @ random_rotation(rng).T
-    moved = Mesh((rotated + [3.0, -2.0, 7.0]) * scale, wolf.faces)
+    rotated = figure.vertices @ random_rotation(rng).T
+    moved = Mesh((rotated + [3.0, -2.0, 7.0]) * scale, figure.faces)
     d = describe_mesh(moved, small_preset)
     for m in MODALITIES:
-        assert _difference(wolf_descriptor, d, m) <= RIGID
+        assert _difference(figure_descriptor, d, m) <= RIGID
 
 
-def test_same_surface_at_twice_the_resolution(wolf, wolf_descriptor, small_preset):
-    finer = clean_mesh(*trimesh.remesh.subdivide(wolf.vertices, wolf.faces))
-    assert finer.n_vertices > 3 * wolf.n_vertices
+def test_same_surface_at_twice_the_resolution(figure, figure_descriptor, small_preset):
+    finer = clean_mesh(*trimesh.remesh.subdivide(figure.vertices, figure.faces))
+    assert finer.n_vertices > 3 * figure.n_vertices
     d = describe_mesh(finer, small_preset)
     for m in MODALITIES:
-        assert _difference(wolf_descriptor, d, m) <= SAME_SURFACE
+        assert _difference(figure_descriptor, d, m) <= SAME_SURFACE
 
 
 def test_bent_cylinder_is_closer_than_a_different_shape(small_preset):
@@ -97,9 +103,9 @@ def test_bent_cylinder_is_closer_than_a_different_shape(small_preset):
     assert _difference(straight, bent, "gdm") < 0.05
 
 
-def test_descriptor_round_trips(wolf_descriptor):
-    partial = replace(wolf_descriptor, kept_area_fraction=0.625)
-    for original in (wolf_descriptor, partial):
+def test_descriptor_round_trips(figure_descriptor):
+    partial = replace(figure_descriptor, kept_area_fraction=0.625)
+    for original in (figure_descriptor, partial):
         for restored in (
             ShapeDescriptor.from_json(original.to_json()),
             ShapeDescriptor.from_npz_bytes(original.to_npz_bytes()),
@@ -110,25 +116,25 @@ def test_descriptor_round_trips(wolf_descriptor):
             assert restored.timings == original.timings
             assert restored.kept_area_fraction == original.kept_area_fraction
     # A descriptor stored before the kept share was recorded reads as not known.
-    old = wolf_descriptor.to_json()
+    old = figure_descriptor.to_json()
     del old["kept_area_fraction"]
     assert ShapeDescriptor.from_json(old).kept_area_fraction is None
 
 
-def test_describe_file_times_every_stage(tosca_dir, small_preset):
-    d = describe_file(tosca_dir / "wolf1.off.gz", small_preset)
+def test_describe_file_times_every_stage(small_preset):
+    d = describe_file(example("quadruped-1"), small_preset)
     assert list(d.timings) == ["load", "resample", "gdm", "eigen_ddt", "modal", "total"]
     assert d.timings["total"] == pytest.approx(sum(v for k, v in d.timings.items() if k != "total"))
     assert d.kept_area_fraction == 1.0  # one connected surface
 
 
-def test_a_file_of_separate_parts_describes_its_largest_and_says_so(tosca_dir, small_preset):
-    """wolf0 with a far, smaller copy of itself in the same file: the wolf is what is
-    described (the same descriptor as the wolf's own file), and the descriptor says
+def test_a_file_of_separate_parts_describes_its_largest_and_says_so(small_preset):
+    """quadruped-0 with a far, smaller copy of itself in the same file: the quadruped is
+    what is described (the same descriptor as its own file), and the descriptor says
     which share of the file's surface that is."""
-    wolf, both = with_a_far_half_copy(tosca_dir / "wolf0.off.gz")
+    mesh, both = with_a_far_half_copy(example("quadruped-0"))
     d = describe_file(both, small_preset, "two.off")
-    alone = describe_file(wolf.export(file_type="off").encode(), small_preset, "one.off")
+    alone = describe_file(mesh.export(file_type="off").encode(), small_preset, "one.off")
     assert d.kept_area_fraction == pytest.approx(0.8, rel=1e-6)  # 1 / (1 + 0.5^2)
     for m in MODALITIES:
         assert _difference(d, alone, m) < 1e-6

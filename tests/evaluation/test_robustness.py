@@ -8,9 +8,10 @@ import shutil
 
 import numpy as np
 import pytest
+from conftest import EXAMPLES, example
 
 from worker.engine.presets import Preset
-from worker.evaluation.datasets import pose_set, shared_dataset
+from worker.evaluation.datasets import pose_set
 from worker.evaluation.robustness import (
     PRESET_ROW,
     cross_resolution,
@@ -109,18 +110,15 @@ def test_cross_resolution_finds_a_pose_unless_the_resolution_moves_it_past_anoth
 
 @pytest.mark.slow  # describes 4 meshes, 2 variants each, and 2 poses
 def test_run_writes_the_report_and_rotation_costs_nothing(tmp_path, surface_preset):
-    tosca = shared_dataset("tosca")
-    if not tosca.is_dir():
-        pytest.skip(f"TOSCA set not found at {tosca}")
     labels = tmp_path / "labels.csv"
     labels.write_text(
-        "file,class\nwolf0.off.gz,wolf\nwolf1.off.gz,wolf\n"
-        "centaur0.off.gz,centaur\ncentaur1.off.gz,centaur\n"
+        "file,class\nquadruped-0.off.gz,quadruped\nquadruped-1.off.gz,quadruped\n"
+        "biped-0.off.gz,biped\nbiped-1.off.gz,biped\n"
     )
-    poses = tmp_path / "wolves"
+    poses = tmp_path / "quadrupeds"
     poses.mkdir()
-    for name in ("wolf2.off.gz", "wolf0.off.gz"):
-        shutil.copy(tosca / name, poses / name)
+    for name in ("quadruped-2", "quadruped-0"):
+        shutil.copy(example(name), poses)
     preset = dataclasses.replace(
         surface_preset,
         name="test-robust-run",
@@ -128,7 +126,7 @@ def test_run_writes_the_report_and_rotation_costs_nothing(tmp_path, surface_pres
         fused_modalities=("gdm", "ddt", "spectrum"),
     )
     report = run_robustness(
-        tosca,
+        EXAMPLES,
         labels,
         preset,
         out_dir=tmp_path / "out",
@@ -145,12 +143,12 @@ def test_run_writes_the_report_and_rotation_costs_nothing(tmp_path, surface_pres
         assert rotated["gap"] < 1e-4 and rotated["self_retrieval"] == 1.0
         assert report["tessellation"][row]["variants"]["decimated-50"]["count"] == 4
     assert report["poses"]["scores"][PRESET_ROW]["poses"] == 2
-    # Both poses remeshed at two resolutions; wolf0 and wolf2 differ by more than that.
+    # Both poses remeshed at two resolutions; quadruped-0 and -2 differ by more than that.
     across = report["poses"]["cross_resolution"]
     assert across[PRESET_ROW]["poses"] == 2 and across[PRESET_ROW]["rank1"] == 1.0
     markdown = (tmp_path / "out" / "robustness.md").read_text()
     assert "Cross-resolution pose retrieval (2 poses" in markdown
-    assert [m.name for m in pose_set(poses)] == ["wolf0.off.gz", "wolf2.off.gz"]
+    assert [m.name for m in pose_set(poses)] == ["quadruped-0.off.gz", "quadruped-2.off.gz"]
     assert report["failures"] == {}
     # The same meshes rotated; decimated to half the faces, about half the vertices.
     vertices = report["input_vertices"]

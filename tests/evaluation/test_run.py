@@ -1,5 +1,5 @@
-"""``shapes evaluate`` end to end on a few small TOSCA meshes: the report, its files,
-the descriptor cache in use, meshes left out."""
+"""``shapes evaluate`` end to end on a few of the bundled examples: the report, its
+files, the descriptor cache in use, meshes left out."""
 
 from __future__ import annotations
 
@@ -9,35 +9,36 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from conftest import EXAMPLES, example
 
 from worker.cli import main
 from worker.engine.presets import PRESETS, Preset
 from worker.evaluation import compute
 from worker.evaluation.cache import file_sha256
-from worker.evaluation.datasets import LabeledMesh, read_labels, shared_dataset
+from worker.evaluation.datasets import LabeledMesh, read_labels
 from worker.evaluation.run import run_evaluation
 from worker.evaluation.scoring import BASELINE, COLUMNS, ROWS
 
 pytestmark = pytest.mark.slow  # shapes evaluate end to end
 
-TOSCA = shared_dataset("tosca")
-# The 8 smallest files of three classes (4.3k to 19k vertices).
+# 8 examples of three classes.
 SUBSET = {
-    "wolf0.off.gz": "wolf",
-    "wolf1.off.gz": "wolf",
-    "wolf2.off.gz": "wolf",
-    "centaur0.off.gz": "centaur",
-    "centaur3.off.gz": "centaur",
-    "centaur5.off.gz": "centaur",
-    "horse0.off.gz": "horse",
-    "horse6.off.gz": "horse",
+    "quadruped-0.off.gz": "quadruped",
+    "quadruped-1.off.gz": "quadruped",
+    "quadruped-2.off.gz": "quadruped",
+    "biped-0.off.gz": "biped",
+    "biped-2.off.gz": "biped",
+    "biped-3.off.gz": "biped",
+    "hand-0.off.gz": "hand",
+    "hand-2.off.gz": "hand",
 }
 # Test-only preset: the paper's method at 500 vertices keeps the run to seconds.
 EVAL_PRESET = Preset(name="test-eval-small", version=0, n_vertices=500, n_eigenpairs=100)
-# Wolves, centaurs and horses are far apart; even at 500 vertices the paper's GDM and
-# the preset's fusion should find a same-class nearest neighbour for at least 7 of 8.
-MIN_EASY_NN = 7 / 8
-MAX_EASY_EER = 0.3
+# The three figures are far apart: even at 500 vertices the paper's GDM and the preset's
+# fusion find a same-class nearest neighbour for all 8 and put every pair of one figure
+# nearer than any pair of two (measured: NN 100%, EER 0).
+MIN_EASY_NN = 1.0
+MAX_EASY_EER = 0.0
 
 
 def write_labels(path: Path, rows: dict[str, str]) -> Path:
@@ -47,13 +48,11 @@ def write_labels(path: Path, rows: dict[str, str]) -> Path:
 
 @pytest.fixture(scope="module")
 def first_run(tmp_path_factory):
-    """``shapes evaluate`` on the TOSCA subset with 2 worker processes, cold cache."""
-    if not TOSCA.is_dir():
-        pytest.skip(f"TOSCA set not found at {TOSCA}")
+    """``shapes evaluate`` on the examples' subset with 2 worker processes, cold cache."""
     tmp = tmp_path_factory.mktemp("evaluate")
     labels = write_labels(tmp / "labels.csv", SUBSET)
     cache, out = tmp / "cache", tmp / "out"
-    argv = ["evaluate", str(TOSCA), "--labels", str(labels), "--preset", EVAL_PRESET.name]
+    argv = ["evaluate", str(EXAMPLES), "--labels", str(labels), "--preset", EVAL_PRESET.name]
     argv += ["--jobs", "2", "--cache", str(cache)]
     with pytest.MonkeyPatch.context() as mp:
         mp.setitem(PRESETS, EVAL_PRESET.name, EVAL_PRESET)
@@ -81,9 +80,9 @@ def test_cli_writes_report_files(first_run):
     assert report["command"].startswith("shapes evaluate ")
     assert report["preset"]["name"] == EVAL_PRESET.name
     assert report["failures"] == {}
-    assert report["class_sizes"] == {"centaur": 3, "horse": 2, "wolf": 3}
+    assert report["class_sizes"] == {"biped": 3, "hand": 2, "quadruped": 3}
     gallery = [o["file"] for o in report["objects"] if o["gallery"]]
-    assert gallery == ["centaur0.off.gz", "horse0.off.gz", "wolf0.off.gz"]
+    assert gallery == ["biped-0.off.gz", "hand-0.off.gz", "quadruped-0.off.gz"]
     assert (
         "first instance of each class in natural file-name order"
         in (report["protocol"]["identification"])
@@ -159,8 +158,8 @@ def test_only_missing_entries_are_computed(first_run, tmp_path, monkeypatch):
         target = cache / entry.parent.name / entry.name
         target.parent.mkdir(parents=True, exist_ok=True)
         target.write_bytes(entry.read_bytes())
-    wolf1 = file_sha256(TOSCA / "wolf1.off.gz")
-    next(cache.glob(f"*/{wolf1}.descriptor.npz")).unlink()
+    second = file_sha256(example("quadruped-1"))
+    next(cache.glob(f"*/{second}.descriptor.npz")).unlink()
 
     calls = []
     real = compute._describe_job
@@ -170,9 +169,9 @@ def test_only_missing_entries_are_computed(first_run, tmp_path, monkeypatch):
         return real(path, sha256, preset, variant, need_descriptor, need_baseline, stored)
 
     monkeypatch.setattr(compute, "_describe_job", counting)
-    meshes = read_labels(first_run["tmp"] / "labels.csv", TOSCA)
+    meshes = read_labels(first_run["tmp"] / "labels.csv", EXAMPLES)
     computed = compute.compute_descriptors(meshes, EVAL_PRESET, cache, jobs=1, progress=False)
-    assert calls == [("wolf1.off.gz", None, True, False)]
+    assert calls == [("quadruped-1.off.gz", None, True, False)]
     assert computed.stats["from_cache"] == 7 and computed.stats["computed"] == 1
 
 
@@ -182,15 +181,14 @@ def test_a_remeshed_variant_is_made_once_and_described_again_from_its_stored_mes
     """MeshLab's remeshing is most of the robustness protocol's time: its meshes are
     stored, so a changed pipeline describes the same variant meshes without remaking
     them, and gets the very descriptors it would from a freshly made one."""
-    if not TOSCA.is_dir():
-        pytest.skip(f"TOSCA set not found at {TOSCA}")
-    meshes = [LabeledMesh(name="wolf0.off.gz", label="wolf", path=TOSCA / "wolf0.off.gz")]
+    path = example("quadruped-0")
+    meshes = [LabeledMesh(name=path.name, label="quadruped", path=path)]
     cache = tmp_path / "cache"
     made = compute.compute_descriptors(
         meshes, EVAL_PRESET, cache, jobs=1, progress=False, variant="remeshed-8k"
     )
     stored = list(cache.glob("variants-*/*.remeshed-8k.npz"))
-    assert [p.name for p in stored] == [f"{file_sha256(TOSCA / 'wolf0.off.gz')}.remeshed-8k.npz"]
+    assert [p.name for p in stored] == [f"{file_sha256(path)}.remeshed-8k.npz"]
 
     def must_not_remesh(*args, **kwargs):
         raise AssertionError("a stored variant mesh was made again")

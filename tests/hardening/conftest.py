@@ -1,8 +1,8 @@
 """A real service with small limits for the hardening tests (same machinery as tests/service).
 
 The service runs with a 10,000-face limit and a 1 MB upload limit, two real
-worker processes and an Alembic-built SQLite database, and has two TOSCA
-meshes enrolled before any hostile input arrives, so tests can check that
+worker processes and an Alembic-built SQLite database, and has two of the bundled
+examples enrolled before any hostile input arrives, so tests can check that
 nothing about them changes.
 """
 
@@ -16,8 +16,8 @@ import pytest
 from benchmarks.common import Service
 from tests.service.conftest import migrated_service, running
 
-MAX_FACES = 10_000  # over wolf0's 8,684 faces
-ENROLLED = {"wolf0": "wolf", "wolf1": "wolf"}
+MAX_FACES = 10_000  # over the examples' 4,996 faces
+ENROLLED = {"quadruped-0": "quadruped", "quadruped-1": "quadruped"}
 
 
 def make_service(tmp_path_factory, name: str, **env: str) -> Service:

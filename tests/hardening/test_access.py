@@ -5,8 +5,9 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import pytest
+from conftest import example
 
-from benchmarks.common import TOSCA, Service
+from benchmarks.common import Service
 
 from .conftest import make_service
 
@@ -34,11 +35,8 @@ def _unauthorized(response, sentence: str) -> None:
     assert response.headers["www-authenticate"] == "X-API-Key"
 
 
-WOLF = (TOSCA / "wolf0.off.gz").read_bytes()
-
-
 def test_every_write_needs_the_key_and_reads_do_not(guarded: Service):
-    files = {"file": ("wolf0.off.gz", WOLF)}
+    files = {"file": ("quadruped-0.off.gz", example("quadruped-0").read_bytes())}
     writes = [
         ("POST", "/meshes", {"files": files}),
         ("POST", "/query", {"files": files}),

@@ -27,8 +27,9 @@ def crashy(tmp_path_factory) -> Iterator[Service]:
     try:
         svc.start_worker()
         svc.start_api()
-        for name in ("wolf0", "wolf1"):
-            assert svc.wait_mesh(svc.upload(name, "wolf").json()["id"])["status"] == "ready"
+        for name in ("quadruped-0", "quadruped-1"):
+            created = svc.upload(name, "quadruped")
+            assert svc.wait_mesh(created.json()["id"])["status"] == "ready"
         yield svc
     finally:
         svc.close()
@@ -92,7 +93,7 @@ def test_api_killed_mid_upload_leaves_nothing_half_written(crashy: Service):
 
 
 def test_api_killed_right_after_accepting_loses_no_upload(crashy: Service):
-    created = crashy.upload("wolf2", "wolf")
+    created = crashy.upload("quadruped-2", "quadruped")
     assert created.status_code == 202
     _kill_api(crashy)
     crashy.start_api()
@@ -113,6 +114,6 @@ def test_a_damaged_index_is_rebuilt_from_the_database_at_start(crashy: Service, 
             path.unlink()
     crashy.start_api()
     _index_agrees_with_the_database(crashy)
-    wolf = _db(crashy, "SELECT id FROM meshes WHERE name = 'wolf0'")[0][0]
-    similar = crashy.client.post(f"/meshes/{wolf}/similar", params={"k": 1}).json()
-    assert similar["matches"][0]["label"] == "wolf"
+    first = _db(crashy, "SELECT id FROM meshes WHERE name = 'quadruped-0'")[0][0]
+    similar = crashy.client.post(f"/meshes/{first}/similar", params={"k": 1}).json()
+    assert similar["matches"][0]["label"] == "quadruped"

@@ -147,7 +147,7 @@ def test_oversized_bodies_are_refused_while_streaming(hardened: Service, enrolle
 
 @pytest.mark.parametrize("path", ["/meshes", "/query"])
 def test_malformed_requests(hardened: Service, path):
-    no_file = hardened.client.post(path, files={"label": (None, "wolf")})
+    no_file = hardened.client.post(path, files={"label": (None, "quadruped")})
     _error(no_file, 422, ("missing_file",))
     nothing = hardened.client.post(
         path, content=b"--b--\r\n", headers={"content-type": "multipart/form-data; boundary=b"}

@@ -26,12 +26,12 @@ def limited(tmp_path_factory) -> Iterator[Service]:
 
 def test_a_job_over_its_limit_fails_and_the_worker_lives_on(limited: Service):
     worker = limited.workers["enroll"][0]
-    created = limited.upload("wolf0", "wolf")
+    created = limited.upload("quadruped-0", "quadruped")
     mesh = limited.wait_mesh(created.json()["id"])
     assert mesh["status"] == "failed" and mesh["error"] == "describe_timeout", mesh
     assert "limit of 0.1 seconds" in mesh["detail"]
     job = limited.client.get(mesh["links"]["job"]).json()
     assert job["enqueues"] == 1  # not retried
-    query = limited.query("wolf1")
+    query = limited.query("quadruped-1")
     assert query.status_code == 422 and query.json()["error"] == "describe_timeout"
     assert worker.poll() is None  # the same worker process is still serving

@@ -67,7 +67,7 @@ def fuzzed(tmp_path_factory) -> Iterator[Service]:
         svc.start_worker("query")
         svc.start_api()
         svc.client.headers["X-API-Key"] = KEY
-        created = svc.upload("wolf0", "wolf")
+        created = svc.upload("quadruped-0", "quadruped")
         assert svc.wait_mesh(created.json()["id"])["status"] == "ready"
         yield svc
     finally:
@@ -107,7 +107,7 @@ def test_stateful_sequences_follow_the_links_without_errors(fuzzed: Service):
     schema = schemathesis.openapi.from_url(f"{fuzzed.url}/openapi.json")
     links = schema.statistic.transitions.total
     assert links >= 10, "POST /meshes (200, 202) must link to the mesh operations and its job"
-    enrolled = fuzzed.upload("wolf1", "wolf")  # more than one mesh to list, search, delete
+    enrolled = fuzzed.upload("quadruped-1", "quadruped")  # more than one to list, search, delete
     assert fuzzed.wait_mesh(enrolled.json()["id"])["status"] == "ready"
 
     answered: Counter[tuple[str, int]] = Counter()  # (operation, status) -> responses

@@ -9,31 +9,24 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import EXAMPLES, example
 
 from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.pipeline import describe_file
 from worker.engine.presets import get_preset
-from worker.evaluation.datasets import shared_dataset
 from worker.jobs.limits import describe_limited
 from worker.jobs.previews import IMPORTS as PREVIEW_IMPORTS
 
-pytestmark = pytest.mark.slow  # each describes a TOSCA mesh in a fresh child process
+pytestmark = pytest.mark.slow  # each describes a mesh in a fresh child process
 
-TOSCA = shared_dataset("tosca")
-WOLF = TOSCA / "wolf0.off.gz"
+MESH = example("quadruped-0")
 GB = 1024**3
-
-
-@pytest.fixture(autouse=True)
-def _needs_tosca() -> None:
-    if not WOLF.is_file():
-        pytest.skip(f"TOSCA set not found at {TOSCA}")
 
 
 def test_within_the_limits_the_descriptor_and_the_previews_come_back():
     outcome = describe_limited(
-        WOLF,
-        WOLF.name,
+        MESH,
+        MESH.name,
         "smeets2010-shrec",
         max_faces=10**6,
         time_limit=120,
@@ -47,19 +40,19 @@ def test_within_the_limits_the_descriptor_and_the_previews_come_back():
 
 def test_a_query_gets_the_same_descriptor_and_its_preview_but_no_thumbnail():
     outcome = describe_limited(
-        WOLF, WOLF.name, "smeets2010-shrec", max_faces=10**6, time_limit=120,
+        MESH, MESH.name, "smeets2010-shrec", max_faces=10**6, time_limit=120,
         memory_limit_bytes=4 * GB, with_thumbnail=False,
     )  # fmt: skip
     assert outcome.preview is not None and outcome.thumbnail is None
     described = ShapeDescriptor.from_npz_bytes(outcome.descriptor)
-    direct = describe_file(WOLF, get_preset("smeets2010-shrec"))
+    direct = describe_file(MESH, get_preset("smeets2010-shrec"))
     for modality in ("gdm", "ddt", "spectrum"):
         np.testing.assert_array_equal(getattr(described, modality), getattr(direct, modality))
 
 
 def test_over_the_time_limit_the_job_fails_with_a_sentence():
     outcome = describe_limited(
-        WOLF, WOLF.name, "smeets2010-shrec", max_faces=10**6, time_limit=0.5, memory_limit_bytes=0
+        MESH, MESH.name, "smeets2010-shrec", max_faces=10**6, time_limit=0.5, memory_limit_bytes=0
     )
     assert outcome.descriptor is None and outcome.code == "describe_timeout"
     assert "longer than this service's limit of 0.5 seconds" in str(outcome.message)
@@ -67,7 +60,7 @@ def test_over_the_time_limit_the_job_fails_with_a_sentence():
 
 def test_over_the_memory_limit_the_job_fails_with_a_sentence():
     outcome = describe_limited(
-        WOLF, WOLF.name, "smeets2010-shrec", max_faces=10**6, time_limit=120,
+        MESH, MESH.name, "smeets2010-shrec", max_faces=10**6, time_limit=120,
         memory_limit_bytes=300 * 1024**2,
     )  # fmt: skip
     assert outcome.descriptor is None and outcome.code == "describe_out_of_memory", outcome
@@ -76,12 +69,12 @@ def test_over_the_memory_limit_the_job_fails_with_a_sentence():
 
 def test_a_mesh_error_keeps_its_code_and_a_crash_is_raised_for_a_retry():
     outcome = describe_limited(
-        WOLF, WOLF.name, "smeets2010-shrec", max_faces=10, time_limit=30, memory_limit_bytes=0
+        MESH, MESH.name, "smeets2010-shrec", max_faces=10, time_limit=30, memory_limit_bytes=0
     )
     assert outcome.code == "too_many_faces" and "the limit is 10" in str(outcome.message)
     with pytest.raises(RuntimeError, match="FileNotFoundError"):
         describe_limited(
-            TOSCA / "missing.off.gz", "m.off.gz", "smeets2010-shrec", max_faces=10,
+            EXAMPLES / "missing.off.gz", "m.off.gz", "smeets2010-shrec", max_faces=10,
             time_limit=30, memory_limit_bytes=0,
         )  # fmt: skip
 

@@ -47,21 +47,21 @@ def service(tmp_path_factory) -> Iterator[Service]:
 
 
 GALLERY = {
-    "wolf0": "wolf",
-    "wolf1": "wolf",
-    "centaur0": "centaur",
-    "centaur1": "centaur",
-    "horse0": "horse",
-    "horse5": "horse",
+    "quadruped-0": "quadruped",
+    "quadruped-1": "quadruped",
+    "biped-0": "biped",
+    "biped-1": "biped",
+    "hand-0": "hand",
+    "hand-1": "hand",
 }
 
 
 @pytest.fixture(scope="session")
 def gallery(service: Service) -> dict[str, int]:
-    """The small TOSCA gallery, enrolled and ready: name -> mesh id."""
+    """A small gallery of the bundled examples, enrolled and ready: name -> mesh id."""
     ids = {}
     for name, label in GALLERY.items():
-        response = service.upload(name, label, metadata='{"source": "TOSCA"}')
+        response = service.upload(name, label, metadata='{"source": "examples"}')
         assert response.status_code in (200, 202), response.text
         ids[name] = response.json()["id"]
     for name, mesh_id in ids.items():

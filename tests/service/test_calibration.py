@@ -6,25 +6,26 @@ from collections.abc import Iterator
 from itertools import combinations
 
 import pytest
+from conftest import example
 
-from benchmarks.common import TOSCA, Service
+from benchmarks.common import Service
 
 from .conftest import migrated_service, running
 
-#: Four classes, 3-4 poses each: 18 genuine and 48 impostor pairs once all are ready.
+#: Four classes, 1-4 poses each: 12 genuine and 43 impostor pairs once all are ready.
+#: Not enrolled: hand-3 and biped-3 (other poses of enrolled classes), the spiders.
 LABELLED = {
-    "wolf0": "wolf",
-    "wolf1": "wolf",
-    "wolf2": "wolf",
-    "centaur0": "centaur",
-    "centaur1": "centaur",
-    "centaur2": "centaur",
-    "centaur3": "centaur",
-    "horse0": "horse",
-    "horse5": "horse",
-    "horse6": "horse",
-    "horse7": "horse",
-    "cat0": "cat",
+    "quadruped-0": "quadruped",
+    "quadruped-1": "quadruped",
+    "quadruped-2": "quadruped",
+    "quadruped-3": "quadruped",
+    "biped-0": "biped",
+    "biped-1": "biped",
+    "biped-2": "biped",
+    "hand-0": "hand",
+    "hand-1": "hand",
+    "hand-2": "hand",
+    "bird-0": "bird",
 }
 
 
@@ -54,15 +55,15 @@ def enroll(svc: Service, names: dict[str, str]) -> dict[str, int]:
 
 
 def test_too_few_labelled_pairs_is_a_409_with_a_sentence(verifier: Service):
-    enroll(verifier, {"wolf0": "wolf", "centaur0": "centaur"})
+    enroll(verifier, {"quadruped-0": "quadruped", "biped-0": "biped"})
     response = verifier.client.get("/calibration")
     assert response.status_code == 409
     body = response.json()
     assert body["error"] == "not_calibrated" and "at least 10 of each" in body["detail"]
-    refused = verifier.client.post("/verify", files=form(mesh_id="1", claim_label="centaur"))
+    refused = verifier.client.post("/verify", files=form(mesh_id="1", claim_label="biped"))
     assert refused.status_code == 409 and refused.json()["error"] == "not_calibrated"
-    assert verifier.query("wolf1", far="0.01").json()["error"] == "not_calibrated"
-    uncalibrated = verifier.query("wolf1", k=1).json()
+    assert verifier.query("quadruped-1", far="0.01").json()["error"] == "not_calibrated"
+    uncalibrated = verifier.query("quadruped-1", k=1).json()
     assert uncalibrated["matches"][0]["confidence"] is None
 
 
@@ -88,37 +89,37 @@ def test_calibration_counts_every_labelled_pair(verifier: Service, calibrated):
 
 
 def test_verify_answers_yes_for_the_same_object_and_no_for_another(verifier: Service, calibrated):
-    with open(TOSCA / "horse10.off.gz", "rb") as fh:  # another pose, not enrolled
+    with open(example("hand-3"), "rb") as fh:  # another pose, not enrolled
         same = verifier.client.post(
             "/verify",
-            files={"file": ("horse10.off.gz", fh)},
-            data={"claim_label": "horse", "far": "0.05"},
+            files={"file": ("hand-3.off.gz", fh)},
+            data={"claim_label": "hand", "far": "0.05"},
         ).json()
     assert same["same"] is True and same["score"] <= same["threshold"]
-    assert same["candidates"] == 4 and same["probe"] == "upload"
+    assert same["candidates"] == 3 and same["probe"] == "upload"
     assert same["estimated_far"] <= 0.05 and set(same["scores"]) == {"gdm", "ddt", "spectrum"}
-    probe, claim = str(calibrated["wolf2"]), str(calibrated["centaur1"])
+    probe, claim = str(calibrated["quadruped-2"]), str(calibrated["biped-1"])
     different = verifier.client.post("/verify", files=form(mesh_id=probe, claim_id=claim)).json()
     assert different["same"] is False and different["far"] == 0.01
     assert different["confidence"] < same["confidence"]
 
 
 def test_open_set_query_rejects_a_class_absent_from_the_gallery(verifier: Service, calibrated):
-    absent = verifier.query("gorilla1", k=3, far="0.01").json()
+    absent = verifier.query("spider-0", k=3, far="0.01").json()
     assert absent["far"] == 0.01 and absent["threshold"] is not None
     assert [m["accepted"] for m in absent["matches"]] == [False, False, False]
-    present = verifier.query("centaur5", k=1).json()
-    assert present["matches"][0]["label"] == "centaur"
+    present = verifier.query("biped-3", k=1).json()
+    assert present["matches"][0]["label"] == "biped"
     assert 0.0 <= present["matches"][0]["confidence"] <= 1.0
     assert present["matches"][0]["accepted"] is None  # no far asked
-    summed = verifier.query("centaur5", k=1, fusion="sum").json()
+    summed = verifier.query("biped-3", k=1, fusion="sum").json()
     assert summed["matches"][0]["confidence"] is None  # another fusion is not calibrated
 
 
 def test_deleted_shapes_leave_the_calibration(verifier: Service, calibrated):
     before = verifier.client.get("/calibration").json()
-    assert verifier.client.delete(f"/meshes/{calibrated['cat0']}").status_code == 204
+    assert verifier.client.delete(f"/meshes/{calibrated['bird-0']}").status_code == 204
     after = verifier.client.get("/calibration").json()
     assert after["labelled_shapes"] == before["labelled_shapes"] - 1
-    labels = [label for name, label in LABELLED.items() if name != "cat0"]
+    labels = [label for name, label in LABELLED.items() if name != "bird-0"]
     assert (after["genuine_pairs"], after["impostor_pairs"]) == pair_counts(labels)

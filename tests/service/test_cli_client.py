@@ -10,9 +10,9 @@ import sys
 from collections.abc import Iterator
 
 import pytest
-from conftest import with_a_far_half_copy
+from conftest import EXAMPLES, example, with_a_far_half_copy
 
-from benchmarks.common import REPO, TOSCA, Service
+from benchmarks.common import REPO, Service
 
 from .conftest import migrated_service, running
 
@@ -35,13 +35,15 @@ def shapes(svc: Service, *args: str) -> subprocess.CompletedProcess[str]:
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory):
-    """Two TOSCA meshes, a broken file and a file that is not a mesh, with labels."""
+    """Two examples, a broken file and a file that is not a mesh, with labels."""
     root = tmp_path_factory.mktemp("import")
-    for name in ("wolf0.off.gz", "centaur0.off.gz"):
-        shutil.copy(TOSCA / name, root / name)
+    for name in ("quadruped-0", "biped-0"):
+        shutil.copy(example(name), root)
     (root / "broken.off").write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n")  # a face, but no third vertex
     (root / "notes.txt").write_text("not a mesh: skipped")
-    (root / "labels.csv").write_text("file,class\nwolf0.off.gz,wolf\ncentaur0.off.gz,centaur\n")
+    (root / "labels.csv").write_text(
+        "file,class\nquadruped-0.off.gz,quadruped\nbiped-0.off.gz,biped\n"
+    )
     return root
 
 
@@ -53,7 +55,10 @@ def test_import_reports_the_broken_file_and_resumes(served: Service, folder):
     assert "unreadable_mesh" in reason  # the service's code and sentence
     assert "upload" in first.stderr and "ETA" in first.stderr  # the progress bars
     listed = served.client.get("/meshes", params={"status": "ready"}).json()["items"]
-    assert {(m["name"], m["label"]) for m in listed} == {("wolf0", "wolf"), ("centaur0", "centaur")}
+    assert {(m["name"], m["label"]) for m in listed} == {
+        ("quadruped-0", "quadruped"),
+        ("biped-0", "biped"),
+    }
 
     again = shapes(served, "import", str(folder), "--labels", str(folder / "labels.csv"))
     # Nothing uploaded twice; the file that failed before is reported again.
@@ -66,11 +71,11 @@ def _default_sigint() -> None:
 
 
 def test_an_interrupted_import_resumes_and_enrolls_nothing_twice(tmp_path_factory):
-    # No descriptor worker: uploads only queue jobs, and all of TOSCA takes seconds.
-    svc = migrated_service(tmp_path_factory, "interrupt", SHAPES_MAX_UPLOAD_BYTES=str(8 << 20))
+    # No descriptor worker: uploads only queue jobs, and all the examples take seconds.
+    svc = migrated_service(tmp_path_factory, "interrupt")
     with running(svc, workers=0):
-        files = sorted(TOSCA.glob("*.off.gz"))
-        command = [sys.executable, "-m", "worker.cli", "import", str(TOSCA), "--url", svc.url]
+        files = sorted(EXAMPLES.glob("*.off.gz"))
+        command = [sys.executable, "-m", "worker.cli", "import", str(EXAMPLES), "--url", svc.url]
         first = subprocess.Popen(
             [*command, "--concurrency", "1"],
             cwd=REPO,
@@ -82,7 +87,7 @@ def test_an_interrupted_import_resumes_and_enrolls_nothing_twice(tmp_path_factor
             preexec_fn=_default_sigint,
         )
         # Interrupt right after the third upload, as its progress line says: polling the
-        # service instead raced a fast machine, which had sent all 83 before the signal.
+        # service instead raced a fast machine, which had sent all of them before the signal.
         assert first.stderr is not None
         progress = []
         for line in first.stderr:
@@ -114,33 +119,33 @@ def test_an_interrupted_import_resumes_and_enrolls_nothing_twice(tmp_path_factor
 
 
 def test_query_prints_the_ranked_matches(served: Service, folder):
-    table = shapes(served, "query", str(TOSCA / "wolf1.off.gz"), "-k", "2")
+    table = shapes(served, "query", str(example("quadruped-1")), "-k", "2")
     assert table.returncode == 0, table.stderr
     lines = table.stdout.splitlines()
     assert lines[1].split()[:4] == ["rank", "name", "label", "score"]
-    assert lines[2].split()[:3] == ["1", "wolf0", "wolf"]
-    body = json.loads(shapes(served, "query", str(TOSCA / "wolf1.off.gz"), "--json").stdout)
-    assert body["matches"][0]["name"] == "wolf0"
+    assert lines[2].split()[:3] == ["1", "quadruped-0", "quadruped"]
+    body = json.loads(shapes(served, "query", str(example("quadruped-1")), "--json").stdout)
+    assert body["matches"][0]["name"] == "quadruped-0"
 
 
 def test_an_unreachable_service_is_a_sentence_not_a_traceback(tmp_path):
     down = Service.__new__(Service)
     down.url = "http://127.0.0.1:9"  # nothing listens on the discard port
-    result = shapes(down, "query", str(TOSCA / "wolf1.off.gz"))
+    result = shapes(down, "query", str(example("quadruped-1")))
     assert result.returncode == 2
     assert "no service answers at http://127.0.0.1:9" in result.stderr
     assert "Traceback" not in result.stderr
 
 
 def test_an_import_lists_the_files_described_in_part(served: Service, tmp_path):
-    """(After the query test: the two-part wolf joins the gallery.)"""
-    _, both = with_a_far_half_copy(TOSCA / "wolf2.off.gz")
-    (tmp_path / "wolf2-and-a-copy.off").write_bytes(both)
-    shutil.copy(TOSCA / "horse0.off.gz", tmp_path / "horse0.off.gz")
+    """(After the query test: the two-part quadruped joins the gallery.)"""
+    _, both = with_a_far_half_copy(example("quadruped-2"))
+    (tmp_path / "quadruped-2-and-a-copy.off").write_bytes(both)
+    shutil.copy(example("hand-0"), tmp_path)
     result = shapes(served, "import", str(tmp_path), "--wait")
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
     assert lines[0] == "2 files: 2 enrolled, 0 already enrolled, 0 failed"
     assert lines[1].startswith("1 described in part: only their largest connected part")
-    assert lines[3].split() == ["wolf2-and-a-copy.off", "80%"]
-    assert len(lines) == 4  # horse0 is one connected surface
+    assert lines[3].split() == ["quadruped-2-and-a-copy.off", "80%"]
+    assert len(lines) == 4  # hand-0 is one connected surface

@@ -13,12 +13,13 @@ import pytest
 from alembic import command
 from alembic.autogenerate import compare_metadata
 from alembic.runtime.migration import MigrationContext
+from conftest import example
 from sqlalchemy import create_engine, inspect, text
 
 from app import models  # noqa: F401  (registers the tables on Base.metadata)
 from app.db import Base
 from app.migrations import alembic_config, upgrade_head
-from benchmarks.common import TIMEOUT, TOSCA, Postgres, Redis, Service
+from benchmarks.common import TIMEOUT, Postgres, Redis, Service
 
 pytestmark = [pytest.mark.scaleout, pytest.mark.service, pytest.mark.slow]
 
@@ -108,12 +109,19 @@ def test_the_service_on_postgresql_and_redis_survives_kill_9(
         victim = service.start_worker()
         service.start_worker("query")
         service.start_api()
-        names = {"wolf0": "wolf", "wolf1": "wolf", "cat0": "cat", "cat1": "cat", "horse0": "horse"}
+        names = {
+            "quadruped-0": "quadruped",
+            "quadruped-1": "quadruped",
+            "bird-0": "bird",
+            "bird-1": "bird",
+            "hand-0": "hand",
+        }
         created = {name: service.upload(name, label) for name, label in names.items()}
         assert all(r.status_code == 202 for r in created.values()), created
         ids = [r.json()["id"] for r in created.values()]
-        again = service.upload("wolf0", "wolf")  # the same bytes: the same mesh
-        assert again.status_code == 200 and again.json()["id"] == created["wolf0"].json()["id"]
+        again = service.upload("quadruped-0", "quadruped")  # the same bytes: the same mesh
+        assert again.status_code == 200
+        assert again.json()["id"] == created["quadruped-0"].json()["id"]
 
         # A worker dies mid-job, then the Redis server, with jobs still queued.
         deadline = time.monotonic() + TIMEOUT
@@ -133,13 +141,13 @@ def test_the_service_on_postgresql_and_redis_survives_kill_9(
         assert ready["checks"]["index"] == f"ok ({len(ids)} shapes)"
         assert _descriptor_rows(postgres.url) == len(ids)
 
-        answer = service.query("wolf2", k=2)
+        answer = service.query("quadruped-2", k=2)
         assert answer.status_code == 200, answer.text
-        assert [m["label"] for m in answer.json()["matches"]] == ["wolf", "wolf"]
-        wolf0 = created["wolf0"].json()["id"]
-        assert service.client.delete(f"/meshes/{wolf0}").status_code == 204
-        matches = service.query("wolf2", k=5).json()["matches"]
-        assert wolf0 not in [m["mesh_id"] for m in matches]
+        assert [m["label"] for m in answer.json()["matches"]] == ["quadruped", "quadruped"]
+        first = created["quadruped-0"].json()["id"]
+        assert service.client.delete(f"/meshes/{first}").status_code == 204
+        matches = service.query("quadruped-2", k=5).json()["matches"]
+        assert first not in [m["mesh_id"] for m in matches]
         assert _descriptor_rows(postgres.url) == len(ids) - 1
     finally:
         service.close()
@@ -174,18 +182,18 @@ def test_two_api_replicas_and_two_workers_share_nothing_but_the_servers(
         a.start_api()
         b.start_api()
         start = _descriptor_rows(postgres.url)  # what the other tests left
-        names = ("centaur0", "centaur1", "gorilla1")
-        ids = [a.upload(n, n[:-1]).json()["id"] for n in names]
+        names = {"biped-0": "biped", "biped-1": "biped", "spider-1": "spider"}
+        ids = [a.upload(name, label).json()["id"] for name, label in names.items()]
         assert all(body["status"] == "ready" for body in _wait_all(a, ids).values())
         _wait_index_size(b, start + 3)  # stored by A's collector, followed by B
-        matches = b.query("centaur2", k=2).json()["matches"]
+        matches = b.query("biped-2", k=2).json()["matches"]
         assert {m["mesh_id"] for m in matches} == set(ids[:2])
-        original = (TOSCA / f"{names[2]}.off.gz").read_bytes()
+        original = example("spider-1").read_bytes()
         assert b.client.get(f"/meshes/{ids[2]}/file").content == original
 
         assert b.client.delete(f"/meshes/{ids[0]}").status_code == 204
         _wait_index_size(a, start + 2)
-        assert ids[0] not in [m["mesh_id"] for m in a.query("centaur2", k=5).json()["matches"]]
+        assert ids[0] not in [m["mesh_id"] for m in a.query("biped-2", k=5).json()["matches"]]
         assert a.client.get(f"/meshes/{ids[0]}/file").status_code == 404
         rows = _descriptor_rows(postgres.url)
         assert a.index_size() == b.index_size() == rows == start + 2

@@ -6,11 +6,14 @@ import gzip
 
 import numpy as np
 import pytest
-from conftest import with_a_far_half_copy
+from conftest import example, with_a_far_half_copy
 
 from app.client import format_matches
-from benchmarks.common import TOSCA, Service
+from benchmarks.common import Service
+from worker.engine.mesh_io import load_mesh
+from worker.engine.pipeline import resampled_surface
 from worker.engine.presets import DEFAULT_PRESET, get_preset
+from worker.evaluation.samples import SAMPLE_VERTICES
 
 from .conftest import GALLERY
 
@@ -18,15 +21,16 @@ DEFAULT = get_preset(DEFAULT_PRESET)
 
 
 def test_enrolled_meshes_are_ready_with_descriptor_info(service: Service, gallery):
-    body = service.client.get(f"/meshes/{gallery['wolf0']}").json()
+    body = service.client.get(f"/meshes/{gallery['quadruped-0']}").json()
     assert body["status"] == "ready"
-    assert body["label"] == "wolf"
-    assert body["metadata"] == {"source": "TOSCA"}
+    assert body["label"] == "quadruped"
+    assert body["metadata"] == {"source": "examples"}
     assert body["descriptor"]["preset"] == DEFAULT.name
     assert body["descriptor"]["preset_version"] == DEFAULT.version
-    assert body["descriptor"]["input_vertices"] == 4344
-    # decimated to the preset's target, long edges split out of its vertices (wolf0: 2,506)
-    assert abs(body["descriptor"]["vertices"] - DEFAULT.n_vertices) <= 0.02 * DEFAULT.n_vertices
+    assert body["descriptor"]["input_vertices"] == SAMPLE_VERTICES
+    # the preset's resampling: the long edges of the file's decimation split (2,611)
+    resampled = resampled_surface(load_mesh(example("quadruped-0")), DEFAULT)
+    assert body["descriptor"]["vertices"] == resampled.n_vertices
     assert body["descriptor"]["timings"]["total"] > 0
     assert body["descriptor"]["kept_area_fraction"] == 1.0  # one connected surface
     job = service.client.get(body["links"]["job"]).json()
@@ -35,7 +39,7 @@ def test_enrolled_meshes_are_ready_with_descriptor_info(service: Service, galler
 
 
 def test_query_with_another_pose_ranks_the_right_class_first(service: Service, gallery):
-    response = service.query("wolf2", k=4)
+    response = service.query("quadruped-2", k=4)
     assert response.status_code == 200, response.text
     body = response.json()
     assert body["preset"] == DEFAULT.name and body["descriptor_source"] == "computed"
@@ -43,49 +47,51 @@ def test_query_with_another_pose_ranks_the_right_class_first(service: Service, g
     assert body["gallery_size"] >= len(GALLERY)
     matches = body["matches"]
     assert [m["rank"] for m in matches] == [1, 2, 3, 4]
-    assert matches[0]["label"] == "wolf"
-    assert {m["label"] for m in matches[:2]} == {"wolf"}
+    assert matches[0]["label"] == "quadruped"
+    assert {m["label"] for m in matches[:2]} == {"quadruped"}
     scores = [m["score"] for m in matches]
     assert scores == sorted(scores)
     for m in matches:  # the fused score: the weighted product of the per-modality D1
         product = np.prod([m["scores"][k] ** DEFAULT.weight(k) for k in DEFAULT.fused_modalities])
         assert abs(m["score"] - product) <= 1e-9 * m["score"]
     assert body["timings"]["total"] > 0 and body["timings"]["search"] < 1.0
-    assert body["query"]["input_vertices"] > body["query"]["vertices"]
+    assert body["query"]["input_vertices"] == SAMPLE_VERTICES
+    resampled = resampled_surface(load_mesh(example("quadruped-2")), DEFAULT)
+    assert body["query"]["vertices"] == resampled.n_vertices
     assert body["query"]["kept_area_fraction"] == 1.0
 
 
 def test_a_query_of_separate_parts_says_what_was_left_out(service: Service, gallery):
-    """wolf2 and a far copy at half its size in one file: the wolf is described and
-    found, and the answer (and the command line's table) says that a fifth of the
-    file's surface was left out."""
-    _, both = with_a_far_half_copy(TOSCA / "wolf2.off.gz")
+    """quadruped-2 and a far copy at half its size in one file: the quadruped is
+    described and found, and the answer (and the command line's table) says that a
+    fifth of the file's surface was left out."""
+    _, both = with_a_far_half_copy(example("quadruped-2"))
     response = service.client.post("/query", files={"file": ("two.off", both)}, data={"k": "2"})
     assert response.status_code == 200, response.text
     body = response.json()
     assert body["query"]["kept_area_fraction"] == pytest.approx(0.8, rel=1e-6)
-    assert body["matches"][0]["label"] == "wolf"
+    assert body["matches"][0]["label"] == "quadruped"
     assert "Only 80% of the query file's surface was described" in format_matches(body)
-    whole = service.query("wolf2", k=2).json()
+    whole = service.query("quadruped-2", k=2).json()
     assert "left out" not in format_matches(whole)
 
 
 def test_bytes_already_described_answer_without_a_worker(service: Service, gallery):
-    enrolled = service.query("horse0", k=1).json()
+    enrolled = service.query("hand-0", k=1).json()
     assert enrolled["descriptor_source"] == "enrolled"
-    assert enrolled["matches"][0]["mesh_id"] == gallery["horse0"]
+    assert enrolled["matches"][0]["mesh_id"] == gallery["hand-0"]
     assert enrolled["matches"][0]["score"] == 0.0
-    first = service.query("horse6", k=1).json()
-    again = service.query("horse6", k=1).json()
+    first = service.query("hand-2", k=1).json()
+    again = service.query("hand-2", k=1).json()
     assert (first["descriptor_source"], again["descriptor_source"]) == ("computed", "recent")
     assert again["matches"] == first["matches"]
     assert again["timings"]["describe_wall"] < 0.1 < first["timings"]["describe_wall"]
 
 
 def test_query_options_fusion_and_modalities(service: Service, gallery):
-    body = service.query("centaur2", k=2, fusion="sum", modalities="gdm,ddt").json()
+    body = service.query("biped-2", k=2, fusion="sum", modalities="gdm,ddt").json()
     assert body["fusion"] == "sum"
-    assert body["matches"][0]["label"] == "centaur"
+    assert body["matches"][0]["label"] == "biped"
     m = body["matches"][0]  # the preset's weights, with the requested rule and modalities
     weighted = (
         DEFAULT.weight("gdm") * m["scores"]["gdm"] + DEFAULT.weight("ddt") * m["scores"]["ddt"]
@@ -94,27 +100,27 @@ def test_query_options_fusion_and_modalities(service: Service, gallery):
 
 
 def test_similar_uses_the_stored_descriptor_and_leaves_the_mesh_out(service: Service, gallery):
-    response = service.client.post(f"/meshes/{gallery['horse0']}/similar", params={"k": 3})
+    response = service.client.post(f"/meshes/{gallery['hand-0']}/similar", params={"k": 3})
     assert response.status_code == 200, response.text
     matches = response.json()["matches"]
-    assert gallery["horse0"] not in [m["mesh_id"] for m in matches]
-    assert matches[0]["mesh_id"] == gallery["horse5"]
+    assert gallery["hand-0"] not in [m["mesh_id"] for m in matches]
+    assert matches[0]["mesh_id"] == gallery["hand-1"]
 
 
 def test_same_bytes_again_answer_200_with_the_existing_mesh(service: Service, gallery):
-    response = service.upload("wolf0", "something else")
+    response = service.upload("quadruped-0", "something else")
     assert response.status_code == 200
-    assert response.json()["id"] == gallery["wolf0"]
-    assert response.json()["label"] == "wolf"  # the stored mesh is not rewritten
-    listed = service.client.get("/meshes", params={"label": "wolf"}).json()
-    assert [m["name"] for m in listed["items"]].count("wolf0") == 1
+    assert response.json()["id"] == gallery["quadruped-0"]
+    assert response.json()["label"] == "quadruped"  # the stored mesh is not rewritten
+    listed = service.client.get("/meshes", params={"label": "quadruped"}).json()
+    assert [m["name"] for m in listed["items"]].count("quadruped-0") == 1
 
 
 def test_file_returns_the_original_bytes(service: Service, gallery):
-    response = service.client.get(f"/meshes/{gallery['centaur0']}/file")
+    response = service.client.get(f"/meshes/{gallery['biped-0']}/file")
     assert response.status_code == 200
-    assert response.content == (TOSCA / "centaur0.off.gz").read_bytes()
-    assert "centaur0.off.gz" in response.headers["content-disposition"]
+    assert response.content == example("biped-0").read_bytes()
+    assert "biped-0.off.gz" in response.headers["content-disposition"]
 
 
 def test_list_is_paginated_and_filtered(service: Service, gallery):
@@ -123,21 +129,21 @@ def test_list_is_paginated_and_filtered(service: Service, gallery):
     assert page["total"] >= len(GALLERY)
     second = service.client.get("/meshes", params={"status": "ready", "limit": 2, "offset": 2})
     assert {m["id"] for m in page["items"]}.isdisjoint(m["id"] for m in second.json()["items"])
-    horses = service.client.get("/meshes", params={"label": "horse"}).json()
-    assert {m["label"] for m in horses["items"]} == {"horse"}
+    hands = service.client.get("/meshes", params={"label": "hand"}).json()
+    assert {m["label"] for m in hands["items"]} == {"hand"}
 
 
 def test_delete_removes_from_the_index_at_once(service: Service, gallery):
-    created = service.upload("horse7", "horse")
+    created = service.upload("hand-3", "hand")
     assert created.status_code == 202
     mesh_id = created.json()["id"]
     assert service.wait_mesh(mesh_id)["status"] == "ready"
-    before = service.client.post(f"/meshes/{gallery['horse0']}/similar", params={"k": 10})
+    before = service.client.post(f"/meshes/{gallery['hand-0']}/similar", params={"k": 10})
     assert mesh_id in [m["mesh_id"] for m in before.json()["matches"]]
 
     assert service.client.delete(f"/meshes/{mesh_id}").status_code == 204
 
-    after = service.client.post(f"/meshes/{gallery['horse0']}/similar", params={"k": 10}).json()
+    after = service.client.post(f"/meshes/{gallery['hand-0']}/similar", params={"k": 10}).json()
     assert mesh_id not in [m["mesh_id"] for m in after["matches"]]
     assert after["gallery_size"] == before.json()["gallery_size"] - 1
     assert service.client.get(f"/meshes/{mesh_id}").status_code == 404
@@ -197,36 +203,38 @@ def test_unreadable_mesh_query_is_422_and_enrollment_fails_with_the_sentence(ser
 
 
 def test_bad_fields_are_422(service: Service, gallery):
-    wolf = (TOSCA / "wolf0.off.gz").read_bytes()
+    mesh = example("quadruped-0").read_bytes()
     _error(service.client.post("/meshes", data={"label": "x"}, files={}), 415)
-    no_file = service.client.post("/meshes", files={"label": (None, "wolf")})
+    no_file = service.client.post("/meshes", files={"label": (None, "quadruped")})
     _error(no_file, 422, "missing_file")
     bad_meta = service.client.post(
-        "/meshes", files={"file": ("w.off.gz", wolf)}, data={"metadata": "[1, 2]"}
+        "/meshes", files={"file": ("m.off.gz", mesh)}, data={"metadata": "[1, 2]"}
     )
     _error(bad_meta, 422, "invalid_metadata")
     twice = service.client.post(
         "/meshes",
-        files=[("file", ("w.off.gz", wolf)), ("label", (None, "a")), ("label", (None, "b"))],
+        files=[("file", ("m.off.gz", mesh)), ("label", (None, "a")), ("label", (None, "b"))],
     )
     _error(twice, 422, "repeated_field")
-    _error(service.client.post("/query", files={"file": ("w.off.gz", wolf)}, data={"k": "0"}), 422)
+    _error(service.client.post("/query", files={"file": ("m.off.gz", mesh)}, data={"k": "0"}), 422)
     _error(
-        service.client.post("/query", files={"file": ("w.off.gz", wolf)}, data={"fusion": "max"}),
+        service.client.post("/query", files={"file": ("m.off.gz", mesh)}, data={"fusion": "max"}),
         422,
         "invalid_fusion",
     )
     _error(
-        service.client.post("/query", files={"file": ("w.off.gz", wolf)}, data={"preset": "nope"}),
+        service.client.post("/query", files={"file": ("m.off.gz", mesh)}, data={"preset": "nope"}),
         422,
         "unknown_preset",
     )
-    _error(service.client.post(f"/meshes/{gallery['wolf0']}/similar", params={"k": "many"}), 422)
+    _error(
+        service.client.post(f"/meshes/{gallery['quadruped-0']}/similar", params={"k": "many"}), 422
+    )
 
 
 def test_query_and_similar_validate_their_options_alike(service: Service, gallery):
     """Form fields of /query and query parameters of /similar: same codes, same sentences."""
-    wolf = (TOSCA / "wolf0.off.gz").read_bytes()
+    mesh = example("quadruped-0").read_bytes()
     cases = [
         ({"k": "0"}, "invalid_k"),
         ({"k": "many"}, "invalid_k"),
@@ -237,14 +245,14 @@ def test_query_and_similar_validate_their_options_alike(service: Service, galler
         ({"modalities": "gdm,colour"}, "unknown_modality"),
     ]
     for fields, code in cases:
-        by_form = service.client.post("/query", files={"file": ("w.off.gz", wolf)}, data=fields)
-        by_params = service.client.post(f"/meshes/{gallery['wolf0']}/similar", params=fields)
+        by_form = service.client.post("/query", files={"file": ("m.off.gz", mesh)}, data=fields)
+        by_params = service.client.post(f"/meshes/{gallery['quadruped-0']}/similar", params=fields)
         assert _error(by_form, 422, code) == _error(by_params, 422, code), fields
 
 
 def test_405_allows_every_method_of_the_path(service: Service, gallery):
     """One path's methods live on several routes; Allow must list them all."""
-    mesh = gallery["wolf0"]
+    mesh = gallery["quadruped-0"]
     for method, path, allow in [
         ("OPTIONS", "/meshes", "GET, POST"),
         ("PUT", f"/meshes/{mesh}", "DELETE, GET"),
@@ -293,7 +301,7 @@ def test_previews_of_enrolled_and_searched_meshes(service: Service, gallery):
     import trimesh
     from PIL import Image
 
-    mesh = service.client.get(f"/meshes/{gallery['wolf0']}").json()
+    mesh = service.client.get(f"/meshes/{gallery['quadruped-0']}").json()
     glb = service.client.get(mesh["links"]["preview"])
     assert glb.status_code == 200 and glb.headers["content-type"] == "model/gltf-binary"
     assert "immutable" in glb.headers["cache-control"]
@@ -304,7 +312,7 @@ def test_previews_of_enrolled_and_searched_meshes(service: Service, gallery):
     assert png.status_code == 200 and png.headers["content-type"] == "image/png"
     assert Image.open(io.BytesIO(png.content)).size == (256, 256)
 
-    body = service.query("wolf2", k=1).json()
+    body = service.query("quadruped-2", k=1).json()
     searched = service.client.get(body["preview"])
     assert searched.status_code == 200 and searched.content[:4] == b"glTF"
     unknown = service.client.get("/previews/" + "0" * 64)

@@ -27,7 +27,7 @@ def _wait_processing(service: Service, job_id: int) -> dict:
 def test_worker_killed_mid_job_is_retried_after_a_new_worker_starts(service: Service, gallery):
     service.stop_workers("enroll")
     victim = service.start_worker()
-    created = service.upload("centaur3", "centaur")
+    created = service.upload("biped-3", "biped")
     assert created.status_code == 202
     body = created.json()
 
@@ -50,7 +50,7 @@ def test_worker_killed_mid_job_is_retried_after_a_new_worker_starts(service: Ser
 def test_restart_loses_nothing_queued_and_reloads_the_index(service: Service, gallery):
     size_before = service.client.get("/ready").json()["checks"]["index"]
     service.stop_workers("enroll")
-    created = service.upload("wolf2", "wolf")  # queued; no worker is running
+    created = service.upload("quadruped-2", "quadruped")  # queued; no worker is running
     assert created.status_code == 202
     mesh_id = created.json()["id"]
     service.stop_api()
@@ -61,7 +61,7 @@ def test_restart_loses_nothing_queued_and_reloads_the_index(service: Service, ga
     service.start_worker()
     assert service.wait_mesh(mesh_id)["status"] == "ready"
     matches = service.client.post(f"/meshes/{mesh_id}/similar", params={"k": 2}).json()
-    assert matches["matches"][0]["label"] == "wolf"
+    assert matches["matches"][0]["label"] == "quadruped"
 
 
 def test_a_new_preset_version_describes_every_stored_mesh_again(tmp_path_factory):
@@ -71,7 +71,7 @@ def test_a_new_preset_version_describes_every_stored_mesh_again(tmp_path_factory
     version = get_preset(DEFAULT_PRESET).version
     with running(migrated_service(tmp_path_factory, "older-version"), workers=1) as svc:
         ids = {}
-        for name, label in (("wolf0", "wolf"), ("centaur0", "centaur")):
+        for name, label in (("quadruped-0", "quadruped"), ("biped-0", "biped")):
             ids[name] = svc.upload(name, label).json()["id"]
             assert svc.wait_mesh(ids[name])["status"] == "ready"
         svc.stop_api()
@@ -94,5 +94,5 @@ def test_a_new_preset_version_describes_every_stored_mesh_again(tmp_path_factory
                 assert body["status"] != "failed" and time.monotonic() < deadline, body
                 time.sleep(0.2)
         assert svc.client.get("/ready").json()["checks"]["index"] == "ok (2 shapes)"
-        matches = svc.query("wolf1", k=2).json()["matches"]
-        assert [m["label"] for m in matches] == ["wolf", "centaur"]
+        matches = svc.query("quadruped-1", k=2).json()["matches"]
+        assert [m["label"] for m in matches] == ["quadruped", "biped"]

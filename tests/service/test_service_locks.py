@@ -24,9 +24,9 @@ def test_an_enrollment_is_not_held_up_by_a_query_waiting_for_its_descriptor(
 ):
     service.stop_workers("query")
     with ThreadPoolExecutor(1) as pool:
-        waiting = pool.submit(service.query, "cat0", k=1)
+        waiting = pool.submit(service.query, "bird-0", k=1)
         _wait_queued_query(service)  # the query is inside its request, waiting for a worker
-        created = service.upload("cat1", "cat")
+        created = service.upload("bird-1", "bird")
         assert created.status_code == 202, created.text
         assert not waiting.done()  # answered while the query still waited
         service.start_worker("query")

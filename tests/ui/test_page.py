@@ -1,7 +1,7 @@
 """The web page in a real Chromium, as a person uses it (Playwright, Debian's chromium).
 
-Enroll three TOSCA meshes through the page, wait until they are ready, search with
-another pose of one of them: the first card is the right kind of object, and the 3D
+Enroll three of the bundled examples through the page, wait until they are ready,
+search with another pose of one of them: the first card is the right kind of object, and the 3D
 views draw the meshes (non-blank pixels). With ``SHAPES_UI_SCREENSHOTS=docs/ui`` the
 screenshots of the search (with the side-by-side view) and the gallery are saved there.
 """
@@ -14,9 +14,9 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from conftest import with_a_far_half_copy
+from conftest import example, with_a_far_half_copy
 
-from benchmarks.common import TOSCA, Service
+from benchmarks.common import Service
 from tests.service.conftest import migrated_service, running
 
 pytestmark = [pytest.mark.slow, pytest.mark.service]
@@ -32,7 +32,7 @@ ARGS = [
     "--disable-component-update",
     "--disable-sync",
 ]
-ENROLL = {"wolf0": "wolf", "centaur0": "centaur", "horse0": "horse"}
+ENROLL = {"quadruped-0": "quadruped", "biped-0": "biped", "hand-0": "hand"}
 SCREENSHOTS = os.environ.get("SHAPES_UI_SCREENSHOTS")
 # Pixels of a 3D view that differ from its clear colour (#eef1f5) by more than a little.
 DRAWN_PIXELS = """(id) => {
@@ -85,7 +85,7 @@ def shoot(page, name: str) -> None:
 def test_enroll_three_meshes_through_the_page(page, site):
     page.click("#tab-enroll")
     for name, label in ENROLL.items():
-        page.set_input_files("#enroll-files", str(TOSCA / f"{name}.off.gz"))
+        page.set_input_files("#enroll-files", str(example(name)))
         page.fill("#enroll-label", label)
         page.click("#enroll-form button[type=submit]")
     rows = page.locator("#enroll-table tbody tr")
@@ -105,17 +105,17 @@ def test_enroll_three_meshes_through_the_page(page, site):
 
 def test_search_with_another_pose_shows_the_right_object_in_3d(page):
     page.click("#tab-search")
-    page.set_input_files("#file-search", str(TOSCA / "wolf1.off.gz"))
+    page.set_input_files("#file-search", str(example("quadruped-1")))
     cards = page.locator("#search-results .card")
     cards.first.wait_for(timeout=180_000)
     assert cards.count() == len(ENROLL)
-    assert cards.first.locator(".label").inner_text() == "wolf"
+    assert cards.first.locator(".label").inner_text() == "quadruped"
     assert cards.first.locator("img").evaluate("img => img.complete && img.naturalWidth") == 256
     # The best match opens beside the query at once; both views draw their mesh.
     page.locator("#compare").wait_for(state="visible")
     for view in ("view-query", "view-match"):
         page.wait_for_function(f"() => ({DRAWN_PIXELS})('{view}') > 2000", timeout=60_000)
-    assert page.locator("#caption-match").inner_text().startswith("Match 1: wolf0")
+    assert page.locator("#caption-match").inner_text().startswith("Match 1: quadruped-0")
     assert "3 shapes" in page.locator("#service-status").inner_text()
     shoot(page, "search")
     cards.nth(1).click()  # another card replaces the match
@@ -138,19 +138,19 @@ def test_the_gallery_lists_and_opens_a_mesh_in_3d(page):
 
 
 def test_a_search_says_when_part_of_the_file_was_left_out(page, tmp_path):
-    _, both = with_a_far_half_copy(TOSCA / "wolf2.off.gz")
-    path = tmp_path / "wolf2-and-a-copy.off"
+    _, both = with_a_far_half_copy(example("quadruped-2"))
+    path = tmp_path / "quadruped-2-and-a-copy.off"
     path.write_bytes(both)
     page.click("#tab-search")
     page.set_input_files("#file-search", str(path))
     page.wait_for_function(
         "() => document.getElementById('search-progress').textContent"
-        ".startsWith('wolf2-and-a-copy.off: ')",
+        ".startsWith('quadruped-2-and-a-copy.off: ')",
         timeout=180_000,
     )
     progress = page.locator("#search-progress").inner_text()
     assert "Only 80% of the file's surface was described" in progress, progress
-    assert page.locator("#search-results .card .label").first.inner_text() == "wolf"
+    assert page.locator("#search-results .card .label").first.inner_text() == "quadruped"
 
 
 def test_an_error_shows_the_services_sentence(page, tmp_path):
@@ -170,8 +170,10 @@ def test_calibration_says_what_it_needs_then_draws_the_roc(page, site):
         "() => document.getElementById('calibration-summary').textContent.length > 0"
     )
     assert "enroll more meshes with labels" in summary.inner_text()  # the service's sentence
-    # Five cats and two dogs: 11 genuine and 10 impostor pairs at least, enough.
-    named = [(f"cat{i}", "cat") for i in range(5)] + [("dog0", "dog"), ("dog1", "dog")]
+    # Four birds and three more quadrupeds (with the one enrolled): 12 genuine and 10
+    # impostor pairs at least, enough.
+    named = [(f"bird-{i}", "bird") for i in range(4)]
+    named += [(f"quadruped-{i}", "quadruped") for i in range(1, 4)]
     ids = [site.upload(name, label).json()["id"] for name, label in named]
     for mesh_id in ids:
         assert site.wait_mesh(mesh_id)["status"] == "ready"

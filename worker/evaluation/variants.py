@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Callable
+from types import ModuleType
+from typing import cast
 
 import numpy as np
 
@@ -36,6 +38,23 @@ def decimated(mesh: Mesh, fraction: float) -> Mesh:
     return clean_mesh(vertices, faces)
 
 
+def import_pymeshlab(purpose: str) -> ModuleType:
+    """MeshLab's Python module, an optional dependency of the evaluation harness (the
+    ``eval`` extra).
+
+    Raises
+    ------
+    RuntimeError
+        When it is not installed; the message names ``purpose`` and the extra.
+    """
+    try:
+        import pymeshlab
+    except ImportError as exc:
+        raise RuntimeError(f"{purpose} needs pymeshlab: pip install 'modalshape[eval]'") from exc
+    # pymeshlab ships no types: mypy sees the module as Any.
+    return cast(ModuleType, pymeshlab)
+
+
 def remeshed(mesh: Mesh, n_vertices: int) -> Mesh:
     """Isotropic remeshing (Botsch & Kobbelt 2004, MeshLab's filter) to about ``n_vertices``.
 
@@ -46,12 +65,7 @@ def remeshed(mesh: Mesh, n_vertices: int) -> Mesh:
     to 7% of the area on thin parts and moved the first eigenvalues by up to 35%:
     another surface, not another tessellation; docs/evaluation.md.)
     """
-    try:
-        import pymeshlab
-    except ImportError as exc:  # an optional dependency of the evaluation harness
-        raise RuntimeError(
-            "isotropic remeshing needs pymeshlab: pip install 'modalshape[eval]'"
-        ) from exc
+    pymeshlab = import_pymeshlab("isotropic remeshing")
     edge = tiling_edge(float(face_areas(mesh.vertices, mesh.faces).sum()), n_vertices)
     meshes = pymeshlab.MeshSet()
     meshes.add_mesh(pymeshlab.Mesh(mesh.vertices, mesh.faces.astype(np.int32)))
