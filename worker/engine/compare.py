@@ -12,7 +12,7 @@ from typing import cast
 
 import numpy as np
 
-from .presets import Dissimilarity
+from .presets import Dissimilarity, Preset
 
 _TINY = np.finfo(float).tiny
 
@@ -180,3 +180,47 @@ def fuse(
     if rule == "product":
         return product_fusion(dissimilarities, weights)
     raise ValueError(f"unknown fusion rule {rule!r}; use 'sum' or 'product'")
+
+
+#: Below this share of a file's surface left out, the file is still a whole (rounding,
+#: specks of debris).
+PARTIAL_FILE_START = 0.01
+
+
+def partiality(
+    longest_open_loop: float | None, kept_area_fraction: float | None, preset: Preset
+) -> float:
+    """How partial a query looks, from 0 (a whole) to 1, by its own surface.
+
+    A cut or a hole leaves an open boundary loop: from ``preset.partial_loop[0]``
+    square roots of the surface's area the query starts to look partial, from
+    ``partial_loop[1]`` wholly (linear in between; the small gaps of a scan stay below
+    the start). A file whose other, separate parts were left out
+    (``kept_area_fraction`` below 1) is a part of that file: it looks wholly partial
+    once a fifth of the file's surface is missing. Descriptors made before these
+    were recorded (None) count as wholes.
+    """
+    start, end = preset.partial_loop
+    by_loop = float(np.clip(((longest_open_loop or 0.0) - start) / (end - start), 0.0, 1.0))
+    missing = 1.0 - (1.0 if kept_area_fraction is None else kept_area_fraction)
+    by_file = float(np.clip((missing - PARTIAL_FILE_START) / (0.2 - PARTIAL_FILE_START), 0, 1))
+    return max(by_loop, by_file)
+
+
+def query_weights(preset: Preset, partiality: float) -> dict[str, float]:
+    """The product rule's exponent of each modality for a query this partial.
+
+    ``(1 - partiality) * fusion_weights + partiality * partial_weights``: a whole query
+    is scored by the preset's fusion, a wholly partial one by its ``partial_weights``
+    (the parts modality), so full queries are ranked exactly as without it. Modalities
+    at exponent 0 are left out. A preset without ``partial_weights`` weighs every query
+    as a whole.
+    """
+    whole = {m: preset.weight(m) for m in preset.fused_modalities}
+    if not preset.partial_weights or partiality <= 0.0:
+        return {m: w for m, w in whole.items() if w != 0.0}
+    blended = {
+        m: (1.0 - partiality) * whole.get(m, 0.0) + partiality * preset.partial_weights.get(m, 0.0)
+        for m in {*whole, *preset.partial_weights}
+    }
+    return {m: w for m, w in sorted(blended.items()) if w != 0.0}

@@ -17,7 +17,7 @@ from .diffusion import (
     surface_eigenpairs,
 )
 from .geodesic import farthest_point_samples, geodesic_distance_matrix, sample_distances
-from .holes import close_small_holes
+from .holes import boundary_loops, close_small_holes, longest_open_loop
 from .intrinsic import surface_operators
 from .mesh_io import CANONICAL_AREA, DEFAULT_MAX_FACES, Mesh, canonical_frame, read_mesh
 from .modal import (
@@ -28,6 +28,7 @@ from .modal import (
     small_ddt,
     voronoi_areas,
 )
+from .parts import ball_area_profiles, boundary_reach, grid_radii
 from .presets import Preset
 from .resample import resample_mesh
 
@@ -37,10 +38,34 @@ def resampled_surface(mesh: Mesh, preset: Preset) -> Mesh:
     (:func:`~worker.engine.mesh_io.canonical_frame`), its small holes closed if the
     preset says so (:func:`~worker.engine.holes.close_small_holes`), resampled to the
     preset's vertex count, its edges bounded if the preset says so."""
-    surface = canonical_frame(mesh)
+    return _resampled(canonical_frame(mesh), preset)
+
+
+def _resampled(surface: Mesh, preset: Preset) -> Mesh:
+    """:func:`resampled_surface` of a surface already in its canonical frame."""
     if preset.max_hole_perimeter is not None:
         surface = close_small_holes(surface, preset.max_hole_perimeter, CANONICAL_AREA)
     return resample_mesh(surface, preset.n_vertices, preset.max_edge)
+
+
+def parts_descriptor(
+    resampled: Mesh, sample_distances: np.ndarray, vertex_areas: np.ndarray, preset: Preset
+) -> tuple[np.ndarray, np.ndarray]:
+    """The parts modality (:mod:`~worker.engine.parts`) of a resampled surface in its
+    canonical frame, from the GDM's sample distances.
+
+    Returns
+    -------
+    profiles : (m, C) float16, log geodesic-ball area profiles on the preset's grid.
+    reach : (m,) float, each sample's distance to the open boundary, in square roots of
+        the area (``inf`` when the surface is closed).
+    """
+    unit = float(np.sqrt(CANONICAL_AREA))
+    radii = grid_radii(preset)
+    profiles = ball_area_profiles(sample_distances, vertex_areas, radii[0] * unit, len(radii))
+    loops = boundary_loops(resampled)
+    boundary = np.unique(np.concatenate([loops.start, loops.end]))
+    return profiles.astype(np.float16), boundary_reach(sample_distances, boundary) / unit
 
 
 def ddt_descriptor(
@@ -75,7 +100,7 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
 
     Stages (timed): ``resample``, ``gdm`` (intrinsic Delaunay, heat-method GDM),
     ``eigen_ddt`` (eq. 3 eigenpairs and the DDT's modal representation), ``modal``
-    (GDM singular values).
+    (GDM singular values), ``parts`` (the parts modality, when the preset has it).
     """
     timings: dict[str, float] = {}
     clock = time.perf_counter()
@@ -86,7 +111,9 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
         timings[stage] = now - clock
         clock = now
 
-    resampled = resampled_surface(mesh, preset)
+    surface = canonical_frame(mesh)
+    open_loop = longest_open_loop(surface, CANONICAL_AREA)
+    resampled = _resampled(surface, preset)
     lap("resample")
     intrinsic, ops = surface_operators(resampled.vertices, resampled.faces)
     on_surface = preset.measure == "surface"
@@ -125,6 +152,10 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
     lap("eigen_ddt")
     singular_values = modal_gdm(gdm, preset.gdm_singular_values, mass, sample_areas)
     lap("modal")
+    parts, reach = np.zeros((0, 0), dtype=np.float16), np.zeros(0)
+    if preset.has_parts:
+        parts, reach = parts_descriptor(resampled, gdm, ops.vertex_areas, preset)
+        lap("parts")
     return ShapeDescriptor(
         preset=preset.name,
         preset_version=preset.version,
@@ -135,6 +166,9 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
         input_faces=mesh.n_faces,
         vertices=resampled.n_vertices,
         timings=timings,
+        parts=parts,
+        parts_reach=reach,
+        longest_open_loop=open_loop,
     )
 
 

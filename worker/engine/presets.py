@@ -15,7 +15,10 @@ Fusion = Literal["sum", "product"]
 Measure = Literal["vertices", "surface"]
 DdtElements = Literal["core", "diagonal", "slice_values"]
 MassMatrix = Literal["lumped", "averaged"]
+#: The modalities that are one flat vector per shape (eqs. 8 and 9 compare them).
 MODALITIES = ("gdm", "ddt", "spectrum")
+#: The modality of local profiles that compares a part with a whole (:mod:`.parts`).
+PARTS = "parts"
 
 
 @dataclass(frozen=True)
@@ -80,10 +83,24 @@ class Preset:
         the two vertex modes are decomposed (the ones eq. 5 permutes), so slice ``k``
         of the core is time ``t_k``'s own (:func:`worker.engine.modal.vertex_modes_core`;
         the core's third size must then be the number of times).
+    parts_first_radius : the parts modality's smallest radius, in units of the square
+        root of the surface's area (:mod:`worker.engine.parts`); None: no parts modality.
+        Its radii grow by ``2^(1/4)``, from the GDM's samples (needs ``gdm_samples``).
+    parts_radii : radii compared per sample.
+    parts_scales : the query scales tried, ``2^(j/8)`` for ``j < parts_scales`` (up to
+        ``2^(5/8) = 1.54`` at 6: a part down to 42% of its whole's area).
+    parts_scale_prior : ``lambda`` of the prior ``lambda log s`` against shrinking a whole.
+    parts_min_radii : a query sample with fewer radii clear of its boundary is left out.
+    partial_loop : the query's longest open boundary loop (in square roots of its area)
+        from which it starts to look partial, and at which it looks wholly so
+        (:func:`worker.engine.compare.partiality`).
     dissimilarity : D1 (eq. 8) or D2 (eq. 9).
     fusion : sum or product rule over ``fused_modalities``.
-    fused_modalities : modalities combined into the final score.
+    fused_modalities : modalities combined into the final score of a whole query.
     fusion_weights : exponent (product) or factor (sum) per fused modality.
+    partial_weights : the exponents (product rule) of a query that looks wholly partial;
+        a query part way is weighed in between (:func:`worker.engine.compare.query_weights`).
+        Empty: every query is weighed as a whole.
     """
 
     name: str
@@ -103,10 +120,17 @@ class Preset:
     measure: Measure = "vertices"
     ddt_elements: DdtElements = "core"
     ddt_mix_times: bool = True
+    parts_first_radius: float | None = None
+    parts_radii: int = 15
+    parts_scales: int = 6
+    parts_scale_prior: float = 0.02
+    parts_min_radii: int = 3
+    partial_loop: tuple[float, float] = (0.1, 0.3)
     dissimilarity: Dissimilarity = "D2"
     fusion: Fusion = "product"
     fused_modalities: tuple[str, ...] = ("gdm", "ddt")
     fusion_weights: dict[str, float] = field(default_factory=dict)
+    partial_weights: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.ddt_core_shape[2] > len(self.diffusion_times):
@@ -128,6 +152,28 @@ class Preset:
         unknown = set(self.fused_modalities) - set(MODALITIES)
         if unknown:
             raise ValueError(f"unknown modalities {sorted(unknown)}")
+        unknown = set(self.partial_weights) - {*MODALITIES, PARTS}
+        if unknown:
+            raise ValueError(f"unknown modalities {sorted(unknown)} in partial_weights")
+        if self.parts_first_radius is not None and self.gdm_samples is None:
+            raise ValueError("the parts modality is computed from the GDM's samples")
+        if PARTS in self.partial_weights and (
+            self.parts_first_radius is None or self.fusion != "product"
+        ):
+            raise ValueError("partial_weights weigh the parts modality in a product rule")
+        if not 0.0 <= self.partial_loop[0] < self.partial_loop[1]:
+            raise ValueError("partial_loop must rise from a non-negative start")
+
+    @property
+    def has_parts(self) -> bool:
+        """Whether descriptors carry the parts modality (:mod:`worker.engine.parts`)."""
+        return self.parts_first_radius is not None
+
+    def parts_shape(self) -> tuple[int, int] | None:
+        """(samples, compared radii) of a whole's parts profiles; None without parts."""
+        if self.parts_first_radius is None or self.gdm_samples is None:
+            return None
+        return self.gdm_samples, self.parts_radii
 
     def weight(self, modality: str) -> float:
         return self.fusion_weights.get(modality, 1.0)
@@ -174,11 +220,12 @@ PRESETS: dict[str, Preset] = {
             fusion="sum",
             fused_modalities=("spectrum",),
         ),
-        # The paper's GDM and DDT as operators of the surface, fused with the spectrum.
+        # The paper's GDM and DDT as operators of the surface, fused with the spectrum;
+        # a query that looks partial is ranked by the parts modality.
         # Its versions, what each changed and why: docs/decisions.md.
         Preset(
             name="smeets2010-surface",
-            version=9,
+            version=10,
             max_edge=3.0,
             max_hole_perimeter=0.5,
             measure="surface",
@@ -194,6 +241,8 @@ PRESETS: dict[str, Preset] = {
             fused_modalities=("gdm", "ddt", "spectrum"),
             # Chosen by cross-validation on TOSCA (shapes tune; docs/evaluation.md).
             fusion_weights={"gdm": 0.0, "ddt": 0.5, "spectrum": 1.0},
+            parts_first_radius=0.07,
+            partial_weights={PARTS: 1.0},
         ),
     )
 }
@@ -201,7 +250,16 @@ PRESETS: dict[str, Preset] = {
 DEFAULT_PRESET = "smeets2010-surface"
 
 #: Fields that only say how descriptors are compared, not how they are made.
-COMPARISON_FIELDS = ("dissimilarity", "fusion", "fused_modalities", "fusion_weights")
+COMPARISON_FIELDS = (
+    "dissimilarity",
+    "fusion",
+    "fused_modalities",
+    "fusion_weights",
+    "parts_scale_prior",
+    "parts_min_radii",
+    "partial_loop",
+    "partial_weights",
+)
 
 
 def get_preset(name: str) -> Preset:

@@ -46,6 +46,9 @@ class Tolerances:
     # The same bound under which the heat step fits single precision (exp(-60) =
     # 9e-27, above float32's smallest normal 1e-38 with room for the gradient).
     heat_max_decay_single: float = 60.0
+    # A geodesic ball's area over pi r^2 is floored here before its logarithm: the
+    # parts modality's profiles stay finite where a thin part's ball saturates.
+    parts_ratio_floor: float = 1e-3
 
 
 TOL = Tolerances()

@@ -1,0 +1,301 @@
+"""The parts modality: local intrinsic profiles that a cut or a hole leaves unchanged
+away from it, and how much of a query's surface a candidate contains.
+
+Every modality of the paper sees the whole surface at once (the GDM's singular values,
+the DDT's core, the spectrum) and is normalized by its whole area, so a query missing a
+slab of its surface moves farther than another object does. This one describes a
+surface by what is around each of its samples, and compares a part with a whole by
+asking whether the whole has, for each sample of the part, a sample that looks the
+same.
+
+Profiles
+--------
+Around each of the ``m`` samples the GDM is computed from (farthest-point samples,
+:func:`worker.engine.geodesic.farthest_point_samples`), the area ``a(c, r)`` of the
+geodesic ball of radius ``r``, over ``pi r^2`` (1 on a plane, below 1 where the surface
+ends or narrows, a thin limb's falling like ``1 / r``), on a grid of radii
+``r_i = r_0 2^(i / 8)`` in units of the square root of the surface's area, as its
+logarithm (:func:`ball_area_profiles`). These are the geodesic distances of the GDM
+itself, summarized per sample instead of by the whole matrix's singular values: intrinsic,
+so a pose does not move them, and area-weighted, so the triangulation hardly does.
+
+A sample's ball of radius ``r`` is the same on a part as on the whole when it does not
+reach the part's open boundary, that is when ``r`` is below the sample's *reach*, its
+geodesic distance to the boundary (:func:`boundary_reach`; infinite on a closed
+surface). Only those radii of a query's sample are compared; the rest are what the cut
+disturbed.
+
+Comparison
+----------
+A part has less area than its whole, so normalized by its own area it is too large:
+by ``1 / sqrt(kappa)`` in length when it keeps ``kappa`` of the area. The query's radii
+are therefore tried at the scales ``s_j = 2^(j / 8)``, ``j = 0 .. J`` (its grid column
+``j + 2 k`` against the gallery's ``2 k``), with a prior ``lambda log s_j`` against
+shrinking a whole. For one scale, query sample ``c`` with valid radii ``V_c`` is as far
+from candidate ``C`` as the root-mean-square difference over ``V_c`` to its nearest
+sample of ``C``; the dissimilarity is the mean of that over the query's samples, each
+weighted by ``|V_c|`` (samples far from the cut carry more of its shape). It asks how
+much of the query the candidate contains, not the other way round: a whole is close to
+each of its parts. The scale is chosen once per query, by its best match
+(:func:`part_dissimilarity`); ``1 / s^2`` then estimates the share of the surface the
+query has.
+
+Measured on TOSCA's partial copies (docs/evaluation.md, sec. "Partial queries"), with
+the paper's and the spectrum's modalities as the complete queries' score
+(:func:`worker.engine.compare.query_weights`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .presets import Preset
+from .tol import TOL
+
+
+@dataclass(frozen=True)
+class PartsMatch:
+    """A query's parts dissimilarity to each candidate, at the scale chosen for it.
+
+    Attributes
+    ----------
+    dissimilarity : (n,) float, one per candidate (``inf`` when no sample of the query
+        has enough radii clear of its boundary).
+    scale : the query's scale ``s_j`` (1 for a whole).
+    """
+
+    dissimilarity: np.ndarray
+    scale: float
+
+    @property
+    def kept_share(self) -> float:
+        """The share of a whole's surface the query seems to have, ``1 / s^2``."""
+        return 1.0 / self.scale**2
+
+
+#: Radii per doubling of the profiles' grid (the compared radii take every second one,
+#: and a query's scales step along it).
+GRID_STEPS_PER_OCTAVE = 8
+
+
+def grid_radii(preset: Preset) -> np.ndarray:
+    """(C,) float, the radii the profiles are stored at, in units of the square root of
+    the surface's area: ``r_0 2^(i / 8)``, enough columns for the compared radii at
+    every query scale."""
+    if preset.parts_first_radius is None:
+        return np.zeros(0)
+    columns = 2 * (preset.parts_radii - 1) + preset.parts_scales
+    return preset.parts_first_radius * 2.0 ** (np.arange(columns) / GRID_STEPS_PER_OCTAVE)
+
+
+def ball_area_profiles(
+    distances: np.ndarray, mass: np.ndarray, first_radius: float, columns: int
+) -> np.ndarray:
+    """Log of the area of each sample's geodesic balls over ``pi r^2``, at the radii
+    ``r_i = first_radius 2^(i / 8)``, ``i < columns``.
+
+    One pass over the distances: each vertex's area goes to the first radius that
+    reaches it (``ceil(8 log2(d / r_0))`` on this geometric grid, which a binary search
+    takes ten times as long to find), and the cumulative sums are the balls' areas.
+    :func:`ball_area_profiles_reference` is the plain version.
+
+    Parameters
+    ----------
+    distances : (n, m) float, geodesic distances from ``m`` samples (columns) to every
+        vertex.
+    mass : (n,) float, lumped vertex areas.
+    first_radius : ``r_0``, in the distances' unit.
+    columns : number of radii.
+
+    Returns
+    -------
+    (m, C) float, ``log(max(a(c, r) / (pi r^2), floor))``.
+    """
+    n, m = distances.shape
+    ratio = np.maximum(np.asarray(distances, dtype=np.float64), 0.0) / first_radius
+    with np.errstate(divide="ignore"):  # a sample's own vertex: log2(0) = -inf, bin 0
+        first = np.ceil(GRID_STEPS_PER_OCTAVE * np.log2(ratio))
+    first = np.clip(first, 0, columns).astype(np.int64)
+    first += (columns + 1) * np.arange(m, dtype=np.int64)[None, :]
+    per_bin = np.bincount(
+        first.ravel(),
+        weights=np.broadcast_to(np.asarray(mass, dtype=np.float64)[:, None], (n, m)).ravel(),
+        minlength=m * (columns + 1),
+    )
+    areas = np.cumsum(per_bin.reshape(m, columns + 1), axis=1)[:, :columns]
+    return _log_ratio(areas, first_radius * 2.0 ** (np.arange(columns) / GRID_STEPS_PER_OCTAVE))
+
+
+def ball_area_profiles_reference(
+    distances: np.ndarray, mass: np.ndarray, first_radius: float, columns: int
+) -> np.ndarray:
+    """:func:`ball_area_profiles` by summing the vertex areas within each radius."""
+    radii = first_radius * 2.0 ** (np.arange(columns) / GRID_STEPS_PER_OCTAVE)
+    d = np.asarray(distances, dtype=np.float64)
+    areas = np.stack([mass @ (d <= r) for r in radii], axis=1)
+    return _log_ratio(areas, radii)
+
+
+def _log_ratio(areas: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    ratio = areas / (np.pi * radii**2)
+    profiles: np.ndarray = np.log(np.maximum(ratio, TOL.parts_ratio_floor))
+    return profiles
+
+
+def boundary_reach(distances: np.ndarray, boundary: np.ndarray) -> np.ndarray:
+    """Each sample's geodesic distance to the surface's open boundary.
+
+    Parameters
+    ----------
+    distances : (n, m) float, from ``m`` samples (columns) to every vertex.
+    boundary : (b,) int, the boundary vertices (empty for a closed surface).
+
+    Returns
+    -------
+    (m,) float, ``inf`` everywhere when there is no boundary.
+    """
+    if len(boundary) == 0:
+        return np.full(distances.shape[1], np.inf)
+    reach: np.ndarray = np.asarray(distances[boundary].min(axis=0), dtype=np.float64)
+    return reach
+
+
+def compared_profiles(profiles: np.ndarray, preset: Preset) -> np.ndarray:
+    """(..., m, K) of wholes' (..., m, C) profiles: the radii a query's are compared with (every
+    second column of the grid; a gallery keeps only these)."""
+    compared: np.ndarray = profiles[..., 0 : 2 * preset.parts_radii : 2]
+    return compared
+
+
+def part_dissimilarity(
+    profiles: np.ndarray,
+    reach: np.ndarray,
+    gallery: np.ndarray,
+    preset: Preset,
+    scales: range | None = None,
+) -> PartsMatch:
+    """How much of a query's surface each candidate does *not* contain (module docstring).
+
+    Parameters
+    ----------
+    profiles : (m, C) float, the query's :func:`ball_area_profiles` on :func:`grid_radii`.
+    reach : (m,) float, its samples' :func:`boundary_reach`, in the radii's unit.
+    gallery : (n, m', K) float, the candidates' :func:`compared_profiles`.
+    preset : the radii, the scales and their prior.
+    scales : the scale indices ``j`` tried (default all of the preset's; ``range(1)``
+        compares the query as a whole).
+
+    Returns
+    -------
+    PartsMatch
+    """
+    return best_scale(scale_scores(profiles, reach, gallery, preset, scales), preset, scales)
+
+
+def scale_scores(
+    profiles: np.ndarray,
+    reach: np.ndarray,
+    gallery: np.ndarray,
+    preset: Preset,
+    scales: range | None = None,
+) -> np.ndarray:
+    """(J, n) the dissimilarity to each candidate at each scale tried, its prior added
+    (``inf`` at a scale where no sample of the query has enough radii clear of its
+    boundary). Candidates can be scored in blocks and the blocks' columns joined
+    before :func:`best_scale` chooses. Parameters as :func:`part_dissimilarity`."""
+    radii = grid_radii(preset)
+    count, prior = preset.parts_radii, preset.parts_scale_prior
+    whole = np.ascontiguousarray(gallery, dtype=np.float64)
+    n, per_shape = whole.shape[:2]
+    tried = range(preset.parts_scales) if scales is None else scales
+    out = np.full((len(tried), n), np.inf)
+    for row, j in enumerate(tried):
+        columns = j + 2 * np.arange(count)
+        valid = (radii[columns][None, :] <= reach[:, None]).astype(np.float64)
+        used = valid.sum(axis=1)
+        keep = used >= preset.parts_min_radii
+        if not keep.any() or n == 0:
+            continue
+        query, valid, used = profiles[keep][:, columns], valid[keep], used[keep]
+        # Centred on the query's mean, the expansion below cancels far less.
+        centre = (query * valid).sum(axis=0) / np.maximum(valid.sum(axis=0), 1.0)
+        nearest = _nearest_squared(query - centre, valid, whole - centre, n, per_shape)
+        rms = np.sqrt(np.maximum(nearest, 0.0) / used[:, None])
+        out[row] = used @ rms / used.sum() + prior * np.log(_scale(j))
+    return out
+
+
+def best_scale(scores: np.ndarray, preset: Preset, scales: range | None = None) -> PartsMatch:
+    """The query's scale, by its best match over all candidates, and the dissimilarities
+    at it, from :func:`scale_scores`' (J, n)."""
+    tried = range(preset.parts_scales) if scales is None else scales
+    if scores.size == 0 or not np.isfinite(scores).any():
+        return PartsMatch(np.full(scores.shape[1], np.inf), 1.0)
+    row = int(np.argmin(scores.min(axis=1)))
+    return PartsMatch(scores[row], _scale(tried[row]))
+
+
+def _scale(j: int) -> float:
+    return float(2.0 ** (j / GRID_STEPS_PER_OCTAVE))
+
+
+#: Candidate samples compared at once: bounds the (query samples x block) matrix.
+_BLOCK_ROWS = 1 << 15
+
+
+def _nearest_squared(
+    query: np.ndarray, valid: np.ndarray, whole: np.ndarray, n: int, per_shape: int
+) -> np.ndarray:
+    """(q, n): each query row's smallest masked squared distance to the rows of each
+    candidate, ``sum_k valid_ck (query_ck - whole_yk)^2``, by matrix products."""
+    rows = whole.reshape(n * per_shape, -1)
+    weighted = valid * query
+    own = (weighted * query).sum(axis=1)[:, None]
+    out = np.empty((len(query), n))
+    shapes_per_block = max(1, _BLOCK_ROWS // per_shape)
+    for first in range(0, n, shapes_per_block):
+        last = min(n, first + shapes_per_block)
+        block = rows[first * per_shape : last * per_shape]
+        squared = own + valid @ (block * block).T - 2.0 * weighted @ block.T
+        starts = np.arange(0, len(block), per_shape)
+        out[:, first:last] = np.minimum.reduceat(squared, starts, axis=1)
+    return out
+
+
+def part_dissimilarity_reference(
+    profiles: np.ndarray,
+    reach: np.ndarray,
+    gallery: np.ndarray,
+    preset: Preset,
+    scales: range | None = None,
+) -> PartsMatch:
+    """:func:`part_dissimilarity` by direct differences, one sample pair at a time."""
+    radii = grid_radii(preset)
+    count = preset.parts_radii
+    best: tuple[float, list[float], float] | None = None
+    for j in range(preset.parts_scales) if scales is None else scales:
+        columns = j + 2 * np.arange(count)
+        scale = _scale(j)
+        samples = []
+        for c in range(len(profiles)):
+            valid = radii[columns] <= reach[c]
+            if valid.sum() >= preset.parts_min_radii:
+                samples.append((profiles[c, columns][valid], valid))
+        if not samples:
+            continue
+        scores = []
+        for candidate in gallery:
+            total = weight = 0.0
+            for values, valid in samples:
+                whole = candidate[:, valid]
+                nearest = np.min(np.mean((whole - values) ** 2, axis=1))
+                total += valid.sum() * np.sqrt(nearest)
+                weight += valid.sum()
+            scores.append(total / weight + preset.parts_scale_prior * np.log(scale))
+        if best is None or min(scores) < best[0]:
+            best = (min(scores), scores, scale)
+    if best is None:
+        return PartsMatch(np.full(len(gallery), np.inf), 1.0)
+    return PartsMatch(np.asarray(best[1]), best[2])
