@@ -1,5 +1,5 @@
-"""The ``shapes`` command: ``describe``, ``evaluate``, ``robustness``, ``tune`` and
-``samples`` (the engine and its evaluation harness), ``import`` and ``query`` (the
+"""The ``shapes`` command: ``describe``, ``evaluate``, ``robustness``, ``partiality``,
+``tune`` and ``samples`` (the engine and its evaluation harness), ``import`` and ``query`` (the
 service's HTTP client, :mod:`app.client`)."""
 
 from __future__ import annotations
@@ -151,6 +151,52 @@ def _robustness(args: argparse.Namespace) -> int:
     return 1 if report["failures"] else 0
 
 
+def _partiality(args: argparse.Namespace) -> int:
+    from .evaluation.datasets import EvaluationError
+    from .evaluation.run import run_partiality
+
+    preset = get_preset(args.preset)
+    dataset = Path(args.dataset_dir)
+    labels = Path(args.labels) if args.labels else dataset / "labels.csv"
+    out = Path(args.out) if args.out else Path("evaluation-out") / "partiality" / preset.name
+    variants = args.variants.split(",") if args.variants else None
+    try:
+        report = run_partiality(
+            dataset,
+            labels,
+            preset,
+            out_dir=out,
+            cache_root=Path(args.cache),
+            jobs=args.jobs,
+            per_class_limit=args.limit,
+            poses_dir=args.poses,
+            command=shlex.join(["shapes", *args.argv]),
+            environment={"git": _git_revision()},
+            **({"variants": variants} if variants else {}),
+        )
+    except (EvaluationError, OSError, RuntimeError) as exc:
+        print(f"shapes partiality: {exc}", file=sys.stderr)
+        return 2
+    titles = report["rows"]
+    names = list(report["variants"])
+    width = max(len(t) for t in titles.values())
+    print(f"{'':{width}}  " + "  ".join(f"{n:>17}" for n in names))
+    print(f"{'':{width}}  " + "  ".join(f"{'class/source/mAP':>17}" for _ in names))
+    for key, title in titles.items():
+        cells = (report["scores"][key][n] for n in names)
+        print(
+            f"{title:{width}}  "
+            + "  ".join(
+                f"{100 * c['own_class']:5.1f}/{100 * c['own_source']:5.1f}/{100 * c['map']:5.1f}"
+                for c in cells
+            )
+        )
+    for name, why in report["failures"].items():
+        print(f"could not describe {name}: {why}", file=sys.stderr)
+    print(f"report written to {out}/partiality.md", file=sys.stderr)
+    return 1 if report["failures"] else 0
+
+
 def _tune(args: argparse.Namespace) -> int:
     from .evaluation.datasets import EvaluationError
     from .evaluation.run import run_tuning
@@ -297,6 +343,28 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", help="report directory (default: evaluation-out/robustness/PRESET)"
     )
     robustness.set_defaults(run=_robustness)
+
+    partial = sub.add_parser(
+        "partiality",
+        help="whether partial copies of the meshes (cuts, holes, one view) find their whole",
+        description="Describe every mesh of labels.csv and partial copies of it (a planar cut "
+        "of 5, 15 and 30%% of the vertices, geodesic holes of 10 and 25%% of the area, a "
+        "single-view scan), and query the whole meshes with each copy; report per modality, "
+        "for the parts modality, the preset's score and ShapeDNA the own class and own "
+        "source at rank 1 and the mAP. With --poses the poses join the gallery as one more "
+        "class. Writes partiality.json and partiality.md.",
+    )
+    _add_collection_arguments(partial)
+    partial.add_argument(
+        "--poses", help="directory of poses of one object (e.g. SCAPE) to add as one more class"
+    )
+    partial.add_argument(
+        "--variants", help="comma-separated subset of the partial copies (default: all six)"
+    )
+    partial.add_argument(
+        "--out", help="report directory (default: evaluation-out/partiality/PRESET)"
+    )
+    partial.set_defaults(run=_partiality)
 
     tune = sub.add_parser(
         "tune",

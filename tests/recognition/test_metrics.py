@@ -412,3 +412,15 @@ def test_diagonal_is_ignored():
     np.fill_diagonal(d, -1e9)  # would win every ranking if it were read
     assert m.retrieval_scores(d, LABELS_B) == m.retrieval_scores(D_B, LABELS_B)
     assert m.equal_error_rate(d, LABELS_B) == m.equal_error_rate(D_B, LABELS_B)
+
+
+def test_query_mean_average_precision_against_a_separate_gallery():
+    d = np.array([[0.1, 0.3, 0.2], [0.9, 0.1, 0.5]])
+    gallery = np.array(["a", "b", "a"])
+    # query a: relevant at ranks 1 and 2 -> AP 1; query b: relevant at rank 1 -> AP 1
+    assert m.query_mean_average_precision(d, ["a", "b"], gallery) == pytest.approx(1.0)
+    # query b ranked last: its one relevant object at rank 3 -> AP 1/3
+    d[1] = [0.1, 0.9, 0.2]
+    assert m.query_mean_average_precision(d, ["a", "b"], gallery) == pytest.approx(2 / 3)
+    with pytest.raises(ValueError, match="no object of its class"):
+        m.query_mean_average_precision(d, ["a", "c"], gallery)

@@ -10,11 +10,13 @@ from typing import Any
 
 import numpy as np
 
-from worker.engine.presets import MODALITIES, Preset
+from worker.engine.presets import MODALITIES, PARTS, Preset
 from worker.recognition import metrics
 
 from .cache import engine_fingerprint
 from .compute import ComputedSet, descriptor_vectors
+from .partiality import collection_matrices
+from .robustness import PRESET_ROW
 from .scoring import COLUMNS, ROWS, dissimilarity_matrices, score_dissimilarity
 from .shapedna import BASELINE, SHAPEDNA_K
 
@@ -92,10 +94,21 @@ def build_report(
     labels = [m.label for m in computed.meshes]
     vectors = descriptor_vectors(computed)
     matrices, info = dissimilarity_matrices(vectors, preset, vectors[BASELINE])
+    titles = {key: ROWS[key] for key in matrices}
+    if preset.has_parts:
+        baseline = matrices.pop(BASELINE)  # stays the last row
+        matrices.update(collection_matrices(computed.descriptors, matrices, preset))
+        matrices[BASELINE] = baseline
+        titles[PARTS] = ("Parts", (PARTS,), None)
+        titles[PRESET_ROW] = (
+            "The preset's score (parts by partiality)",
+            (*preset.fused_modalities, PARTS),
+            "product",
+        )
     gallery_idx, probe_idx = metrics.first_instance_split(names, labels)
     rows = {}
     for key, matrix in matrices.items():
-        title, members, rule = ROWS[key]
+        title, members, rule = titles[key]
         rows[key] = {
             "title": title,
             "members": list(members),
@@ -316,3 +329,52 @@ def render_robustness_markdown(report: Mapping[str, Any]) -> str:
             lines += [f"- `{name}` ({variant}): {text}" for variant, text in why.items()]
     lines.append("")
     return "\n".join(lines)
+
+
+def render_partiality_markdown(report: Mapping[str, Any]) -> str:
+    """partiality.md: per row and partial variant, own class, own source and mAP."""
+    preset = report["preset"]
+    about = report["variants"]
+    variants = list(about)
+    poses = f" and the poses of `{report['poses']}` (one more class)" if report["poses"] else ""
+    lines = [
+        f"# Partial queries: preset `{preset['name']}` v{preset['version']}",
+        "",
+        f"Gallery: the {report['wholes']} whole meshes of `{report['dataset']}`{poses}. "
+        f"Command: `{report['command'] or '(not recorded)'}`",
+        "",
+        "Every mesh's partial copies (" + ", ".join(f"`{v}`" for v in variants) + ") query "
+        "the whole meshes. Per cell: **own class** at rank 1 / **own source** at rank 1 / "
+        "**mAP** (the query's class relevant), in %.",
+        "",
+        "| | " + " | ".join(variants) + " |",
+        "|---|" + "---:|" * len(variants),
+    ]
+    for key, title in report["rows"].items():
+        if key not in report["scores"]:
+            continue
+        cells = [
+            " / ".join(_pct(v[k], 1) for k in ("own_class", "own_source", "map"))
+            for v in (report["scores"][key][name] for name in variants)
+        ]
+        lines.append(f"| {title} | " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "How partial the copies look (the preset's partiality, 0 a whole, 1 wholly partial): "
+        "median, and the share weighed by the parts modality at all.",
+        "",
+        "| | " + " | ".join(variants) + " |",
+        "|---|" + "---:|" * len(variants),
+        "| copies | " + " | ".join(str(about[v]["count"]) for v in variants) + " |",
+        "| median partiality | "
+        + " | ".join(f"{about[v]['partiality_median']:.2f}" for v in variants)
+        + " |",
+        "| looks partial | "
+        + " | ".join(_pct(about[v]["looks_partial"], 0) for v in variants)
+        + " |",
+    ]
+    failed = report.get("failures") or {}
+    if failed:
+        lines += ["", "Not described (left out):", ""]
+        lines += [f"- `{name}`: {why}" for name, why in failed.items()]
+    return "\n".join(lines) + "\n"

@@ -1,6 +1,6 @@
-"""``shapes evaluate``, ``shapes robustness`` and ``shapes tune``: describe, compare and
-score a labelled collection (and variants of its meshes), write the reports, choose the
-fusion weights."""
+"""``shapes evaluate``, ``shapes robustness``, ``shapes partiality`` and ``shapes tune``:
+describe, compare and score a labelled collection (and variants of its meshes), write the
+reports, choose the fusion weights."""
 
 from __future__ import annotations
 
@@ -19,10 +19,13 @@ from worker.recognition.fusion import FOLDS, tune_fusion
 
 from .compute import compute_descriptors, descriptor_vectors
 from .datasets import EvaluationError, LabeledMesh, pose_set, read_labels
+from .partial import PARTIAL_VARIANTS
+from .partiality import partial_row_titles, partiality_scores
 from .report import (
     build_report,
     environment_info,
     render_markdown,
+    render_partiality_markdown,
     render_robustness_markdown,
 )
 from .robustness import (
@@ -297,6 +300,85 @@ def run_robustness(
     out.mkdir(parents=True, exist_ok=True)
     (out / "robustness.json").write_text(json.dumps(report, indent=1) + "\n")
     (out / "robustness.md").write_text(render_robustness_markdown(report))
+    return report
+
+
+def run_partiality(
+    dataset_dir: str | Path,
+    labels_csv: str | Path,
+    preset: Preset,
+    *,
+    out_dir: str | Path,
+    cache_root: str | Path,
+    variants: Sequence[str] = tuple(PARTIAL_VARIANTS),
+    poses_dir: str | Path | None = None,
+    jobs: int = 1,
+    per_class_limit: int | None = None,
+    command: str = "",
+    environment: Mapping[str, str] | None = None,
+    progress: bool = True,
+) -> dict[str, Any]:
+    """The partiality protocol (:mod:`.partiality`); writes ``partiality.json`` and
+    ``partiality.md`` to ``out_dir``.
+
+    Every mesh of the collection and its partial copies (:mod:`.partial`) are described
+    (through the cache); the copies query the whole meshes. With ``poses_dir`` (poses
+    of one object, e.g. SCAPE) the poses join the gallery as one more class, and their
+    copies are queries too.
+
+    Returns
+    -------
+    The report dict (as in partiality.json).
+    """
+    if not preset.has_parts:
+        raise EvaluationError(f"preset {preset.name} has no parts modality")
+    unknown = sorted(set(variants) - set(PARTIAL_VARIANTS))
+    if unknown:
+        raise EvaluationError(
+            f"unknown partial variants {unknown}; known: {', '.join(PARTIAL_VARIANTS)}"
+        )
+    meshes = read_labels(labels_csv, dataset_dir, per_class_limit)
+    if poses_dir is not None:
+        meshes = [*meshes, *pose_set(poses_dir)]
+    start = time.perf_counter()
+    computed = compute_descriptors(meshes, preset, cache_root, jobs=jobs, progress=progress)
+    index = {m.name: i for i, m in enumerate(computed.meshes)}
+    failures = {name: {"original": why} for name, why in computed.failures.items()}
+    described = {}
+    shapedna = {}
+    for variant in variants:
+        done = compute_descriptors(
+            computed.meshes, preset, cache_root, jobs=jobs, progress=progress, variant=variant
+        )
+        for name, why in done.failures.items():
+            failures.setdefault(name, {})[variant] = why
+        sources = np.array([index[m.name] for m in done.meshes], dtype=np.int64)
+        described[variant] = (sources, done.descriptors)
+        shapedna[variant] = np.stack([b.descriptor for b in done.baselines])
+    wholes = np.stack([b.descriptor for b in computed.baselines])
+    scores = partiality_scores(
+        computed.descriptors,
+        [m.label for m in computed.meshes],
+        described,
+        preset,
+        baselines=(wholes, shapedna),
+    )
+    report: dict[str, Any] = {
+        "dataset": str(dataset_dir),
+        "poses": None if poses_dir is None else str(poses_dir),
+        "command": command,
+        "preset": preset.to_dict(),
+        "rows": partial_row_titles(preset),
+        "wholes": len(computed.meshes),
+        **scores,
+        "failures": failures,
+        "environment": {**environment_info(), **(environment or {})},
+        "seconds": time.perf_counter() - start,
+    }
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "partiality.json").write_text(json.dumps(report, indent=1) + "\n")
+    (out / "partiality.md").write_text(render_partiality_markdown(report))
     return report
 
 

@@ -20,6 +20,8 @@ import numpy as np
 
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas, tiling_edge
 
+from .partial import PARTIAL_VARIANTS
+
 #: Gaussian vertex noise, as a fraction of the mesh's mean edge length.
 NOISE_FRACTION = 0.1
 #: Rotated and rescaled copies are scaled by 10**u, u uniform in this range.
@@ -129,5 +131,7 @@ def variant_seed(name: str, variant: str) -> int:
 
 
 def make_variant(mesh: Mesh, variant: str, name: str) -> Mesh:
-    """The variant ``variant`` of ``mesh`` (the file called ``name``)."""
-    return VARIANTS[variant](mesh, np.random.default_rng(variant_seed(name, variant)))
+    """The variant ``variant`` of ``mesh`` (the file called ``name``): one of
+    :data:`VARIANTS`, or a partial copy (:data:`.partial.PARTIAL_VARIANTS`)."""
+    make = VARIANTS.get(variant) or PARTIAL_VARIANTS[variant]
+    return make(mesh, np.random.default_rng(variant_seed(name, variant)))

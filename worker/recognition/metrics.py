@@ -16,6 +16,7 @@ Benchmark (PSB) literature:
   :func:`second_tier`, :func:`e_measure`, :func:`discounted_cumulative_gain`,
   :func:`mean_average_precision`, and :func:`retrieval_scores` for all of them at
   once. Row ``i`` is the query, so each query ranks ``dissimilarity[i, j], j != i``.
+* Queries against a separate gallery: :func:`query_mean_average_precision`.
 
 Tie conventions (deliberately different per family, each the standard one):
 
@@ -44,6 +45,7 @@ __all__ = [
     "first_instance_split",
     "first_tier",
     "mean_average_precision",
+    "query_mean_average_precision",
     "natural_sort_key",
     "nearest_neighbor_rate",
     "pair_equal_error_rate",
@@ -470,6 +472,26 @@ def _mean_average_precision(relevant: NDArray[np.bool_]) -> float:
     precision_at = np.cumsum(relevant, axis=1) / positions
     ap = np.sum(precision_at * relevant, axis=1) / relevant.sum(axis=1)
     return float(np.mean(ap))
+
+
+def query_mean_average_precision(
+    dissimilarity: ArrayLike, query_labels: ArrayLike, gallery_labels: ArrayLike
+) -> float:
+    """mAP of queries against a separate gallery: each query ranks the whole gallery,
+    the gallery objects of its class relevant (every query needs one).
+
+    Parameters
+    ----------
+    dissimilarity : (q, n) float.
+    query_labels : (q,); gallery_labels : (n,).
+    """
+    d = np.asarray(dissimilarity, dtype=np.float64)
+    order = np.argsort(d, axis=1, kind="stable")
+    gallery = np.asarray(gallery_labels)
+    relevant = gallery[order] == np.asarray(query_labels)[:, None]
+    if not relevant.any(axis=1).all():
+        raise ValueError("a query has no object of its class in the gallery")
+    return _mean_average_precision(relevant)
 
 
 def nearest_neighbor_rate(dissimilarity: ArrayLike, labels: ArrayLike) -> float:

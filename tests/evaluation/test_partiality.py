@@ -1,0 +1,59 @@
+"""The partiality protocol: its ranking numbers, and a run on the bundled examples."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import EXAMPLES
+
+from worker.engine.presets import DEFAULT_PRESET, PARTS, get_preset
+from worker.evaluation.partiality import ranking_scores
+from worker.evaluation.robustness import PRESET_ROW
+from worker.evaluation.run import run_partiality
+from worker.evaluation.shapedna import BASELINE
+
+
+def test_ranking_scores_count_own_class_own_source_and_average_precision():
+    labels = np.array(["a", "a", "b", "b"])
+    d = np.array(
+        [
+            [0.1, 0.2, 0.3, 0.4],  # from 0: its source first
+            [0.1, 0.5, 0.2, 0.3],  # from 1: its class first, not its source
+            [0.3, 0.1, 0.2, 0.4],  # from 2: another class first; b at ranks 2 and 4
+        ]
+    )
+    scores = ranking_scores(d, np.array([0, 1, 2]), labels)
+    assert scores["own_class"] == pytest.approx(2 / 3)
+    assert scores["own_source"] == pytest.approx(1 / 3)
+    # APs: 1; a at ranks 1 and 4 -> (1 + 2/4) / 2; b at ranks 2 and 4 -> (1/2 + 2/4) / 2
+    assert scores["map"] == pytest.approx((1 + 0.75 + 0.5) / 3)
+
+
+@pytest.mark.slow  # describes 6 meshes and a cut copy of each
+def test_run_writes_the_report_and_cut_copies_find_their_class(tmp_path):
+    labels = tmp_path / "labels.csv"
+    labels.write_text(
+        "file,class\n"
+        + "".join(f"{c}-{p}.off.gz,{c}\n" for c in ("quadruped", "biped", "hand") for p in (0, 1))
+    )
+    report = run_partiality(
+        EXAMPLES,
+        labels,
+        get_preset(DEFAULT_PRESET),
+        out_dir=tmp_path / "out",
+        cache_root=tmp_path / "cache",
+        variants=("cut-15",),
+        progress=False,
+    )
+    saved = json.loads((tmp_path / "out" / "partiality.json").read_text())
+    assert saved["scores"] == report["scores"]
+    assert report["failures"] == {} and report["wholes"] == 6
+    assert set(report["scores"]) == {"gdm", "ddt", "spectrum", PARTS, PRESET_ROW, BASELINE}
+    cut = report["variants"]["cut-15"]
+    assert cut["count"] == 6 and cut["looks_partial"] > 0.5
+    assert report["scores"][PARTS]["cut-15"]["own_class"] == 1.0
+    assert report["scores"][PRESET_ROW]["cut-15"]["own_class"] == 1.0
+    markdown = (tmp_path / "out" / "partiality.md").read_text()
+    assert "| Parts |" in markdown and "`cut-15`" in markdown

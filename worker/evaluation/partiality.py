@@ -1,0 +1,193 @@
+"""Whether a part finds its whole: the partiality protocol.
+
+Pure functions on descriptors (the describing is :mod:`.compute`'s, the partial copies
+:mod:`.partial`'s). Every partial copy of a mesh of a labelled collection queries the
+collection's whole meshes, its own source among them. Per modality, for the parts
+modality, for the preset's own score (each query weighed by how partial it looks,
+:func:`worker.engine.compare.query_weights`) and for the ShapeDNA baseline:
+
+* **own class**: the nearest whole is of the query's class;
+* **own source**: the nearest whole is the mesh the query was cut from;
+* **mAP**: the mean over queries of the average precision of the whole ranking, the
+  meshes of the query's class (its source included) relevant.
+
+Rankings are per query, so the product rule is used as it is (no root): only the order
+of each query's candidates counts here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from worker.engine.compare import (
+    dissimilarity,
+    fuse,
+    gallery_sigma,
+    partiality,
+    query_weights,
+)
+from worker.engine.descriptor import ShapeDescriptor
+from worker.engine.parts import compared_profiles, part_dissimilarity
+from worker.engine.presets import MODALITIES, PARTS, Preset
+from worker.recognition import metrics
+
+from .robustness import PRESET_ROW
+from .shapedna import BASELINE, shapedna_dissimilarity
+
+
+def partial_row_titles(preset: Preset) -> dict[str, str]:
+    """Row key -> title, in table order."""
+    fused = "+".join(m.upper() if m != "spectrum" else "Spectrum" for m in preset.fused_modalities)
+    return {
+        "gdm": "GDM",
+        "ddt": "DDT",
+        "spectrum": "Spectrum",
+        PARTS: "Parts",
+        PRESET_ROW: f"{fused} {preset.fusion}, parts by partiality (the preset's score)",
+        BASELINE: "ShapeDNA (lapy)",
+    }
+
+
+def query_partiality(descriptors: Sequence[ShapeDescriptor], preset: Preset) -> np.ndarray:
+    """(q,) how partial each descriptor's surface looks (:func:`partiality`)."""
+    return np.array(
+        [partiality(d.longest_open_loop, d.kept_area_fraction, preset) for d in descriptors]
+    )
+
+
+def parts_matrix(
+    queries: Sequence[ShapeDescriptor], gallery: Sequence[ShapeDescriptor], preset: Preset
+) -> np.ndarray:
+    """(q, n) the parts dissimilarity of every query to every gallery shape."""
+    whole = compared_profiles(np.stack([g.parts.astype(np.float64) for g in gallery]), preset)
+    return np.stack(
+        [
+            part_dissimilarity(
+                q.parts.astype(np.float64), q.parts_reach, whole, preset
+            ).dissimilarity
+            for q in queries
+        ]
+    )
+
+
+def query_matrices(
+    queries: Sequence[ShapeDescriptor],
+    gallery: Sequence[ShapeDescriptor],
+    preset: Preset,
+    baselines: tuple[np.ndarray, np.ndarray] | None = None,
+) -> dict[str, np.ndarray]:
+    """Row key -> (q, n) dissimilarity of every query to every gallery shape.
+
+    Parameters
+    ----------
+    queries, gallery : descriptors of the preset (with the parts modality).
+    preset : the dissimilarity (D2's sigma over the gallery), fusion and partial weights.
+    baselines : ShapeDNA descriptors of the queries and of the gallery; the baseline row
+        is left out without them.
+    """
+    per: dict[str, np.ndarray] = {}
+    for m in MODALITIES:
+        q = np.stack([d.vector(m) for d in queries])
+        g = np.stack([d.vector(m) for d in gallery])
+        sigma = gallery_sigma(g) if preset.dissimilarity == "D2" else None
+        per[m] = dissimilarity(q, g, preset.dissimilarity, sigma)
+    per[PARTS] = parts_matrix(queries, gallery, preset)
+    out = dict(per)
+    out[PRESET_ROW] = weighed_by_partiality(per, query_partiality(queries, preset), preset)
+    if baselines is not None:
+        q, g = baselines
+        both = shapedna_dissimilarity(np.concatenate([q, g]))
+        out[BASELINE] = both[: len(q), len(q) :]
+    return out
+
+
+def collection_matrices(
+    descriptors: Sequence[ShapeDescriptor],
+    per_modality: Mapping[str, np.ndarray],
+    preset: Preset,
+) -> dict[str, np.ndarray]:
+    """The parts modality and the preset's partiality-weighted score, all to all.
+
+    Parameters
+    ----------
+    descriptors : (n,) of one collection.
+    per_modality : modality -> (n, n) dissimilarity of the flat modalities.
+    preset : with the parts modality.
+
+    Returns
+    -------
+    {"parts": (n, n), PRESET_ROW: (n, n)}; row ``i`` weighed by query ``i``'s
+    partiality, so neither is symmetric.
+    """
+    per = {**per_modality, PARTS: parts_matrix(descriptors, descriptors, preset)}
+    shares = query_partiality(descriptors, preset)
+    return {PARTS: per[PARTS], PRESET_ROW: weighed_by_partiality(per, shares, preset)}
+
+
+def weighed_by_partiality(
+    per: Mapping[str, np.ndarray], shares: np.ndarray, preset: Preset
+) -> np.ndarray:
+    """(q, n) the product rule of each query row ``i`` with the exponents of its
+    partiality ``shares[i]`` (:func:`query_weights`; the preset's rule for a preset
+    without partial weights)."""
+    rule = "product" if preset.partial_weights else preset.fusion
+    fused = np.empty_like(next(iter(per.values())))
+    for i, share in enumerate(shares):
+        weights = query_weights(preset, float(share))
+        fused[i] = fuse({m: per[m][i] for m in weights}, rule, weights)
+    return fused
+
+
+def ranking_scores(d: np.ndarray, sources: np.ndarray, labels: np.ndarray) -> dict[str, float]:
+    """Own class and own source at rank 1 and mAP of queries ``i`` made from gallery
+    shape ``sources[i]`` (labels (n,) of the gallery)."""
+    nearest = np.argmin(d, axis=1)  # ties -> lower index
+    own = labels[sources]
+    return {
+        "own_class": float(np.mean(labels[nearest] == own)),
+        "own_source": float(np.mean(nearest == sources)),
+        "map": metrics.query_mean_average_precision(d, own, labels),
+    }
+
+
+def partiality_scores(
+    gallery: Sequence[ShapeDescriptor],
+    labels: Sequence[str],
+    variants: Mapping[str, tuple[np.ndarray, Sequence[ShapeDescriptor]]],
+    preset: Preset,
+    baselines: tuple[np.ndarray, Mapping[str, np.ndarray]] | None = None,
+) -> dict[str, Any]:
+    """The protocol's numbers.
+
+    Parameters
+    ----------
+    gallery : descriptors of the whole meshes; labels : (n,) their classes.
+    variants : variant name -> (sources (v,) int, descriptors of the partial copies),
+        ``sources[j]`` the index of the whole copy ``j`` was made from.
+    preset : the comparison.
+    baselines : ShapeDNA of the wholes (n, k) and per variant (v, k).
+
+    Returns
+    -------
+    {"scores": {row: {variant: {"own_class", "own_source", "map"}}}, "variants": {variant:
+    {"count", "partiality_median", "looks_partial"}}}; ``looks_partial`` is the share
+    of the variant's copies whose partiality is above 0 (weighed by the parts modality).
+    """
+    labels_arr = np.asarray([str(x) for x in labels])
+    rows: dict[str, dict[str, dict[str, float]]] = {}
+    about: dict[str, dict[str, Any]] = {}
+    for name, (sources, copies) in variants.items():
+        pair = None if baselines is None else (baselines[1][name], baselines[0])
+        matrices = query_matrices(copies, gallery, preset, pair)
+        for row, d in matrices.items():
+            rows.setdefault(row, {})[name] = ranking_scores(d, np.asarray(sources), labels_arr)
+        shares = query_partiality(copies, preset)
+        about[name] = {
+            "count": len(copies),
+            "partiality_median": float(np.median(shares)),
+            "looks_partial": float(np.mean(shares > 0)),
+        }
+    return {"scores": rows, "variants": about}
