@@ -271,7 +271,9 @@ def query_file(
 
 def format_matches(body: dict[str, Any]) -> str:
     """The ranked matches as an aligned text table."""
-    modalities = list(body["modalities"])
+    # A partial query is ranked by the modalities it was weighed with (the parts among them).
+    matches = body["matches"]
+    modalities = list(matches[0]["scores"]) if matches else list(body["modalities"])
     header = ["rank", "name", "label", "score", *modalities, "confidence"]
     rows = [
         [
@@ -282,7 +284,7 @@ def format_matches(body: dict[str, Any]) -> str:
             *(f"{m['scores'][x]:.4g}" for x in modalities),
             "-" if m["confidence"] is None else f"{m['confidence']:.0%}",
         ]
-        for m in body["matches"]
+        for m in matches
     ]
     widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
     lines = ["  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True))]
@@ -297,6 +299,8 @@ def format_matches(body: dict[str, Any]) -> str:
             f"\nOnly {kept:.0%} of the query file's surface was described: it has other, "
             "separate parts, which were left out (the largest connected part is described)."
         )
+    if body.get("partial"):
+        title += "\n" + body["partial"]["note"]
     return "\n".join([title, *lines])
 
 

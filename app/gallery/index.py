@@ -43,6 +43,13 @@ refitted, and the faiss indexes rebuilt, when the gallery has changed by more
 than ``refit_fraction`` of its size since the last fit; in between, ``rho_m``
 keeps the certificate valid.
 
+A query that looks partial (:func:`worker.engine.compare.partiality`) is ranked by
+:meth:`GalleryIndex.partial_search` instead: the parts modality
+(:mod:`worker.engine.parts`) has no vector to index, so every enrolled shape's profiles
+(kept beside the vectors, float16) are compared, in blocks, and fused with the flat
+modalities' exact scores at the query's weights. Its cost grows with the gallery
+(``benchmarks/query_under_load.py`` measures it); a whole query never takes this path.
+
 Thread safety: all public methods take one lock (searches take milliseconds).
 
 The vectors and running sigma are :mod:`.vectors`, the candidate transforms and
@@ -61,7 +68,8 @@ import faiss
 import numpy as np
 
 from worker.engine.compare import dissimilarity, fuse, normalized_euclidean
-from worker.engine.presets import Preset
+from worker.engine.parts import best_scale, scale_scores
+from worker.engine.presets import PARTS, Preset
 
 from .candidates import FIT_SAMPLE, MAX_DIMS, CandidateTransform
 from .vectors import GalleryVectors, ids_fingerprint
@@ -69,6 +77,7 @@ from .vectors import GalleryVectors, ids_fingerprint
 CANDIDATES = 2048  # faiss candidates per modality (D2), first round
 MAX_CANDIDATES = 16_384  # per modality, when more rounds can still certify the top-k
 MAX_SCORED = 256  # long-modality exact scores per round, in fused-estimate order
+PARTS_BLOCK_SAMPLES = 1 << 16  # gallery samples a partial search compares at once
 BOUND_SAFETY = 1.0 - 1e-5  # float32 candidate distances: keep the bound a true lower bound
 
 
@@ -96,6 +105,8 @@ class SearchStats:
     rounds: int = 0
     certified: bool = False
     seconds: float = 0.0
+    partiality: float = 0.0  # how partial the query looks (0: ranked as a whole)
+    kept_share: float | None = None  # share of its whole the query seems to have
 
 
 class GalleryIndex:
@@ -111,9 +122,10 @@ class GalleryIndex:
         candidates: int = CANDIDATES,
         max_candidates: int = MAX_CANDIDATES,
         max_scored: int = MAX_SCORED,
+        parts_shape: tuple[int, int] | None = None,
     ) -> None:
         self.preset = preset
-        self.store = GalleryVectors(dims)
+        self.store = GalleryVectors(dims, parts_shape)
         self.dims = self.store.dims
         self.modalities = self.store.modalities
         self.refit_fraction = refit_fraction
@@ -320,6 +332,73 @@ class GalleryIndex:
             ]
         stats.seconds = time.perf_counter() - start
         return matches
+
+    def partial_search(
+        self,
+        query: Mapping[str, np.ndarray],
+        profiles: np.ndarray,
+        reach: np.ndarray,
+        weights: Mapping[str, float],
+        k: int,
+        *,
+        exclude: Iterable[int] = (),
+        stats: SearchStats | None = None,
+    ) -> tuple[list[Match], float]:
+        """The ``k`` gallery shapes with the lowest product ``prod_m D_m^w_m`` over the
+        flat modalities and the parts modality (a query that looks partial,
+        :func:`worker.engine.compare.query_weights`), scoring every shape.
+
+        Parameters
+        ----------
+        query : modality -> (M_m,) float, the query's flat vectors.
+        profiles, reach : the query's parts profiles (m, C) and its samples' reach.
+        weights : the product's exponent per modality (``PARTS`` among them).
+
+        Returns
+        -------
+        The matches (``scores`` per weighed modality) and the query's parts scale.
+        """
+        start = time.perf_counter()
+        excluded = set(int(e) for e in exclude)
+        stats = stats if stats is not None else SearchStats()
+        with self.lock:
+            n = self.store.n
+            if self.store.parts_shape is None:
+                raise ValueError("this index keeps no parts profiles")
+            if n == 0 or k <= 0:
+                return [], 1.0
+            positions = np.arange(n)
+            flat = tuple(m for m in weights if m != PARTS)
+            per = self.exact_scores(query, positions, flat, "sum")[1] if flat else {}
+            block = max(1, PARTS_BLOCK_SAMPLES // self.store.parts_shape[0])
+            scores = np.concatenate(
+                [
+                    scale_scores(
+                        profiles, reach, self.store.parts[a : min(n, a + block)], self.preset
+                    )
+                    for a in range(0, n, block)
+                ],
+                axis=1,
+            )
+            found = best_scale(scores, self.preset)
+            per[PARTS] = found.dissimilarity
+            fused = np.asarray(fuse(per, "product", dict(weights)), dtype=np.float64)
+            ids = self.store.ids[:n]
+            keep = np.array([int(i) not in excluded for i in ids], dtype=bool)
+            ids, fused = ids[keep], fused[keep]
+            per = {m: v[keep] for m, v in per.items()}
+            order = np.lexsort((ids, fused))[:k]
+            matches = [
+                Match(
+                    id=int(ids[j]),
+                    score=float(fused[j]),
+                    scores={m: float(per[m][j]) for m in weights},
+                )
+                for j in order
+            ]
+        stats.candidates, stats.scored, stats.rounds, stats.certified = n, n, 1, True
+        stats.seconds = time.perf_counter() - start
+        return matches, found.scale
 
     def _candidate_search(
         self,

@@ -38,7 +38,7 @@ def save_index(index: GalleryIndex, directory: Path) -> None:
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir(parents=True)
         # Any: np.savez also takes a keyword allow_pickle, which the typed dict must not hide.
-        arrays: dict[str, Any] = {"ids": store.ids[:n]}
+        arrays: dict[str, Any] = {"ids": store.ids[:n], "parts": store.parts[:n]}
         for m in index.modalities:
             fit = fits[m]
             arrays.update(
@@ -61,6 +61,7 @@ def save_index(index: GalleryIndex, directory: Path) -> None:
             "preset": index.preset.name,
             "preset_version": index.preset.version,
             "dims": index.dims,
+            "parts_shape": store.parts_shape,
             "size": n,
             "n_at_fit": index.n_at_fit,
             "changes_since_fit": index.changes_since_fit,
@@ -100,7 +101,9 @@ def _read(directory: Path, preset: Preset, **options: Any) -> GalleryIndex:
         manifest["preset_version"],
     ) != (preset.name, preset.version):
         raise ValueError("index made by another format or preset version")
-    index = GalleryIndex(preset, manifest["dims"], **options)
+    shape = manifest.get("parts_shape")
+    parts_shape = None if shape is None else (int(shape[0]), int(shape[1]))
+    index = GalleryIndex(preset, manifest["dims"], parts_shape=parts_shape, **options)
     with np.load(directory / "arrays.npz") as npz:
         arrays = {k: np.array(npz[k]) for k in npz.files}
     n = int(manifest["size"])
@@ -112,6 +115,7 @@ def _read(directory: Path, preset: Preset, **options: Any) -> GalleryIndex:
     store.ids[:n] = ids
     store.pos = {int(i): p for p, i in enumerate(ids)}
     store.n = n
+    store.parts[:n] = arrays["parts"]
     fits = {}
     for m in index.modalities:
         store.vectors[m][:n] = arrays[f"{m}.vectors"]

@@ -19,8 +19,10 @@ from pathlib import Path
 import numpy as np
 from sqlalchemy.orm import Session, sessionmaker
 
+from worker.engine.compare import partiality, query_weights
 from worker.engine.descriptor import ShapeDescriptor
-from worker.engine.presets import MODALITIES, Preset
+from worker.engine.parts import compared_profiles
+from worker.engine.presets import MODALITIES, PARTS, Preset
 
 from ..errors import UnavailableError
 from ..meshes import repository as meshes
@@ -35,14 +37,26 @@ log = logging.getLogger("shapes.gallery")
 FOLLOW_BATCH = 1000  # changes applied per round of following the log
 
 
-def descriptor_vectors(descriptor: ShapeDescriptor) -> dict[str, np.ndarray]:
-    """modality -> (M_m,) float, the flat vectors the index compares."""
-    return {m: descriptor.vector(m) for m in MODALITIES}
+def descriptor_vectors(descriptor: ShapeDescriptor, preset: Preset) -> dict[str, np.ndarray]:
+    """modality -> (M_m,) float, the flat vectors the index compares, and ``PARTS`` ->
+    the (m, K) profiles a whole is compared by when the preset has the parts modality
+    (a surface with fewer samples repeats some: a nearest sample is found all the same).
+    """
+    vectors = {m: descriptor.vector(m) for m in MODALITIES}
+    shape = preset.parts_shape()
+    if shape is not None:
+        compared = compared_profiles(descriptor.parts, preset)
+        if not 0 < len(compared) <= shape[0]:
+            raise ValueError(f"a descriptor with {len(compared)} parts profiles")
+        vectors[PARTS] = compared[np.arange(shape[0]) % len(compared)]
+    return vectors
 
 
-def _decoded(rows: Iterable[tuple[int, bytes]]) -> Iterator[tuple[int, dict[str, np.ndarray]]]:
+def _decoded(
+    rows: Iterable[tuple[int, bytes]], preset: Preset
+) -> Iterator[tuple[int, dict[str, np.ndarray]]]:
     for mesh_id, blob in rows:
-        yield mesh_id, descriptor_vectors(ShapeDescriptor.from_npz_bytes(blob))
+        yield mesh_id, descriptor_vectors(ShapeDescriptor.from_npz_bytes(blob), preset)
 
 
 class Gallery:
@@ -105,7 +119,7 @@ class Gallery:
         loading reconciles with the database)."""
         with self._lock:
             if self._index is not None:
-                self._index.add(mesh_id, descriptor_vectors(descriptor))
+                self._index.add(mesh_id, descriptor_vectors(descriptor, self.preset))
                 self._version += 1
                 self._publish_size()
 
@@ -128,21 +142,36 @@ class Gallery:
     ) -> tuple[list[Match], SearchStats]:
         """The ``k`` enrolled shapes most similar to ``descriptor``, and how the search went.
 
+        With the preset's own score, a query that looks partial is ranked with the parts
+        modality at its weights (:func:`~worker.engine.compare.query_weights`).
+
         Raises
         ------
         UnavailableError
             The index is still loading (``index_loading``).
         """
         index = self._ready()
+        preset = self.preset
         stats = SearchStats()
-        matches = index.search(
-            descriptor_vectors(descriptor),
-            k,
-            fusion=fusion,
-            modalities=modalities,
-            exclude=exclude,
-            stats=stats,
-        )
+        vectors = descriptor_vectors(descriptor, preset)
+        own = modalities == tuple(preset.fused_modalities) and fusion in (None, preset.fusion)
+        share = partiality(descriptor.longest_open_loop, descriptor.kept_area_fraction, preset)
+        weights = query_weights(preset, share)
+        if own and PARTS in weights:
+            matches, scale = index.partial_search(
+                vectors,
+                descriptor.parts.astype(np.float64),
+                descriptor.parts_reach,
+                weights,
+                k,
+                exclude=exclude,
+                stats=stats,
+            )
+            stats.partiality, stats.kept_share = share, 1.0 / scale**2
+        else:
+            matches = index.search(
+                vectors, k, fusion=fusion, modalities=modalities, exclude=exclude, stats=stats
+            )
         self.metrics.search_seconds.observe(stats.seconds)
         return matches, stats
 
@@ -158,7 +187,7 @@ class Gallery:
             if not len(present):
                 return {}
             fused, per = index.exact_scores(
-                descriptor_vectors(descriptor),
+                descriptor_vectors(descriptor, self.preset),
                 index.store.positions(present),
                 tuple(preset.fused_modalities),
                 preset.fusion,
@@ -219,6 +248,8 @@ class Gallery:
             db_ids = meshes.descriptor_mesh_ids(session, preset.name, preset.version)
             try:
                 index = load_index(directory, preset, refit_fraction=self.refit_fraction)
+                if index.store.parts_shape != preset.parts_shape():
+                    raise ValueError("index made with other parts profiles")
                 how = "loaded"
             except ValueError as exc:
                 if directory.exists():
@@ -226,10 +257,13 @@ class Gallery:
                         "index at %s unusable (%s); rebuilding from the database", directory, exc
                     )
                 index = GalleryIndex(
-                    preset, preset.modality_sizes(), refit_fraction=self.refit_fraction
+                    preset,
+                    preset.modality_sizes(),
+                    refit_fraction=self.refit_fraction,
+                    parts_shape=preset.parts_shape(),
                 )
                 rows = meshes.iter_descriptors(session, preset.name, preset.version)
-                index.add_many(_decoded(rows))
+                index.add_many(_decoded(rows, preset))
                 how = "rebuilt"
             else:
                 self._reconcile(index, db_ids, session)
@@ -259,7 +293,7 @@ class Gallery:
             index = self._index
             added = {r.mesh_id for r in log_rows if r.action == "add" and r.mesh_id not in index}
             p = self.preset
-            stored = dict(_decoded(meshes.iter_descriptors(session, p.name, p.version, added)))
+            stored = dict(_decoded(meshes.iter_descriptors(session, p.name, p.version, added), p))
         with self._lock:
             for row in log_rows:
                 if row.action == "add" and row.mesh_id in stored:
@@ -280,7 +314,7 @@ class Gallery:
         if missing:
             p = self.preset
             for mesh_id, vectors in _decoded(
-                meshes.iter_descriptors(session, p.name, p.version, missing)
+                meshes.iter_descriptors(session, p.name, p.version, missing), p
             ):
                 index.add(mesh_id, vectors)
 

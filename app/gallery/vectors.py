@@ -5,6 +5,10 @@ the last one into its place. ``sigma`` comes from running sums of ``x - shift``
 and its square, updated on every add and remove and re-centred on the current
 mean at each refit (``shift``) to avoid cancellation, so it always equals
 ``gallery_sigma`` over the enrolled vectors.
+
+The parts modality's profiles (:mod:`worker.engine.parts`), when the preset has it,
+are kept beside the vectors in the same positions, as float16 (the precision they are
+stored in).
 """
 
 from __future__ import annotations
@@ -14,7 +18,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from worker.engine.presets import MODALITIES
+from worker.engine.presets import MODALITIES, PARTS
 
 INITIAL_CAPACITY = 64
 
@@ -30,10 +34,13 @@ class GalleryVectors:
     Parameters
     ----------
     dims : modality -> M_m, the length of its flat vector.
+    parts_shape : (m, K) of a shape's compared parts profiles; None: no parts.
     """
 
-    def __init__(self, dims: Mapping[str, int]) -> None:
+    def __init__(self, dims: Mapping[str, int], parts_shape: tuple[int, int] | None = None) -> None:
         self.dims = dict(dims)
+        self.parts_shape = parts_shape
+        self.parts = np.empty((INITIAL_CAPACITY, *(parts_shape or (0, 0))), dtype=np.float16)
         self.modalities = tuple(m for m in MODALITIES if m in self.dims)
         self.ids = np.empty(INITIAL_CAPACITY, dtype=np.int64)  # (capacity,) id by position
         self.pos: dict[int, int] = {}
@@ -54,7 +61,8 @@ class GalleryVectors:
         return self.ids[: self.n].copy()
 
     def append(self, item: int, vectors: Mapping[str, np.ndarray]) -> int:
-        """Store ``item``'s vectors (modality -> (M_m,) float) at the end; its position."""
+        """Store ``item``'s vectors (modality -> (M_m,) float, and ``PARTS`` -> (m, K)
+        when the store keeps parts) at the end; its position."""
         self.ensure_capacity(self.n + 1)
         i = self.n
         rows = {}
@@ -63,6 +71,11 @@ class GalleryVectors:
             if x.shape != (self.dims[m],):
                 raise ValueError(f"{m}: expected {self.dims[m]} values, got {x.size}")
             rows[m] = x
+        if self.parts_shape is not None:
+            parts = np.asarray(vectors[PARTS])
+            if parts.shape != self.parts_shape:
+                raise ValueError(f"parts: expected {self.parts_shape}, got {parts.shape}")
+            self.parts[i] = parts
         for m, x in rows.items():
             self.vectors[m][i] = x
             d = x - self.shift[m]
@@ -86,6 +99,7 @@ class GalleryVectors:
             self.sum[m] -= d
             self.sumsq[m] -= d * d
             self.vectors[m][i] = self.vectors[m][last]
+        self.parts[i] = self.parts[last]
         if i != last:
             moved = int(self.ids[last])
             self.ids[i] = moved
@@ -105,6 +119,9 @@ class GalleryVectors:
             grown = np.empty((capacity, self.dims[m]), dtype=np.float64)
             grown[: self.n] = self.vectors[m][: self.n]
             self.vectors[m] = grown
+        parts = np.empty((capacity, *self.parts.shape[1:]), dtype=np.float16)
+        parts[: self.n] = self.parts[: self.n]
+        self.parts = parts
 
     def _changed(self) -> None:
         self._sigma = None

@@ -18,7 +18,7 @@ from ..deps import (
 from ..errors import InvalidInputError, NotFoundError
 from ..schemas import ERROR_RESPONSES, FILE_RESPONSES, UNAUTHORIZED_RESPONSE, multipart_body
 from . import service
-from .schemas import MatchOut, QueryOut
+from .schemas import MatchOut, PartialOut, QueryOut
 
 router = APIRouter(tags=["search"], responses=ERROR_RESPONSES)
 
@@ -135,6 +135,13 @@ def query_out(result: service.SearchResult) -> QueryOut:
         timings=result.timings,
         query=result.query,
         descriptor_source=result.descriptor_source,
+        partial=None
+        if result.partial is None
+        else PartialOut(
+            partiality=result.partial.partiality,
+            missing_share=result.partial.missing_share,
+            note=result.partial.note,
+        ),
         preview=result.preview,
     )
 

@@ -25,6 +25,18 @@ class MatchOut(BaseModel):
     )
 
 
+class PartialOut(BaseModel):
+    partiality: float = Field(
+        description="how partial the query looks, from its open boundary and the share of "
+        "its file left out: 0 a whole, 1 wholly partial (the weight of the parts modality)"
+    )
+    missing_share: float = Field(
+        description="the share of its whole's surface the query seems to miss, from the scale "
+        "at which its parts matched best (and the parts of its file left out)"
+    )
+    note: str = Field(description="the same, as a sentence for the user")
+
+
 class QueryOut(BaseModel):
     model_config = ConfigDict(
         json_schema_extra={
@@ -76,6 +88,13 @@ class QueryOut(BaseModel):
         description="the query's mesh: input_vertices, input_faces (cleaned), vertices "
         "(described), and kept_area_fraction, the described surface's share of the file's "
         "surface area (below 1 when the file has other, separate parts, which are left out)",
+    )
+    partial: PartialOut | None = Field(
+        None,
+        description="present when the query looks partial (a cut, holes, one view): its "
+        "matches are then ranked with the parts modality, which compares a part with a "
+        "whole, and their scores are not on the calibrated scale (no confidence, no "
+        "threshold)",
     )
     preview: str | None = Field(
         None, description="where the query mesh's 3D preview (GLB) can be fetched"

@@ -77,6 +77,27 @@ class RankedMatch:
 
 
 @dataclass
+class PartialQuery:
+    """A query ranked as a part: how partial it looks and how much of its whole it seems
+    to miss."""
+
+    partiality: float
+    missing_share: float
+
+    @property
+    def note(self) -> str:
+        if self.missing_share >= 0.05:
+            return (
+                f"About {round(100 * self.missing_share)}% of the surface seems missing; "
+                "matches are ranked by the parts that are there."
+            )
+        return (
+            "The surface looks open (cut, holed or scanned from one side); matches are "
+            "ranked by the parts that are there."
+        )
+
+
+@dataclass
 class SearchResult:
     """The answer to a search: the options used, the matches best first, timings."""
 
@@ -92,6 +113,8 @@ class SearchResult:
     threshold: float | None = None
     #: Where the query's preview (GLB) can be fetched, when there is one.
     preview: str | None = None
+    #: How partial the query looks, when it was ranked as a part (None: as a whole).
+    partial: PartialQuery | None = None
 
     @property
     def fusion(self) -> str:
@@ -253,9 +276,14 @@ def rank(
         exclude=exclude,
     )
     rows = meshes.by_ids(session, [m.id for m in matches])
-    calibration = _calibration_for(session, state, options)
+    partial = None
+    if stats.kept_share is not None:
+        kept = stats.kept_share * (descriptor.kept_area_fraction or 1.0)
+        partial = PartialQuery(stats.partiality, max(0.0, 1.0 - kept))
+    # The calibration is of whole queries' scores; a part's are on another scale.
+    calibration = None if partial else _calibration_for(session, state, options)
     threshold = None
-    if options.far is not None:
+    if options.far is not None and calibration is not None:
         assert calibration is not None  # _calibration_for raised otherwise
         threshold = calibration.threshold_at(options.far)
     ranked: list[RankedMatch] = []
@@ -283,6 +311,7 @@ def rank(
         query=query_facts(descriptor),
         descriptor_source=descriptor_source,
         threshold=threshold,
+        partial=partial,
     )
 
 

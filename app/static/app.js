@@ -312,7 +312,8 @@ async function search(file) {
       + (partial(result.query.kept_area_fraction)
         ? ` Only ${percent(result.query.kept_area_fraction)} of the file's surface was described: `
           + "it has other, separate parts, which were left out (the largest connected part is described)."
-        : "");
+        : "")
+      + (result.partial ? ` ${result.partial.note}` : "");
     showResults(result, $("search-results"));
   } catch (err) {
     progress.textContent = "";

@@ -6,6 +6,7 @@ import gzip
 
 import numpy as np
 import pytest
+import trimesh
 from conftest import example, with_a_far_half_copy
 
 from app.client import format_matches
@@ -13,6 +14,7 @@ from benchmarks.common import Service
 from worker.engine.mesh_io import load_mesh
 from worker.engine.pipeline import resampled_surface
 from worker.engine.presets import DEFAULT_PRESET, get_preset
+from worker.evaluation.partial import planar_cut
 from worker.evaluation.samples import SAMPLE_VERTICES
 
 from .conftest import GALLERY
@@ -74,6 +76,28 @@ def test_a_query_of_separate_parts_says_what_was_left_out(service: Service, gall
     assert "Only 80% of the query file's surface was described" in format_matches(body)
     whole = service.query("quadruped-2", k=2).json()
     assert "left out" not in format_matches(whole)
+
+
+def test_a_cut_query_is_ranked_by_its_parts_and_says_so(service: Service, gallery):
+    """Another pose of the quadruped with its top 30% cut off: the answer says the query
+    looks partial and how much seems missing, ranks with the parts modality (its bar on
+    every card) and finds the quadruped; its scores are not calibrated ones."""
+    part = planar_cut(load_mesh(example("quadruped-2")), 0.3, np.array([0.0, 0.0, 1.0]))
+    data = trimesh.Trimesh(part.vertices, part.faces, process=False).export(file_type="off")
+    response = service.client.post("/query", files={"file": ("cut.off", data)}, data={"k": "3"})
+    assert response.status_code == 200, response.text
+    body = response.json()
+    assert body["partial"]["partiality"] > 0
+    assert 0 <= body["partial"]["missing_share"] < 1
+    assert "ranked by the parts that are there" in body["partial"]["note"]
+    assert body["matches"][0]["label"] == "quadruped"
+    for m in body["matches"]:
+        assert "parts" in m["scores"] and m["confidence"] is None
+    table = format_matches(body)
+    assert body["partial"]["note"] in table and "parts" in table.splitlines()[2]
+    whole = service.query("quadruped-2", k=2).json()
+    assert whole["partial"] is None
+    assert all("parts" not in m["scores"] for m in whole["matches"])
 
 
 def test_bytes_already_described_answer_without_a_worker(service: Service, gallery):
