@@ -6,10 +6,11 @@ import faiss
 import numpy as np
 import pytest
 
-from app.gallery.index import GalleryIndex, SearchStats
+from app.gallery.index import PARTS_SHORTLIST, GalleryIndex, SearchStats
 from app.gallery.persistence import load_index, save_index
-from worker.engine.compare import dissimilarity, fuse, gallery_sigma
-from worker.engine.presets import MODALITIES, get_preset
+from worker.engine.compare import dissimilarity, fuse, gallery_sigma, query_weights
+from worker.engine.parts import compared_profiles, grid_radii, part_dissimilarity
+from worker.engine.presets import DEFAULT_PRESET, MODALITIES, PARTS, get_preset
 
 SHREC = get_preset("smeets2010-shrec")  # D2, product rule
 TOSCA = get_preset("smeets2010-tosca")  # D1, sum rule
@@ -159,3 +160,64 @@ def test_large_galleries_use_an_inverted_file_that_finds_deletes_and_reloads(tmp
     assert faiss.try_extract_index_ivf(loaded.fits["gdm"].index).nprobe == 8
     for query in queries[:5]:
         assert [m.id for m in loaded.search(query, 10)] == [m.id for m in index.search(query, 10)]
+
+
+DEFAULT = get_preset(DEFAULT_PRESET)  # D1, product rule, with the parts modality
+
+
+def _parts_gallery(n: int, seed: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Flat vectors and whole-surface parts profiles (n, m, C) for the default preset."""
+    rng = np.random.default_rng(seed)
+    samples, columns = DEFAULT.gdm_samples, len(grid_radii(DEFAULT))
+    steps = rng.uniform(0.0, 0.3, size=(n, samples, columns))
+    return _gallery(n, seed, DEFAULT), -np.cumsum(steps, axis=2)
+
+
+@pytest.mark.parametrize("n", [6, 90], ids=["all-shortlisted", "coarse-first"])
+def test_a_partial_search_ranks_as_the_exhaustive_product(n):
+    """With the parts at the query's weights: the exhaustive product of the flat D1 and
+    the parts dissimilarity (scale chosen over all shapes) when every shape is
+    shortlisted; the query's own source first when a coarse pass shortlists."""
+    vectors, profiles = _parts_gallery(n, seed=4)
+    index = GalleryIndex(DEFAULT, DEFAULT.modality_sizes(), parts_shape=DEFAULT.parts_shape())
+    index.add_many(
+        (
+            i,
+            {
+                **{m: vectors[m][i] for m in MODALITIES},
+                PARTS: compared_profiles(profiles[i], DEFAULT),
+            },
+        )
+        for i in range(n)
+    )
+    source = 3
+    part = profiles[source, :200].astype(np.float16).astype(np.float64)  # 200 of its samples
+    reach = np.full(200, np.inf)
+    weights = query_weights(DEFAULT, 0.5)
+    query = {m: vectors[m][source] for m in MODALITIES}
+    found, scale = index.partial_search(query, part, reach, weights, 3, exclude=[5])
+    assert found[0].id == source and scale == 1.0
+    assert [set(m.scores) for m in found] == [set(weights)] * 3
+    if n <= PARTS_SHORTLIST:
+        whole = compared_profiles(profiles.astype(np.float16).astype(np.float64), DEFAULT)
+        per = {m: dissimilarity(query[m][None], vectors[m], "D1")[0] for m in weights if m != PARTS}
+        per[PARTS] = part_dissimilarity(part, reach, whole, DEFAULT).dissimilarity
+        fused = fuse(per, "product", weights)
+        expected = [i for i in np.argsort(fused, kind="stable") if i != 5][:3]
+        assert [m.id for m in found] == expected
+        np.testing.assert_allclose([m.score for m in found], fused[expected], rtol=1e-9)
+
+
+def test_parts_profiles_are_saved_and_loaded(tmp_path):
+    vectors, profiles = _parts_gallery(5, seed=2)
+    index = GalleryIndex(DEFAULT, DEFAULT.modality_sizes(), parts_shape=DEFAULT.parts_shape())
+    for i in range(5):
+        compared = compared_profiles(profiles[i], DEFAULT)
+        index.add(10 + i, {**{m: vectors[m][i] for m in MODALITIES}, PARTS: compared})
+    index.remove(11)  # the last row moves into its place, its profiles with it
+    save_index(index, tmp_path / "index")
+    loaded = load_index(tmp_path / "index", DEFAULT)
+    assert loaded.store.parts_shape == DEFAULT.parts_shape()
+    for item in (10, 12, 13, 14):
+        want = compared_profiles(profiles[item - 10], DEFAULT).astype(np.float16)
+        np.testing.assert_array_equal(loaded.store.parts[loaded.store.pos[item]], want)

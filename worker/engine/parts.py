@@ -169,6 +169,26 @@ def compared_profiles(profiles: np.ndarray, preset: Preset) -> np.ndarray:
     return compared
 
 
+#: Samples a coarse comparison keeps of a query and of each candidate (:func:`coarse`).
+COARSE_SAMPLES = 64
+
+
+def coarse(
+    profiles: np.ndarray, reach: np.ndarray, gallery: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A query and candidates cut down for a coarse first comparison that shortlists
+    candidates: the query's ``COARSE_SAMPLES`` samples farthest from its boundary
+    (among equals the first: the farthest-point order spreads them), and each
+    candidate's first ``COARSE_SAMPLES`` samples (spread over its surface the same way).
+
+    Returns
+    -------
+    profiles (q', C), reach (q',), gallery (n, m'', K).
+    """
+    keep = np.sort(np.argsort(-reach, kind="stable")[:COARSE_SAMPLES])
+    return profiles[keep], reach[keep], gallery[:, :COARSE_SAMPLES]
+
+
 def part_dissimilarity(
     profiles: np.ndarray,
     reach: np.ndarray,
@@ -249,16 +269,23 @@ def _nearest_squared(
     query: np.ndarray, valid: np.ndarray, whole: np.ndarray, n: int, per_shape: int
 ) -> np.ndarray:
     """(q, n): each query row's smallest masked squared distance to the rows of each
-    candidate, ``sum_k valid_ck (query_ck - whole_yk)^2``, by matrix products."""
+    candidate, ``sum_k valid_ck (query_ck - whole_yk)^2``, by one matrix product.
+
+    A row's valid radii are the first ones (those within its reach), so its candidates'
+    part of the expansion, ``sum_k valid_ck whole_yk^2``, is their cumulative sum of
+    squares at its count: gathered, not multiplied.
+    """
     rows = whole.reshape(n * per_shape, -1)
     weighted = valid * query
     own = (weighted * query).sum(axis=1)[:, None]
+    last_valid = valid.sum(axis=1).astype(np.int64) - 1
     out = np.empty((len(query), n))
     shapes_per_block = max(1, _BLOCK_ROWS // per_shape)
     for first in range(0, n, shapes_per_block):
         last = min(n, first + shapes_per_block)
         block = rows[first * per_shape : last * per_shape]
-        squared = own + valid @ (block * block).T - 2.0 * weighted @ block.T
+        norms = np.cumsum(block * block, axis=1)[:, last_valid].T
+        squared = own + norms - 2.0 * weighted @ block.T
         starts = np.arange(0, len(block), per_shape)
         out[:, first:last] = np.minimum.reduceat(squared, starts, axis=1)
     return out
