@@ -55,7 +55,10 @@ def candidate(preset: Preset, start: float, width: float, share: float) -> Prese
 
 
 def matrices(
-    queries: Sequence[ShapeDescriptor], gallery: Sequence[ShapeDescriptor], preset: Preset
+    queries: Sequence[ShapeDescriptor],
+    gallery: Sequence[ShapeDescriptor],
+    preset: Preset,
+    jobs: int,
 ) -> dict[str, np.ndarray]:
     per = {}
     g_all = {m: np.stack([d.vector(m) for d in gallery]) for m in MODALITIES}
@@ -63,7 +66,7 @@ def matrices(
         q = np.stack([d.vector(m) for d in queries])
         sigma = gallery_sigma(g_all[m]) if preset.dissimilarity == "D2" else None
         per[m] = dissimilarity(q, g_all[m], preset.dissimilarity, sigma)
-    per[PARTS] = parts_matrix(queries, gallery, preset)
+    per[PARTS] = parts_matrix(queries, gallery, preset, jobs)
     return per
 
 
@@ -123,7 +126,7 @@ def main() -> None:
     whole = compute_descriptors(meshes, preset, args.cache, jobs=args.jobs)
     labels = np.array([m.label for m in whole.meshes])
     index = {m.name: i for i, m in enumerate(whole.meshes)}
-    wholes = (matrices(whole.descriptors, whole.descriptors, preset), whole.descriptors)
+    wholes = (matrices(whole.descriptors, whole.descriptors, preset, args.jobs), whole.descriptors)
     copies = {}
     for variant in PARTIAL_VARIANTS:
         done = compute_descriptors(
@@ -131,7 +134,7 @@ def main() -> None:
         )
         sources = np.array([index[m.name] for m in done.meshes])
         copies[variant] = (
-            matrices(done.descriptors, whole.descriptors, preset),
+            matrices(done.descriptors, whole.descriptors, preset, args.jobs),
             done.descriptors,
             sources,
         )

@@ -138,11 +138,15 @@ def _robustness(args: argparse.Namespace) -> int:
     if "poses" in report:
         print(f"\nposes of {report['poses']['dataset']}: ratio, foreign nearest neighbours")
         for key, title in titles.items():
+            if key not in report["poses"]["scores"]:  # the parts: whole queries only
+                continue
             row = report["poses"]["scores"][key]
             print(f"{title:{width}}  {row['ratio']:.3f}  {row['foreign_nearest']}/{row['poses']}")
         first, second = report["poses"]["resolutions"]
         print(f"\nposes at {first} against {second} and back: rank 1, ratio")
         for key, title in titles.items():
+            if key not in report["poses"]["cross_resolution"]:
+                continue
             row = report["poses"]["cross_resolution"][key]
             print(f"{title:{width}}  {100 * row['rank1']:5.1f}%  {row['ratio']:.3f}")
     for name, why in report["failures"].items():

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import EXAMPLES, example
 
-from worker.engine.presets import Preset
+from worker.engine.presets import PARTS, Preset
 from worker.evaluation.datasets import pose_set
 from worker.evaluation.robustness import (
     PRESET_ROW,
@@ -124,6 +124,8 @@ def test_run_writes_the_report_and_rotation_costs_nothing(tmp_path, surface_pres
         name="test-robust-run",
         n_vertices=500,
         fused_modalities=("gdm", "ddt", "spectrum"),
+        gdm_samples=100,
+        parts_first_radius=0.07,
     )
     report = run_robustness(
         EXAMPLES,
@@ -138,10 +140,12 @@ def test_run_writes_the_report_and_rotation_costs_nothing(tmp_path, surface_pres
     saved = json.loads((tmp_path / "out" / "robustness.json").read_text())
     assert saved["tessellation"] == report["tessellation"]
     assert "| GDM+DDT+Spectrum product" in (tmp_path / "out" / "robustness.md").read_text()
-    for row in ("gdm", "ddt", "spectrum", PRESET_ROW, BASELINE):
+    for row in ("gdm", "ddt", "spectrum", PARTS, PRESET_ROW, BASELINE):
         rotated = report["tessellation"][row]["variants"]["rotated-scaled"]
         assert rotated["gap"] < 1e-4 and rotated["self_retrieval"] == 1.0
         assert report["tessellation"][row]["variants"]["decimated-50"]["count"] == 4
+    assert "| Parts |" in (tmp_path / "out" / "robustness.md").read_text()
+    assert PARTS not in report["poses"]["scores"]  # the parts never rank a whole query
     assert report["poses"]["scores"][PRESET_ROW]["poses"] == 2
     # Both poses remeshed at two resolutions; quadruped-0 and -2 differ by more than that.
     across = report["poses"]["cross_resolution"]

@@ -32,7 +32,7 @@ class _Job:
     error: str | None = None
 
 
-def _single_threaded_blas() -> None:
+def single_threaded_blas() -> None:
     """Give each worker process one BLAS thread.
 
     ``--jobs`` processes with OpenBLAS's default of one thread per core
@@ -176,7 +176,7 @@ def compute_descriptors(
                 bar.update()
     elif todo:
         workers = min(jobs, len(todo))
-        with ProcessPoolExecutor(max_workers=workers, initializer=_single_threaded_blas) as pool:
+        with ProcessPoolExecutor(max_workers=workers, initializer=single_threaded_blas) as pool:
             futures = {pool.submit(_describe_job, *a): i for i, a in zip(todo, args, strict=True)}
             for future in as_completed(futures):
                 try:

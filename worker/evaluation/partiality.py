@@ -18,6 +18,7 @@ of each query's candidates counts here.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -34,6 +35,7 @@ from worker.engine.parts import compared_profiles, part_dissimilarity
 from worker.engine.presets import MODALITIES, PARTS, Preset
 from worker.recognition import metrics
 
+from .compute import single_threaded_blas
 from .robustness import PRESET_ROW
 from .shapedna import BASELINE, shapedna_dissimilarity
 
@@ -59,18 +61,43 @@ def query_partiality(descriptors: Sequence[ShapeDescriptor], preset: Preset) -> 
 
 
 def parts_matrix(
-    queries: Sequence[ShapeDescriptor], gallery: Sequence[ShapeDescriptor], preset: Preset
+    queries: Sequence[ShapeDescriptor],
+    gallery: Sequence[ShapeDescriptor],
+    preset: Preset,
+    jobs: int = 1,
 ) -> np.ndarray:
-    """(q, n) the parts dissimilarity of every query to every gallery shape."""
+    """(q, n) the parts dissimilarity of every query to every gallery shape (every
+    sample of every shape), the queries shared among ``jobs`` processes."""
     whole = compared_profiles(np.stack([g.parts.astype(np.float64) for g in gallery]), preset)
-    return np.stack(
-        [
-            part_dissimilarity(
-                q.parts.astype(np.float64), q.parts_reach, whole, preset
-            ).dissimilarity
-            for q in queries
-        ]
-    )
+    profiles = [q.parts.astype(np.float64) for q in queries]
+    reach = [q.parts_reach for q in queries]
+    if jobs <= 1 or len(queries) < 2:
+        return np.stack(
+            [_parts_row(whole, preset, p, r) for p, r in zip(profiles, reach, strict=True)]
+        )
+    with ProcessPoolExecutor(
+        max_workers=jobs, initializer=_hold_gallery, initargs=(whole, preset)
+    ) as pool:
+        return np.stack(list(pool.map(_held_row, profiles, reach, chunksize=4)))
+
+
+_HELD: dict[str, tuple[np.ndarray, Preset]] = {}
+
+
+def _hold_gallery(whole: np.ndarray, preset: Preset) -> None:
+    """A worker process's gallery, sent once rather than with every query."""
+    single_threaded_blas()
+    _HELD["gallery"] = (whole, preset)
+
+
+def _held_row(profiles: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    return _parts_row(*_HELD["gallery"], profiles, reach)
+
+
+def _parts_row(
+    whole: np.ndarray, preset: Preset, profiles: np.ndarray, reach: np.ndarray
+) -> np.ndarray:
+    return part_dissimilarity(profiles, reach, whole, preset).dissimilarity
 
 
 def query_matrices(
@@ -78,6 +105,7 @@ def query_matrices(
     gallery: Sequence[ShapeDescriptor],
     preset: Preset,
     baselines: tuple[np.ndarray, np.ndarray] | None = None,
+    jobs: int = 1,
 ) -> dict[str, np.ndarray]:
     """Row key -> (q, n) dissimilarity of every query to every gallery shape.
 
@@ -94,7 +122,7 @@ def query_matrices(
         g = np.stack([d.vector(m) for d in gallery])
         sigma = gallery_sigma(g) if preset.dissimilarity == "D2" else None
         per[m] = dissimilarity(q, g, preset.dissimilarity, sigma)
-    per[PARTS] = parts_matrix(queries, gallery, preset)
+    per[PARTS] = parts_matrix(queries, gallery, preset, jobs)
     out = dict(per)
     out[PRESET_ROW] = weighed_by_partiality(per, query_partiality(queries, preset), preset)
     if baselines is not None:
@@ -108,6 +136,7 @@ def collection_matrices(
     descriptors: Sequence[ShapeDescriptor],
     per_modality: Mapping[str, np.ndarray],
     preset: Preset,
+    jobs: int = 1,
 ) -> dict[str, np.ndarray]:
     """The parts modality and the preset's partiality-weighted score, all to all.
 
@@ -122,7 +151,7 @@ def collection_matrices(
     {"parts": (n, n), PRESET_ROW: (n, n)}; row ``i`` weighed by query ``i``'s
     partiality, so neither is symmetric.
     """
-    per = {**per_modality, PARTS: parts_matrix(descriptors, descriptors, preset)}
+    per = {**per_modality, PARTS: parts_matrix(descriptors, descriptors, preset, jobs)}
     shares = query_partiality(descriptors, preset)
     return {PARTS: per[PARTS], PRESET_ROW: weighed_by_partiality(per, shares, preset)}
 
@@ -159,6 +188,7 @@ def partiality_scores(
     variants: Mapping[str, tuple[np.ndarray, Sequence[ShapeDescriptor]]],
     preset: Preset,
     baselines: tuple[np.ndarray, Mapping[str, np.ndarray]] | None = None,
+    jobs: int = 1,
 ) -> dict[str, Any]:
     """The protocol's numbers.
 
@@ -169,6 +199,7 @@ def partiality_scores(
         ``sources[j]`` the index of the whole copy ``j`` was made from.
     preset : the comparison.
     baselines : ShapeDNA of the wholes (n, k) and per variant (v, k).
+    jobs : processes comparing the parts.
 
     Returns
     -------
@@ -181,7 +212,7 @@ def partiality_scores(
     about: dict[str, dict[str, Any]] = {}
     for name, (sources, copies) in variants.items():
         pair = None if baselines is None else (baselines[1][name], baselines[0])
-        matrices = query_matrices(copies, gallery, preset, pair)
+        matrices = query_matrices(copies, gallery, preset, pair, jobs)
         for row, d in matrices.items():
             rows.setdefault(row, {})[name] = ranking_scores(d, np.asarray(sources), labels_arr)
         shares = query_partiality(copies, preset)

@@ -75,6 +75,7 @@ def build_report(
     command: str = "",
     environment: Mapping[str, str] | None = None,
     dataset: str = "",
+    jobs: int = 1,
 ) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Dissimilarities and metrics of every row, as one JSON-ready dict.
 
@@ -83,6 +84,7 @@ def build_report(
     computed : the described set (:func:`compute_descriptors`).
     preset : the preset the descriptors were made with.
     command, environment, dataset : recorded as given.
+    jobs : processes comparing the parts modality.
 
     Returns
     -------
@@ -97,7 +99,7 @@ def build_report(
     titles = {key: ROWS[key] for key in matrices}
     if preset.has_parts:
         baseline = matrices.pop(BASELINE)  # stays the last row
-        matrices.update(collection_matrices(computed.descriptors, matrices, preset))
+        matrices.update(collection_matrices(computed.descriptors, matrices, preset, jobs))
         matrices[BASELINE] = baseline
         titles[PARTS] = ("Parts", (PARTS,), None)
         titles[PRESET_ROW] = (

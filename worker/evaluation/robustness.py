@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from worker.engine.compare import dissimilarity, fuse, gallery_sigma
-from worker.engine.presets import MODALITIES, Preset
+from worker.engine.presets import MODALITIES, PARTS, Preset
 
 from .shapedna import BASELINE, shapedna_dissimilarity
 
@@ -55,12 +55,15 @@ POSE_RESOLUTIONS = ("remeshed-8k", "remeshed-15k")
 
 
 def row_titles(preset: Preset) -> dict[str, str]:
-    """Row key -> title, in table order."""
+    """Row key -> title, in table order (the parts modality's row when the preset has it:
+    the tessellation protocol only; a whole query's score does not use it)."""
     fused = "+".join(m.upper() if m != "spectrum" else "Spectrum" for m in preset.fused_modalities)
+    parts = {PARTS: "Parts"} if preset.has_parts else {}
     return {
         "gdm": "GDM",
         "ddt": "DDT",
         "spectrum": "Spectrum",
+        **parts,
         PRESET_ROW: f"{fused} {preset.fusion} (the preset's score)",
         BASELINE: "ShapeDNA (lapy)",
     }
@@ -109,6 +112,7 @@ def tessellation_scores(
     labels: Sequence[str],
     variants: Mapping[str, tuple[np.ndarray, Mapping[str, np.ndarray]]],
     preset: Preset,
+    parts: tuple[np.ndarray, Mapping[str, np.ndarray]] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """The protocol's numbers per row.
 
@@ -120,6 +124,9 @@ def tessellation_scores(
         [and ``BASELINE``]), ``sources[j]`` the index of the original variant ``j``
         was made from.
     preset : the dissimilarity, fusion rule and weights.
+    parts : the parts modality's dissimilarities, originals to originals (n, n) and
+        per variant to the originals (v, n) (:func:`.partiality.parts_matrix`); its row
+        is left out without them.
 
     Returns
     -------
@@ -135,6 +142,10 @@ def tessellation_scores(
     cross = {}
     for name, (sources, vectors) in variants.items():
         cross[name] = (np.asarray(sources), _cross(vectors, originals, preset))
+    if parts is not None:
+        among[PARTS] = parts[0]
+        for name, (_, matrices) in cross.items():
+            matrices[PARTS] = parts[1][name]
     scores: dict[str, dict[str, Any]] = {}
     for row, matrix in among.items():
         nearest_other = np.where(other_class, matrix, np.inf).min(axis=1)

@@ -20,7 +20,7 @@ from worker.recognition.fusion import FOLDS, tune_fusion
 from .compute import compute_descriptors, descriptor_vectors
 from .datasets import EvaluationError, LabeledMesh, pose_set, read_labels
 from .partial import PARTIAL_VARIANTS
-from .partiality import partial_row_titles, partiality_scores
+from .partiality import partial_row_titles, partiality_scores, parts_matrix
 from .report import (
     build_report,
     environment_info,
@@ -70,7 +70,7 @@ def run_evaluation(
         )
     env = {**environment_info(), **(environment or {})}
     report, _ = build_report(
-        computed, preset, command=command, environment=env, dataset=str(dataset_dir)
+        computed, preset, command=command, environment=env, dataset=str(dataset_dir), jobs=jobs
     )
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -249,6 +249,7 @@ def run_robustness(
     originals = descriptor_vectors(computed)
     failures = {name: {"original": why} for name, why in computed.failures.items()}
     described: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
+    parts: dict[str, np.ndarray] = {}  # the parts modality's, per variant
     # Vertices of the meshes as described, summed: two runs whose sums agree described
     # the same variant meshes (MeshLab's remesher once gave others under load).
     vertices = {"original": sum(d.input_vertices for d in computed.descriptors)}
@@ -261,7 +262,12 @@ def run_robustness(
             failures.setdefault(name, {})[variant] = why
         sources = np.array([index[m.name] for m in done.meshes], dtype=np.int64)
         described[variant] = (sources, descriptor_vectors(done))
+        if preset.has_parts:
+            parts[variant] = parts_matrix(done.descriptors, computed.descriptors, preset, jobs)
     labels = [m.label for m in computed.meshes]
+    among = None
+    if preset.has_parts:
+        among = parts_matrix(computed.descriptors, computed.descriptors, preset, jobs)
     report: dict[str, Any] = {
         "dataset": str(dataset_dir),
         "command": command,
@@ -269,7 +275,9 @@ def run_robustness(
         "rows": row_titles(preset),
         "gap_bar": GAP_BAR,
         "variants": list(variants),
-        "tessellation": tessellation_scores(originals, labels, described, preset),
+        "tessellation": tessellation_scores(
+            originals, labels, described, preset, None if among is None else (among, parts)
+        ),
         "input_vertices": vertices,
         "failures": failures,
         "environment": {**environment_info(), **(environment or {})},
@@ -362,6 +370,7 @@ def run_partiality(
         described,
         preset,
         baselines=(wholes, shapedna),
+        jobs=jobs,
     )
     report: dict[str, Any] = {
         "dataset": str(dataset_dir),
