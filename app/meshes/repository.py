@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, selectinload
 
-from ..models import Descriptor, Job, Mesh, Preview
+from ..models import Descriptor, Job, Mesh, MeshStatus, Preview
 
 
 def get(session: Session, mesh_id: int) -> Mesh | None:
@@ -104,6 +104,20 @@ def descriptor_mesh_ids(session: Session, preset: str, version: int) -> set[int]
             )
         )
     )
+
+
+def description_progress(session: Session, preset: str, version: int) -> tuple[int, int]:
+    """``(described, describable)``: meshes with a descriptor of this preset version, and
+    meshes that have one or are waiting for one (the failed left out)."""
+    described = session.scalar(
+        select(func.count(Descriptor.id)).where(
+            Descriptor.preset == preset, Descriptor.preset_version == version
+        )
+    )
+    describable = session.scalar(
+        select(func.count(Mesh.id)).where(Mesh.status != MeshStatus.failed.value)
+    )
+    return int(described or 0), int(describable or 0)
 
 
 def iter_descriptors(

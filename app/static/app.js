@@ -539,7 +539,11 @@ function drawRoc(roc, eer) {
 async function status() {
   try {
     const ready = await fetch("/ready").then((r) => r.json());
-    $("service-status").textContent = ready.status === "ready" ? `index: ${ready.checks.index}` : "starting...";
+    const progress = ready.descriptors;
+    const behind = progress && progress.described < progress.enrolled
+      ? `; describing with ${progress.preset}: ${progress.described} of ${progress.enrolled} done`
+      : "";
+    $("service-status").textContent = ready.status === "ready" ? `index: ${ready.checks.index}${behind}` : "starting...";
   } catch {
     $("service-status").textContent = "service unreachable";
   }

@@ -21,11 +21,16 @@ def health() -> dict[str, str]:
 @router.get(
     "/ready",
     summary="Database reachable and index loaded",
+    description="`descriptors` says how many enrolled meshes are described with the current "
+    "preset version (after an upgrade the others are described again in the background, "
+    "and are searchable once done).",
     responses={503: {"description": "Not ready yet (index loading) or database unreachable"}},
 )
 def ready(state: StateDep) -> JSONResponse:
     ok, checks = service.readiness(state)
     body: dict[str, object] = {"status": "ready" if ok else "not_ready", "checks": checks}
+    if checks["database"] == "ok":
+        body["descriptors"] = service.description_progress(state)
     if not ok:
         body.update(error="not_ready", detail="The service is starting or its database is down.")
     return JSONResponse(body, status_code=200 if ok else 503)

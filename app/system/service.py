@@ -1,9 +1,11 @@
-"""Readiness: is the database reachable and the gallery loaded?"""
+"""Readiness: is the database reachable and the gallery loaded? And how far the
+describing with the current preset version has come."""
 
 from __future__ import annotations
 
 from sqlalchemy import text
 
+from ..meshes import repository as meshes
 from ..state import AppState
 
 
@@ -22,3 +24,17 @@ def readiness(state: AppState) -> tuple[bool, dict[str, str]]:
     else:
         checks["index"] = gallery.error or "loading"
     return checks["database"] == "ok" and gallery.loaded, checks
+
+
+def description_progress(state: AppState) -> dict[str, object]:
+    """How many enrolled meshes have a descriptor of the service's preset version (all,
+    except while the meshes of an earlier version are described again in the
+    background: only those are searchable meanwhile)."""
+    preset = state.preset
+    with state.read_sessions() as session:
+        described, describable = meshes.description_progress(session, preset.name, preset.version)
+    return {
+        "preset": f"{preset.name} v{preset.version}",
+        "described": described,
+        "enrolled": describable,
+    }

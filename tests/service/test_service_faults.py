@@ -84,6 +84,10 @@ def test_a_new_preset_version_describes_every_stored_mesh_again(tmp_path_factory
         current.rename(index / f"{DEFAULT_PRESET}-v{version - 1}")
 
         svc.start_api()
+        # /ready says how far the describing has come (the worker may be done already).
+        progress = svc.client.get("/ready").json()["descriptors"]
+        assert progress["preset"] == f"{DEFAULT_PRESET} v{version}"
+        assert progress["enrolled"] == 2 and 0 <= progress["described"] <= 2
         deadline = time.monotonic() + TIMEOUT
         for mesh_id in ids.values():
             while True:
@@ -93,6 +97,8 @@ def test_a_new_preset_version_describes_every_stored_mesh_again(tmp_path_factory
                     break
                 assert body["status"] != "failed" and time.monotonic() < deadline, body
                 time.sleep(0.2)
-        assert svc.client.get("/ready").json()["checks"]["index"] == "ok (2 shapes)"
+        ready = svc.client.get("/ready").json()
+        assert ready["checks"]["index"] == "ok (2 shapes)"
+        assert ready["descriptors"]["described"] == ready["descriptors"]["enrolled"] == 2
         matches = svc.query("quadruped-1", k=2).json()["matches"]
         assert [m["label"] for m in matches] == ["quadruped", "biped"]
