@@ -23,6 +23,7 @@ from worker.evaluation.samples import (
     CROSSING_MARGIN,
     FIGURES,
     N_POSES,
+    PARTIAL_SAMPLE,
     SAMPLE_CLASSES,
     SAMPLE_VERTICES,
     marching_tetrahedra,
@@ -124,6 +125,14 @@ def test_shapes_samples_rewrites_the_labels_and_nothing_else(regenerated):
     assert sorted(p.name for p in regenerated.iterdir()) == sorted(
         p.name for p in EXAMPLES.iterdir()
     )
+    assert (regenerated / PARTIAL_SAMPLE).is_file()
+
+
+def test_the_partial_example_is_the_quadruped_without_its_top():
+    """What the walk-through queries with: an open part of quadruped-3, its top gone."""
+    whole, part = read_off_gz(example("quadruped-3")), read_off_gz(EXAMPLES / PARTIAL_SAMPLE)
+    assert not part.is_watertight and 0.6 < part.area / whole.area < 0.95
+    assert part.bounds[1, 2] < whole.bounds[1, 2] and part.bounds[0, 2] == whole.bounds[0, 2]
 
 
 @pytest.mark.slow

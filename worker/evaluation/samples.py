@@ -360,18 +360,33 @@ def off_gz_bytes(mesh: Mesh) -> bytes:
     return gzip.compress(text.getvalue().encode("ascii"), mtime=0)
 
 
+#: A partial scan the walk-through queries with: PARTIAL_SOURCE's sample with its top
+#: (PARTIAL_SHARE of its vertices, along z) cut off, written as PARTIAL_SAMPLE.
+PARTIAL_SOURCE = ("quadruped", 3)
+PARTIAL_SHARE = 0.25
+PARTIAL_SAMPLE = Path("partial") / "quadruped-3-top-cut.off.gz"
+
+
 def write_samples(out_dir: str | Path) -> list[Path]:
-    """Write every sample (``<class>-<pose>.off.gz``) and ``labels.csv`` (columns
-    ``file,class``) into ``out_dir``; returns the paths written, labels last."""
+    """Write every sample (``<class>-<pose>.off.gz``), ``labels.csv`` (columns
+    ``file,class``) and the partial scan ``PARTIAL_SAMPLE`` into ``out_dir``; returns
+    the paths written, labels last."""
+    from .partial import planar_cut
+
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    (out / PARTIAL_SAMPLE).parent.mkdir(parents=True, exist_ok=True)
     written, rows = [], []
     for name in SAMPLE_CLASSES:
         for pose in range(N_POSES):
+            mesh = sample_mesh(name, pose)
             path = out / sample_name(name, pose)
-            path.write_bytes(off_gz_bytes(sample_mesh(name, pose)))
+            path.write_bytes(off_gz_bytes(mesh))
             written.append(path)
             rows.append((path.name, name))
+            if (name, pose) == PARTIAL_SOURCE:
+                part = planar_cut(mesh, PARTIAL_SHARE, np.array([0.0, 0.0, 1.0]))
+                (out / PARTIAL_SAMPLE).write_bytes(off_gz_bytes(part))
+                written.append(out / PARTIAL_SAMPLE)
     labels = out / "labels.csv"
     with open(labels, "w", newline="") as handle:
         writer = csv.writer(handle, lineterminator="\n")
