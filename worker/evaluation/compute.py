@@ -209,7 +209,8 @@ def compute_descriptors(
             "hash_and_cache_seconds": cache_seconds,
             "compute_seconds": compute_seconds,
             "jobs": jobs,
-            "cache_directory": str(cache.directory),
+            # Its name (preset, version, engine fingerprint), not the machine's path.
+            "cache_namespace": cache.directory.name,
         },
     )
 
