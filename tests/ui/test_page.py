@@ -16,8 +16,9 @@ from pathlib import Path
 import pytest
 from conftest import example, with_a_far_half_copy
 
-from benchmarks.common import Service
+from benchmarks.common import EXAMPLES, Service
 from tests.service.conftest import migrated_service, running
+from worker.evaluation.samples import PARTIAL_SAMPLE
 
 pytestmark = [pytest.mark.slow, pytest.mark.service]
 
@@ -151,6 +152,24 @@ def test_a_search_says_when_part_of_the_file_was_left_out(page, tmp_path):
     progress = page.locator("#search-progress").inner_text()
     assert "Only 80% of the file's surface was described" in progress, progress
     assert page.locator("#search-results .card .label").first.inner_text() == "quadruped"
+
+
+def test_a_partial_scan_is_ranked_by_its_parts_and_the_page_says_so(page):
+    """The walk-through's partial example: the page says how much seems missing, and
+    every card has the parts bar."""
+    page.click("#tab-search")
+    page.set_input_files("#file-search", str(EXAMPLES / PARTIAL_SAMPLE))
+    page.wait_for_function(
+        "() => document.getElementById('search-progress').textContent"
+        ".startsWith('quadruped-3-top-cut.off.gz: ')",
+        timeout=180_000,
+    )
+    progress = page.locator("#search-progress").inner_text()
+    assert "matches are ranked by the parts that are there" in progress, progress
+    cards = page.locator("#search-results .card")
+    assert cards.first.locator(".label").inner_text() == "quadruped"
+    assert "PARTS" in cards.first.locator(".bars").inner_text()
+    shoot(page, "partial")
 
 
 def test_an_error_shows_the_services_sentence(page, tmp_path):
