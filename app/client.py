@@ -1,8 +1,8 @@
 """The command-line client of the service: ``shapes import`` and ``shapes query``.
 
 HTTP only (httpx); nothing of the server is imported, so it runs against any
-deployment. The defaults point at the local service that ``./scripts/serve.sh``
-starts.
+deployment. ``--url`` defaults to ``SHAPES_URL``, else to where the service's own
+settings (``SHAPES_HOST``, ``SHAPES_PORT``) make ``./scripts/serve.sh`` listen.
 
 ``shapes import DIR|FILES... [--labels labels.csv] [--url URL] [--api-key K]
 [--concurrency N] [--wait]`` enrolls every mesh file with a progress bar and an
@@ -26,7 +26,7 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,7 +34,21 @@ from typing import Any
 
 import httpx
 
-DEFAULT_URL = os.environ.get("SHAPES_URL", "http://127.0.0.1:8000")
+
+def default_url(environ: Mapping[str, str]) -> str:
+    """Where the commands find the service: ``SHAPES_URL``, else the address the
+    service's own settings make it listen on (``SHAPES_HOST``, ``SHAPES_PORT``; an
+    all-interfaces host is reached on loopback)."""
+    if environ.get("SHAPES_URL"):
+        return environ["SHAPES_URL"].rstrip("/")
+    host = environ.get("SHAPES_HOST") or "127.0.0.1"
+    if host in ("0.0.0.0", "::"):
+        host = "127.0.0.1"
+    host = f"[{host}]" if ":" in host else host
+    return f"http://{host}:{environ.get('SHAPES_PORT') or 8000}"
+
+
+DEFAULT_URL = default_url(os.environ)
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl", ".glb", ".gltf")
 TIMEOUT = httpx.Timeout(300.0, connect=10.0)
 #: Below this share of the file's surface described, the answer says the rest was left out

@@ -12,6 +12,7 @@ from collections.abc import Iterator
 import pytest
 from conftest import EXAMPLES, example, with_a_far_half_copy
 
+from app.client import default_url
 from benchmarks.common import REPO, Service
 
 from .conftest import migrated_service, running
@@ -149,3 +150,12 @@ def test_an_import_lists_the_files_described_in_part(served: Service, tmp_path):
     assert lines[1].startswith("1 described in part: only their largest connected part")
     assert lines[3].split() == ["quadruped-2-and-a-copy.off", "80%"]
     assert len(lines) == 4  # hand-0 is one connected surface
+
+
+def test_the_commands_find_the_service_where_its_settings_put_it():
+    assert default_url({}) == "http://127.0.0.1:8000"
+    assert default_url({"SHAPES_PORT": "8765"}) == "http://127.0.0.1:8765"
+    assert default_url({"SHAPES_HOST": "0.0.0.0", "SHAPES_PORT": "9000"}) == "http://127.0.0.1:9000"
+    assert default_url({"SHAPES_HOST": "::1"}) == "http://[::1]:8000"
+    remote = {"SHAPES_URL": "https://shapes.example.org/", "SHAPES_PORT": "8765"}
+    assert default_url(remote) == "https://shapes.example.org"
