@@ -84,6 +84,8 @@ def shoot(page, name: str) -> None:
 
 
 def test_enroll_three_meshes_through_the_page(page, site):
+    # Nothing searched or opened yet: no empty 3D panels, no detail with live buttons.
+    assert page.locator("#compare").is_hidden() and page.locator("#detail").is_hidden()
     page.click("#tab-enroll")
     for name, label in ENROLL.items():
         page.set_input_files("#enroll-files", str(example(name)))
