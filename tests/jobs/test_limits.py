@@ -4,6 +4,8 @@ crash is raised so that the queue retries it."""
 
 from __future__ import annotations
 
+import pickle
+import signal
 import subprocess
 import sys
 
@@ -14,7 +16,7 @@ from conftest import EXAMPLES, example
 from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.pipeline import describe_file
 from worker.engine.presets import get_preset
-from worker.jobs.limits import describe_limited
+from worker.jobs.limits import describe_limited, outcome_of
 from worker.jobs.previews import IMPORTS as PREVIEW_IMPORTS
 
 pytestmark = pytest.mark.slow  # each describes a mesh in a fresh child process
@@ -77,6 +79,19 @@ def test_a_mesh_error_keeps_its_code_and_a_crash_is_raised_for_a_retry():
             EXAMPLES / "missing.off.gz", "m.off.gz", "smeets2010-shrec", max_faces=10,
             time_limit=30, memory_limit_bytes=0,
         )  # fmt: skip
+
+
+def test_a_child_killed_from_outside_is_retried_not_taken_for_a_lack_of_memory():
+    """SIGKILL (the kernel's out-of-memory killer, an operator) says nothing about the
+    mesh: retried. Dying of another signal under the memory cap is the mesh's need for
+    memory; so is a MemoryError the child reports."""
+    cap = 4096 * 1024**2
+    with pytest.raises(RuntimeError, match="killed"):
+        outcome_of(b"", -signal.SIGKILL, cap)
+    assert outcome_of(b"", -signal.SIGSEGV, cap).code == "describe_out_of_memory"
+    assert outcome_of(pickle.dumps(("out_of_memory", "")), 1, cap).code == "describe_out_of_memory"
+    with pytest.raises(RuntimeError, match="exited with code -11"):
+        outcome_of(b"", -signal.SIGSEGV, 0)  # no cap: a crash
 
 
 def test_a_consumer_can_start_its_fork_server_before_the_first_job():

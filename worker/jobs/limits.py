@@ -16,6 +16,7 @@ import logging
 import multiprocessing as mp
 import pickle
 import resource
+import signal
 from dataclasses import dataclass
 from multiprocessing import forkserver
 from multiprocessing.connection import Connection
@@ -149,6 +150,17 @@ def describe_limited(
                 "seconds; simplify it or upload a smaller mesh."
             ),
         )
+    return outcome_of(message, child.exitcode, memory_limit_bytes)
+
+
+def outcome_of(message: bytes, exitcode: int | None, memory_limit_bytes: int) -> Outcome:
+    """What a finished child's answer (empty when it died without one) and exit code say.
+
+    A MemoryError under the cap, or a signal other than SIGKILL (C code failing to
+    allocate under the cap aborts or faults), is the mesh's need for memory: a failure
+    of this mesh. SIGKILL comes from outside (the kernel's out-of-memory killer, an
+    operator): like any other death, ``RuntimeError``, which the queue retries.
+    """
     if message:
         code, *rest = pickle.loads(message)
         if code == "ok":
@@ -158,8 +170,8 @@ def describe_limited(
             raise RuntimeError(f"describing failed: {rest[0]}")
         if code != "out_of_memory":
             return Outcome(code=code, message=rest[0])
-    # MemoryError under the cap, or a signal (C code failing to allocate, the OOM killer).
-    if message or (memory_limit_bytes > 0 and (child.exitcode or 0) < 0):
+    killed = exitcode == -signal.SIGKILL
+    if message or (memory_limit_bytes > 0 and (exitcode or 0) < 0 and not killed):
         mb = memory_limit_bytes / (1024 * 1024)
         return Outcome(
             code="describe_out_of_memory",
@@ -168,4 +180,6 @@ def describe_limited(
                 "simplify it or upload a smaller mesh."
             ),
         )
-    raise RuntimeError(f"the descriptor process exited with code {child.exitcode}")
+    if killed:
+        raise RuntimeError("the descriptor process was killed (SIGKILL, from outside it)")
+    raise RuntimeError(f"the descriptor process exited with code {exitcode}")
