@@ -142,6 +142,13 @@ def test_random_bytes_are_unreadable():
         assert info.value.message.endswith(".")
 
 
+def test_an_off_file_with_a_word_for_a_number_is_unreadable():
+    """numpy refuses the token with a ValueError; the file is damaged, not a crash."""
+    bad = b"OFF\n3 1 0\nx 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"
+    with pytest.raises(errors.UnreadableMeshError, match="could not be read as OFF"):
+        load_mesh(bad, "bad.off")
+
+
 def test_truncated_gzip():
     data = gzip.compress(_off(*_tetra()))[:20]
     with pytest.raises(errors.UnreadableMeshError, match="truncated|not valid gzip"):

@@ -148,7 +148,10 @@ def _parse_triangle_off(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
         return None
     with warnings.catch_warnings():  # bad text shows as a wrong count, checked below
         warnings.simplefilter("ignore")
-        numbers = np.fromstring(parts[4], sep=" ")
+        try:
+            numbers = np.fromstring(parts[4], sep=" ")
+        except ValueError:  # a token that is not a number (newer numpy raises)
+            return None
     columns, rest = divmod(numbers.size - 4 * n_faces, max(n_vertices, 1))
     if n_vertices < 1 or n_faces < 0 or rest or columns < 3:
         return None
