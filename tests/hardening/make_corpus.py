@@ -195,6 +195,9 @@ def build_corpus(max_faces: int, seed: int = 5) -> list[Case]:
         add(f"truncated-{ext}", f"truncated.{ext}", data[: len(data) // 2], 422, UNREADABLE)
     add("truncated-gz", "truncated.off.gz", gzip.compress(good["off"])[:200], 422, UNREADABLE)
     add("not-gzip", "plain.off.gz", good["off"], 422, "unreadable_mesh")
+    # A word where a number belongs (numpy's reader raises ValueError on it).
+    add("off-word-token", "word.off", b"OFF\n3 1 0\nx 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", 422,
+        "unreadable_mesh")  # fmt: skip
     add("gltf-bad-json", "broken.gltf", b'{"asset": {"version": "2.0"}, "meshes": [', 422,
         UNREADABLE)  # fmt: skip
     add("gltf-missing-buffer", "external.gltf",

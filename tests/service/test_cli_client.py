@@ -75,7 +75,7 @@ def test_an_interrupted_import_resumes_and_enrolls_nothing_twice(tmp_path_factor
     # No descriptor worker: uploads only queue jobs, and all the examples take seconds.
     svc = migrated_service(tmp_path_factory, "interrupt")
     with running(svc, workers=0):
-        files = sorted(EXAMPLES.glob("*.off.gz"))
+        files = sorted(EXAMPLES.rglob("*.off.gz"))  # the import takes sub-folders too
         command = [sys.executable, "-m", "worker.cli", "import", str(EXAMPLES), "--url", svc.url]
         first = subprocess.Popen(
             [*command, "--concurrency", "1"],
