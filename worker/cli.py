@@ -10,6 +10,7 @@ import os
 import shlex
 import subprocess
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -100,17 +101,20 @@ def _evaluate(args: argparse.Namespace) -> int:
     return 1 if report["failures"] else 0
 
 
-def _robustness(args: argparse.Namespace) -> int:
+def _run_protocol(
+    args: argparse.Namespace, run: Callable[..., dict[str, Any]], name: str
+) -> tuple[dict[str, Any] | None, Path]:
+    """Run a variant protocol (``robustness``, ``partiality``) with the command's
+    arguments; the report (None after an error, printed) and its directory."""
     from .evaluation.datasets import EvaluationError
-    from .evaluation.run import run_robustness
 
     preset = get_preset(args.preset)
     dataset = Path(args.dataset_dir)
     labels = Path(args.labels) if args.labels else dataset / "labels.csv"
-    out = Path(args.out) if args.out else Path("evaluation-out") / "robustness" / preset.name
+    out = Path(args.out) if args.out else Path("evaluation-out") / name / preset.name
     variants = args.variants.split(",") if args.variants else None
     try:
-        report = run_robustness(
+        report = run(
             dataset,
             labels,
             preset,
@@ -124,7 +128,16 @@ def _robustness(args: argparse.Namespace) -> int:
             **({"variants": variants} if variants else {}),
         )
     except (EvaluationError, OSError, RuntimeError) as exc:
-        print(f"shapes robustness: {exc}", file=sys.stderr)
+        print(f"shapes {name}: {exc}", file=sys.stderr)
+        return None, out
+    return report, out
+
+
+def _robustness(args: argparse.Namespace) -> int:
+    from .evaluation.run import run_robustness
+
+    report, out = _run_protocol(args, run_robustness, "robustness")
+    if report is None:
         return 2
     titles = report["rows"]
     width = max(len(t) for t in titles.values())
@@ -156,30 +169,10 @@ def _robustness(args: argparse.Namespace) -> int:
 
 
 def _partiality(args: argparse.Namespace) -> int:
-    from .evaluation.datasets import EvaluationError
     from .evaluation.run import run_partiality
 
-    preset = get_preset(args.preset)
-    dataset = Path(args.dataset_dir)
-    labels = Path(args.labels) if args.labels else dataset / "labels.csv"
-    out = Path(args.out) if args.out else Path("evaluation-out") / "partiality" / preset.name
-    variants = args.variants.split(",") if args.variants else None
-    try:
-        report = run_partiality(
-            dataset,
-            labels,
-            preset,
-            out_dir=out,
-            cache_root=Path(args.cache),
-            jobs=args.jobs,
-            per_class_limit=args.limit,
-            poses_dir=args.poses,
-            command=shlex.join(["shapes", *args.argv]),
-            environment={"git": _git_revision()},
-            **({"variants": variants} if variants else {}),
-        )
-    except (EvaluationError, OSError, RuntimeError) as exc:
-        print(f"shapes partiality: {exc}", file=sys.stderr)
+    report, out = _run_protocol(args, run_partiality, "partiality")
+    if report is None:
         return 2
     titles = report["rows"]
     names = list(report["variants"])

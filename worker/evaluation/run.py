@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
@@ -17,7 +17,7 @@ import numpy as np
 from worker.engine.presets import MODALITIES, Preset
 from worker.recognition.fusion import FOLDS, tune_fusion
 
-from .compute import compute_descriptors, descriptor_vectors
+from .compute import ComputedSet, compute_descriptors, descriptor_vectors
 from .datasets import EvaluationError, LabeledMesh, pose_set, read_labels
 from .partial import PARTIAL_VARIANTS
 from .partiality import partial_row_titles, partiality_scores, parts_matrix
@@ -245,7 +245,6 @@ def run_robustness(
     meshes = read_labels(labels_csv, dataset_dir, per_class_limit)
     start = time.perf_counter()
     computed = compute_descriptors(meshes, preset, cache_root, jobs=jobs, progress=progress)
-    index = {m.name: i for i, m in enumerate(computed.meshes)}
     originals = descriptor_vectors(computed)
     failures = {name: {"original": why} for name, why in computed.failures.items()}
     described: dict[str, tuple[np.ndarray, dict[str, np.ndarray]]] = {}
@@ -253,14 +252,10 @@ def run_robustness(
     # Vertices of the meshes as described, summed: two runs whose sums agree described
     # the same variant meshes (MeshLab's remesher once gave others under load).
     vertices = {"original": sum(d.input_vertices for d in computed.descriptors)}
-    for variant in variants:
-        done = compute_descriptors(
-            computed.meshes, preset, cache_root, jobs=jobs, progress=progress, variant=variant
-        )
+    for variant, sources, done in _variants_of(
+        computed, variants, preset, cache_root, jobs, progress, failures
+    ):
         vertices[variant] = sum(d.input_vertices for d in done.descriptors)
-        for name, why in done.failures.items():
-            failures.setdefault(name, {})[variant] = why
-        sources = np.array([index[m.name] for m in done.meshes], dtype=np.int64)
         described[variant] = (sources, descriptor_vectors(done))
         if preset.has_parts:
             parts[variant] = parts_matrix(done.descriptors, computed.descriptors, preset, jobs)
@@ -350,17 +345,12 @@ def run_partiality(
         meshes = [*meshes, *pose_set(poses_dir)]
     start = time.perf_counter()
     computed = compute_descriptors(meshes, preset, cache_root, jobs=jobs, progress=progress)
-    index = {m.name: i for i, m in enumerate(computed.meshes)}
     failures = {name: {"original": why} for name, why in computed.failures.items()}
     described = {}
     shapedna = {}
-    for variant in variants:
-        done = compute_descriptors(
-            computed.meshes, preset, cache_root, jobs=jobs, progress=progress, variant=variant
-        )
-        for name, why in done.failures.items():
-            failures.setdefault(name, {})[variant] = why
-        sources = np.array([index[m.name] for m in done.meshes], dtype=np.int64)
+    for variant, sources, done in _variants_of(
+        computed, variants, preset, cache_root, jobs, progress, failures
+    ):
         described[variant] = (sources, done.descriptors)
         shapedna[variant] = np.stack([b.descriptor for b in done.baselines])
     wholes = np.stack([b.descriptor for b in computed.baselines])
@@ -389,6 +379,28 @@ def run_partiality(
     (out / "partiality.json").write_text(json.dumps(report, indent=1) + "\n")
     (out / "partiality.md").write_text(render_partiality_markdown(report))
     return report
+
+
+def _variants_of(
+    computed: ComputedSet,
+    variants: Sequence[str],
+    preset: Preset,
+    cache_root: str | Path,
+    jobs: int,
+    progress: bool,
+    failures: dict[str, dict[str, str]],
+) -> Iterator[tuple[str, np.ndarray, ComputedSet]]:
+    """Each variant of the described meshes, through the cache: its name, the index of
+    each copy's source in ``computed.meshes``, and the copies (the ones that could not
+    be described recorded in ``failures``)."""
+    index = {m.name: i for i, m in enumerate(computed.meshes)}
+    for variant in variants:
+        done = compute_descriptors(
+            computed.meshes, preset, cache_root, jobs=jobs, progress=progress, variant=variant
+        )
+        for name, why in done.failures.items():
+            failures.setdefault(name, {})[variant] = why
+        yield variant, np.array([index[m.name] for m in done.meshes], dtype=np.int64), done
 
 
 def _both_resolutions(
