@@ -25,14 +25,14 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from app.gallery.index import GalleryIndex
-from app.gallery.service import descriptor_vectors
+from app.gallery.service import descriptor_vectors, flat_vectors
 from benchmarks.common import TOSCA, add_evaluation_cache_arguments
-from worker.engine.compare import dissimilarity, fuse, partiality, query_weights
+from worker.engine.compare import fuse, partiality, query_weights
 from worker.engine.descriptor import ShapeDescriptor
-from worker.engine.parts import compared_profiles, part_dissimilarity
-from worker.engine.presets import MODALITIES, PARTS, Preset, get_preset
+from worker.engine.presets import PARTS, Preset, get_preset
 from worker.evaluation.compute import compute_descriptors
 from worker.evaluation.datasets import read_labels
+from worker.evaluation.partiality import query_matrices
 
 
 def weights_of(query: ShapeDescriptor, preset: Preset) -> dict[str, float]:
@@ -47,18 +47,8 @@ def exhaustive(
 ) -> np.ndarray:
     """(n,) the fused product over every sample of every whole."""
     weights = weights_of(query, preset)
-    per = {
-        m: dissimilarity(
-            query.vector(m)[None], np.stack([w.vector(m) for w in wholes]), preset.dissimilarity
-        )[0]
-        for m in weights
-        if m != PARTS
-    }
-    gallery = compared_profiles(np.stack([w.parts.astype(np.float64) for w in wholes]), preset)
-    per[PARTS] = part_dissimilarity(
-        query.parts.astype(np.float64), query.parts_reach, gallery, preset
-    ).dissimilarity
-    return np.asarray(fuse(per, "product", weights))
+    per = query_matrices([query], wholes, preset)
+    return np.asarray(fuse({m: per[m][0] for m in weights}, "product", weights))
 
 
 def index_of(preset: Preset, vectors: list[dict[str, np.ndarray]]) -> GalleryIndex:
@@ -69,7 +59,7 @@ def index_of(preset: Preset, vectors: list[dict[str, np.ndarray]]) -> GalleryInd
 
 def seconds_of(index: GalleryIndex, query: ShapeDescriptor, preset: Preset) -> tuple[float, float]:
     """A whole query's and a partial query's search time, each after a warm-up."""
-    flat = {m: query.vector(m) for m in MODALITIES}
+    flat = flat_vectors(query)
     profiles, reach = query.parts.astype(np.float64), query.parts_reach
     weights = weights_of(query, preset)
     out = []
@@ -108,7 +98,7 @@ def main(argv: list[str] | None = None) -> None:
         fast, slow = [], []
         for query in copies.descriptors:
             weights = weights_of(query, preset)
-            flat = {m: query.vector(m) for m in MODALITIES}
+            flat = flat_vectors(query)
             start = time.perf_counter()
             want = exhaustive(query, wholes.descriptors, preset)
             slow.append(time.perf_counter() - start)

@@ -37,12 +37,18 @@ log = logging.getLogger("shapes.gallery")
 FOLLOW_BATCH = 1000  # changes applied per round of following the log
 
 
+def flat_vectors(descriptor: ShapeDescriptor) -> dict[str, np.ndarray]:
+    """modality -> (M_m,) float, the flat vectors the index compares (all a query needs:
+    its parts are compared from its own profiles)."""
+    return {m: descriptor.vector(m) for m in MODALITIES}
+
+
 def descriptor_vectors(descriptor: ShapeDescriptor, preset: Preset) -> dict[str, np.ndarray]:
-    """modality -> (M_m,) float, the flat vectors the index compares, and ``PARTS`` ->
-    the (m, K) profiles a whole is compared by when the preset has the parts modality
+    """What the index keeps of an enrolled shape: its :func:`flat_vectors`, and ``PARTS``
+    -> the (m, K) profiles a whole is compared by when the preset has the parts modality
     (a surface with fewer samples repeats some: a nearest sample is found all the same).
     """
-    vectors = {m: descriptor.vector(m) for m in MODALITIES}
+    vectors = flat_vectors(descriptor)
     shape = preset.parts_shape()
     if shape is not None:
         compared = compared_profiles(descriptor.parts, preset)
@@ -153,7 +159,7 @@ class Gallery:
         index = self._ready()
         preset = self.preset
         stats = SearchStats()
-        vectors = descriptor_vectors(descriptor, preset)
+        vectors = flat_vectors(descriptor)
         own = modalities == tuple(preset.fused_modalities) and fusion in (None, preset.fusion)
         share = partiality(descriptor.longest_open_loop, descriptor.kept_area_fraction, preset)
         weights = query_weights(preset, share)
@@ -187,7 +193,7 @@ class Gallery:
             if not len(present):
                 return {}
             fused, per = index.exact_scores(
-                descriptor_vectors(descriptor, self.preset),
+                flat_vectors(descriptor),
                 index.store.positions(present),
                 tuple(preset.fused_modalities),
                 preset.fusion,

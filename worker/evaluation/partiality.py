@@ -24,9 +24,7 @@ from typing import Any
 import numpy as np
 
 from worker.engine.compare import (
-    dissimilarity,
     fuse,
-    gallery_sigma,
     partiality,
     query_weights,
 )
@@ -36,21 +34,16 @@ from worker.engine.presets import MODALITIES, PARTS, Preset
 from worker.recognition import metrics
 
 from .compute import single_threaded_blas
-from .robustness import PRESET_ROW
-from .shapedna import BASELINE, shapedna_dissimilarity
+from .robustness import PRESET_ROW, cross_dissimilarities, row_titles
+from .shapedna import BASELINE
 
 
 def partial_row_titles(preset: Preset) -> dict[str, str]:
-    """Row key -> title, in table order."""
-    fused = "+".join(m.upper() if m != "spectrum" else "Spectrum" for m in preset.fused_modalities)
-    return {
-        "gdm": "GDM",
-        "ddt": "DDT",
-        "spectrum": "Spectrum",
-        PARTS: "Parts",
-        PRESET_ROW: f"{fused} {preset.fusion}, parts by partiality (the preset's score)",
-        BASELINE: "ShapeDNA (lapy)",
-    }
+    """Row key -> title, in table order: the robustness protocol's, the preset's score
+    weighing the parts by partiality."""
+    titles = row_titles(preset)
+    titles[PRESET_ROW] = titles[PRESET_ROW].replace(" (", ", parts by partiality (")
+    return titles
 
 
 def query_partiality(descriptors: Sequence[ShapeDescriptor], preset: Preset) -> np.ndarray:
@@ -116,19 +109,15 @@ def query_matrices(
     baselines : ShapeDNA descriptors of the queries and of the gallery; the baseline row
         is left out without them.
     """
-    per: dict[str, np.ndarray] = {}
-    for m in MODALITIES:
-        q = np.stack([d.vector(m) for d in queries])
-        g = np.stack([d.vector(m) for d in gallery])
-        sigma = gallery_sigma(g) if preset.dissimilarity == "D2" else None
-        per[m] = dissimilarity(q, g, preset.dissimilarity, sigma)
-    per[PARTS] = parts_matrix(queries, gallery, preset, jobs)
-    out = dict(per)
-    out[PRESET_ROW] = weighed_by_partiality(per, query_partiality(queries, preset), preset)
+    flat = [
+        {m: np.stack([d.vector(m) for d in side]) for m in MODALITIES}
+        for side in (queries, gallery)
+    ]
     if baselines is not None:
-        q, g = baselines
-        both = shapedna_dissimilarity(np.concatenate([q, g]))
-        out[BASELINE] = both[: len(q), len(q) :]
+        flat[0][BASELINE], flat[1][BASELINE] = baselines
+    out = cross_dissimilarities(flat[0], flat[1], preset)
+    out[PARTS] = parts_matrix(queries, gallery, preset, jobs)
+    out[PRESET_ROW] = weighed_by_partiality(out, query_partiality(queries, preset), preset)
     return out
 
 

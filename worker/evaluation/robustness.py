@@ -87,7 +87,7 @@ def protocol_distance(per: Mapping[str, np.ndarray], preset: Preset) -> np.ndarr
     return fused
 
 
-def _cross(
+def cross_dissimilarities(
     queries: Mapping[str, np.ndarray],
     gallery: Mapping[str, np.ndarray],
     preset: Preset,
@@ -136,12 +136,12 @@ def tessellation_scores(
     below ``GAP_BAR``.
     """
     labels_arr = np.asarray([str(x) for x in labels])
-    among = _cross(originals, originals, preset)
+    among = cross_dissimilarities(originals, originals, preset)
     n = len(labels_arr)
     other_class = labels_arr[:, None] != labels_arr[None, :]
     cross = {}
     for name, (sources, vectors) in variants.items():
-        cross[name] = (np.asarray(sources), _cross(vectors, originals, preset))
+        cross[name] = (np.asarray(sources), cross_dissimilarities(vectors, originals, preset))
     if parts is not None:
         among[PARTS] = parts[0]
         for name, (_, matrices) in cross.items():
@@ -210,7 +210,7 @@ def pose_invariance(
     """
     keys = [k for k in collection if k in poses]
     combined = {k: np.concatenate([poses[k], collection[k]]) for k in keys}
-    matrices = _cross(combined, combined, preset)
+    matrices = cross_dissimilarities(combined, combined, preset)
     p = len(next(iter(poses.values())))
     labels_arr = np.asarray([str(x) for x in labels])
     between = labels_arr[:, None] != labels_arr[None, :]
@@ -255,8 +255,11 @@ def cross_resolution(
 
     # Per direction: the queries against the other resolution, and against their own.
     directions = [
-        (_cross(first, second, preset), _cross(first, first, preset)),
-        (_cross(second, first, preset), _cross(second, second, preset)),
+        (cross_dissimilarities(first, second, preset), cross_dissimilarities(first, first, preset)),
+        (
+            cross_dissimilarities(second, first, preset),
+            cross_dissimilarities(second, second, preset),
+        ),
     ]
     out: dict[str, dict[str, Any]] = {}
     for row in directions[0][0]:
