@@ -66,9 +66,24 @@ class Settings(QueueSettings):
     query_cache_size: int = Field(
         default=1024, ge=0, description="descriptors of recent query uploads kept in memory"
     )
+    query_previews_kept: int = Field(
+        default=256,
+        ge=1,
+        description="previews of recent query uploads kept in the database (~70 kB each), "
+        "where every replica serves them",
+    )
     collector_interval_seconds: float = Field(default=0.5, gt=0)
     stalled_after_seconds: float = Field(
-        default=30.0, gt=0, description="a running job whose heartbeat is older is re-enqueued"
+        default=10.0,
+        gt=0,
+        description="a running job whose heartbeat is older is re-enqueued (workers beat "
+        "every heartbeat_seconds, from a thread beside the describing process)",
+    )
+    sweep_interval_seconds: float = Field(
+        default=10.0,
+        gt=0,
+        description="how often the collector enqueues the jobs the queue does not hold "
+        "(accepted while it was down)",
     )
     max_requeues: int = Field(default=2, ge=0)
 

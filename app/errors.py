@@ -6,6 +6,8 @@ error carries. Mesh errors from the descriptor engine map by their ``code``.
 
 from __future__ import annotations
 
+import logging
+
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
@@ -70,6 +72,17 @@ class UnavailableError(DomainError):
     code = "unavailable"
 
 
+log = logging.getLogger("shapes")
+
+#: Seconds a client is asked to wait (``Retry-After``) when a dependency is down.
+RETRY_AFTER_SECONDS = 5
+
+DATABASE_DOWN = "The database is unreachable at the moment; nothing was changed. Try again shortly."
+QUEUE_DOWN = (
+    "The descriptor queue is unreachable at the moment; nothing was lost. Try again shortly."
+)
+
+
 # By code, not class: a worker's refusal reaches the API as its code and sentence only.
 _MESH_ERROR_STATUS = {
     UnsupportedFormatError.code: 415,
@@ -124,11 +137,46 @@ def allowed_methods(routes: list[BaseRoute], request: Request) -> list[str]:
     ]
 
 
-def install_error_handlers(app: FastAPI) -> None:
+def _unavailable(code: str, detail: str) -> JSONResponse:
+    return JSONResponse(
+        _body(code, detail), status_code=503, headers={"Retry-After": str(RETRY_AFTER_SECONDS)}
+    )
+
+
+def install_error_handlers(
+    app: FastAPI,
+    *,
+    database_errors: tuple[type[Exception], ...],
+    queue_errors: tuple[type[Exception], ...],
+) -> None:
+    """Every error answers ``{"error", "detail"}``: domain and engine errors with their
+    status; an unreachable database or queue (``database_errors``, ``queue_errors``)
+    503 with ``Retry-After``; anything else 500, logged."""
+
     @app.exception_handler(DomainError)
     async def _domain(_: Request, exc: DomainError) -> JSONResponse:
+        if exc.status == 503:
+            return _unavailable(exc.code, exc.detail)
         headers = {"WWW-Authenticate": "X-API-Key"} if exc.status == 401 else None
         return JSONResponse(_body(exc.code, exc.detail), status_code=exc.status, headers=headers)
+
+    for error in database_errors:
+        app.add_exception_handler(error, _database_down)
+    for error in queue_errors:
+        app.add_exception_handler(error, _queue_down)
+
+    @app.exception_handler(Exception)
+    async def _internal(request: Request, exc: Exception) -> JSONResponse:
+        # Starlette logs the traceback too, after this answer is sent.
+        log.error("%s %s failed: %r", request.method, request.url.path, exc)
+        return JSONResponse(
+            _body(
+                "internal_error",
+                "The service failed on this request (the operator finds it in the log); "
+                "try again, or report it.",
+            ),
+            status_code=500,
+        )
 
     @app.exception_handler(MeshError)
     async def _mesh(_: Request, exc: MeshError) -> JSONResponse:
@@ -150,3 +198,13 @@ def install_error_handlers(app: FastAPI) -> None:
         if exc.status_code == 405:
             headers["Allow"] = ", ".join(allowed_methods(app.router.routes, request))
         return JSONResponse(_body(code, detail), status_code=exc.status_code, headers=headers)
+
+
+async def _database_down(request: Request, exc: Exception) -> JSONResponse:
+    log.warning("%s %s: database unreachable: %r", request.method, request.url.path, exc)
+    return _unavailable("database_unavailable", DATABASE_DOWN)
+
+
+async def _queue_down(request: Request, exc: Exception) -> JSONResponse:
+    log.warning("%s %s: queue unreachable: %r", request.method, request.url.path, exc)
+    return _unavailable("queue_unavailable", QUEUE_DOWN)

@@ -19,7 +19,8 @@ from worker.engine.presets import get_preset
 
 from .calibration.router import router as calibration_router
 from .config import Settings, get_settings
-from .db import make_engine, make_session_factory
+from .db import DATABASE_ERRORS, make_engine, make_session_factory
+from .deps import document_open_access
 from .errors import install_error_handlers
 from .gallery.service import Gallery
 from .jobs.collector import JobCollector
@@ -27,7 +28,7 @@ from .jobs.router import router as jobs_router
 from .meshes.router import router as meshes_router
 from .metrics import Metrics, RequestMetricsMiddleware
 from .migrations import upgrade_head
-from .queue import DescriptorQueue
+from .queue import QUEUE_ERRORS, DescriptorQueue
 from .search.recent import Recent
 from .search.router import document_limits
 from .search.router import router as search_router
@@ -95,7 +96,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 metrics=metrics,
             ),
             recent_queries=Recent(settings.query_cache_size),
-            recent_previews=Recent(settings.query_cache_size),
         )
         app.state.shapes = state
         collector = JobCollector(state)
@@ -117,7 +117,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         description=DESCRIPTION,
         lifespan=lifespan,
     )
-    install_error_handlers(app)
+    install_error_handlers(app, database_errors=DATABASE_ERRORS, queue_errors=QUEUE_ERRORS)
     app.add_middleware(RequestMetricsMiddleware, metrics=metrics)
     if settings.cors_origins:  # closed by default: browsers get no CORS headers at all
         app.add_middleware(
@@ -140,6 +140,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             return app.openapi_schema
         schema = FastAPI.openapi(app)  # builds and caches app.openapi_schema
         document_limits(schema, max_k=settings.max_k, preset=settings.preset)
+        if settings.api_key is None:
+            document_open_access(schema)
         return schema
 
     # method-assign: replacing app.openapi is FastAPI's documented way to extend the schema.

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sqlite3
 import time
 from pathlib import Path
 from typing import Any
@@ -22,6 +23,20 @@ from worker.jobs.queue import (
 
 from .config import Settings
 from .errors import UnavailableError
+
+
+def _queue_errors() -> tuple[type[Exception], ...]:
+    errors: list[type[Exception]] = [sqlite3.OperationalError]  # the embedded queue, locked
+    try:
+        from redis.exceptions import ConnectionError, TimeoutError
+    except ImportError:  # the redis extra is not installed: no Redis queue to lose
+        return tuple(errors)
+    return (*errors, ConnectionError, TimeoutError)
+
+
+#: What an unreachable queue raises: a request answers 503 with ``Retry-After``
+#: (:func:`app.errors.install_error_handlers`); the collector tries again next round.
+QUEUE_ERRORS = _queue_errors()
 
 
 class QueryMeshError(MeshError):
@@ -142,6 +157,11 @@ class DescriptorQueue:
     def cancel(self, task_id: str) -> None:
         self.huey.revoke_by_id(task_id, revoke_once=True)
         self.forget(task_id)
+
+    def waiting_count(self) -> int:
+        """Enrollments waiting for a worker (asks the queue: raises while it is down)."""
+        count: int = self.huey.pending_count()
+        return count
 
     def waiting_task_ids(self) -> set[str]:
         """Ids of tasks still in the queue or scheduled for a retry."""

@@ -358,21 +358,32 @@ class Postgres:
         subprocess.run([*self._as_user, *args], check=True, capture_output=True, cwd=self.root)
 
     def start(self) -> Postgres:
-        data = str(self.root / "data")
-        self._run(_postgres_bin("initdb"), "-D", data, "-U", "shapes", "--auth=trust", "-E", "UTF8")
+        """Create the cluster and its database on the first call; start it again after
+        :meth:`kill`."""
+        data = self.root / "data"
+        created = data.exists()
+        if not created:
+            self._run(_postgres_bin("initdb"), "-D", str(data), "-U", "shapes", "--auth=trust",
+                      "-E", "UTF8")  # fmt: skip
         options = f"-p {self.port} -k {self.root} -c listen_addresses=127.0.0.1 -c fsync=off"
         self._run(
-            _postgres_bin("pg_ctl"), "-D", data, "-o", options, "-l", str(self.root / "log"),
+            _postgres_bin("pg_ctl"), "-D", str(data), "-o", options, "-l", str(self.root / "log"),
             "-w", "start",
         )  # fmt: skip
-        self._run(_postgres_bin("createdb"), "-h", "127.0.0.1", "-p", str(self.port), "-U",
-                  "shapes", "shapes")  # fmt: skip
+        if not created:
+            self._run(_postgres_bin("createdb"), "-h", "127.0.0.1", "-p", str(self.port), "-U",
+                      "shapes", "shapes")  # fmt: skip
         return self
+
+    def kill(self) -> None:
+        """Stop the server at once (immediate mode: no checkpoint, clients cut off, as
+        a crash); :meth:`start` brings it back with its data."""
+        self._run(_postgres_bin("pg_ctl"), "-D", str(self.root / "data"), "-m", "immediate",
+                  "stop")  # fmt: skip
 
     def stop(self) -> None:
         try:
-            self._run(_postgres_bin("pg_ctl"), "-D", str(self.root / "data"), "-m", "immediate",
-                      "stop")  # fmt: skip
+            self.kill()
         finally:
             shutil.rmtree(self.root, ignore_errors=True)
 

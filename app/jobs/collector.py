@@ -10,7 +10,9 @@ heartbeats of unfinished jobs from the queue's key-value store and
 * marks job and mesh failed when the task raised on every Huey retry;
 * marks a queued job "processing" once its heartbeat appears;
 * re-enqueues a job whose heartbeat went stale (its worker died), at most
-  ``max_requeues`` times, then fails it with a sentence saying so.
+  ``max_requeues`` times, then fails it with a sentence saying so;
+* every ``sweep_interval_seconds``, enqueues the unfinished jobs the queue does not
+  know (accepted while it was down, or lost with its data).
 
 Results are read without removing them and deleted only after the commit, so
 a crash in between makes the collector store the same result again (at least
@@ -42,9 +44,10 @@ from ..db import unit_of_work
 from ..gallery import changes
 from ..meshes import repository as meshes
 from ..models import Descriptor, Job, JobStatus, MeshStatus, utcnow
+from ..queue import QUEUE_ERRORS
 from ..state import AppState
 from . import repository as jobs
-from .service import enqueue_job, new_job
+from .service import enqueue_job, enqueue_soon, lost, new_job
 
 log = logging.getLogger("shapes.collector")
 
@@ -69,24 +72,16 @@ class JobCollector:
 
     # ---------------------------------------------------------------- startup
     def recover(self) -> int:
-        """Re-enqueue unfinished jobs the queue no longer holds (lost with a dead worker
-        or never enqueued because the process stopped right after the commit), and
-        queue jobs for meshes not yet described with the current preset version."""
+        """At startup: re-enqueue the unfinished jobs the queue no longer holds (see
+        :meth:`sweep`), and queue jobs for meshes not yet described with the current
+        preset version."""
         state = self.state
-        waiting = state.queue.waiting_task_ids()
-        to_enqueue: list[Job] = []
+        try:
+            to_enqueue = self._lost(grace_seconds=0.0)
+        except QUEUE_ERRORS as exc:  # the queue is down: the sweep does this once it is back
+            log.warning("queue unreachable at startup (%r); the sweep will recover", exc)
+            to_enqueue = []
         with unit_of_work(state.sessions) as session:
-            unfinished = jobs.unfinished(session)
-            ids = [j.task_id for j in unfinished]
-            results = state.queue.results(ids)
-            beats = state.queue.heartbeats(ids)
-            for job in unfinished:
-                if job.task_id in results or job.task_id in waiting:
-                    continue
-                beat = beats.get(job.task_id)
-                if beat is not None and not state.queue.is_stale(beat):
-                    continue  # running in a worker that is still alive
-                to_enqueue.append(job)
             for mesh in meshes.meshes_missing_descriptor(
                 session, state.preset.name, state.preset.version
             ):
@@ -95,10 +90,25 @@ class JobCollector:
                 mesh.error_code = mesh.error_detail = None
                 to_enqueue.append(job)
         for job in to_enqueue:
-            enqueue_job(state, job)
+            enqueue_soon(state, job)
         if to_enqueue:
             log.info("re-enqueued %d unfinished jobs", len(to_enqueue))
         return len(to_enqueue)
+
+    def sweep(self) -> int:
+        """Enqueue the unfinished jobs the queue does not know (accepted while it was
+        down, or lost with its data); runs every ``sweep_interval_seconds``."""
+        lost = self._lost(grace_seconds=self.state.settings.sweep_interval_seconds)
+        for job in lost:
+            enqueue_job(self.state, job)
+        if lost:
+            log.info("enqueued %d jobs the queue did not hold", len(lost))
+            self.state.metrics.jobs.labels("swept").inc(len(lost))
+        return len(lost)
+
+    def _lost(self, *, grace_seconds: float) -> list[Job]:
+        with unit_of_work(self.state.read_sessions) as session:
+            return lost(self.state, jobs.unfinished(session), grace_seconds=grace_seconds)
 
     # ------------------------------------------------------------------- loop
     def start(self) -> None:
@@ -111,17 +121,23 @@ class JobCollector:
             self._thread.join(timeout=30)
 
     def _run(self) -> None:
-        interval = self.state.settings.collector_interval_seconds
+        settings = self.state.settings
+        last_sweep = time.monotonic()
         while not self._stop.is_set():
             try:
                 self.run_once()
                 self.state.gallery.follow(self.state.read_sessions)
                 self._maybe_save()
+                if time.monotonic() - last_sweep > settings.sweep_interval_seconds:
+                    last_sweep = time.monotonic()
+                    self.sweep()
             except SQLAlchemyError as exc:  # e.g. a mesh deleted meanwhile: next round
                 log.warning("collector round rolled back: %s", exc)
+            except QUEUE_ERRORS as exc:  # the queue is down: next round, and the sweep
+                log.warning("collector round: queue unreachable: %r", exc)
             except Exception:
                 log.exception("collector round failed")
-            self._stop.wait(interval)
+            self._stop.wait(settings.collector_interval_seconds)
 
     def _maybe_save(self) -> None:
         gallery = self.state.gallery

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import functools
 import json
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,11 +18,14 @@ from ..db import after_commit
 from ..errors import ConflictError, InvalidInputError, NotFoundError
 from ..gallery import changes
 from ..jobs import repository as jobs
-from ..jobs.service import enqueue_job, new_job
-from ..models import Descriptor, Mesh, MeshStatus, Preview
+from ..jobs.service import TRANSIENT_FAILURES, enqueue_soon, lost, new_job
+from ..models import UNFINISHED_JOB, Descriptor, Mesh, MeshStatus, Preview
+from ..queue import QUEUE_ERRORS
 from ..state import AppState
 from ..storage import ReceivedFile
 from . import repository as meshes
+
+log = logging.getLogger("shapes.meshes")
 
 MAX_NAME = 255
 
@@ -62,10 +67,13 @@ def enroll(
     label: str | None,
     metadata: str | None,
 ) -> tuple[Mesh, bool]:
-    """Store an upload and queue its descriptor; ``(mesh, created)``.
+    """Store an upload and queue its descriptor; ``(mesh, queued)``: whether this
+    request queued a description.
 
-    The same bytes uploaded again return the existing mesh (``created`` False).
-    The job is enqueued only after the commit that creates its row.
+    The same bytes uploaded again return the existing mesh, described again when it
+    failed for a transient reason or its job was lost (:func:`_retry`). The job is
+    enqueued only after the commit that creates its row; while the queue is down,
+    by the collector's sweep once it is back.
     """
     meta = parse_metadata(metadata)
     name = _text(name, "name") or upload.filename.split(".")[0] or upload.filename
@@ -73,7 +81,7 @@ def enroll(
     existing = meshes.get_by_sha256(session, upload.sha256)
     if existing is not None:
         _same_format(existing, upload)
-        return existing, False
+        return existing, _retry(session, state, existing)
     reference = state.store.put(session, upload)
     mesh = Mesh(
         sha256=upload.sha256,
@@ -95,8 +103,28 @@ def enroll(
         _same_format(existing, upload)
         return existing, False
     job = jobs.add(session, new_job(state, mesh))
-    after_commit(session, lambda: enqueue_job(state, job))
+    after_commit(session, lambda: enqueue_soon(state, job))
     return mesh, True
+
+
+def _retry(session: Session, state: AppState, mesh: Mesh) -> bool:
+    """Describe ``mesh`` again if its last try failed for a reason that says nothing
+    about the file, or its job is unknown to the queue (stuck); True if queued."""
+    if mesh.status == MeshStatus.failed.value:
+        if mesh.error_code not in TRANSIENT_FAILURES:
+            return False  # the file's own fault: the same bytes fail the same way
+        mesh.status = MeshStatus.queued.value
+        mesh.error_code = mesh.error_detail = None
+        stuck = [jobs.add(session, new_job(state, mesh))]
+    else:
+        unfinished = [j for j in mesh.jobs if j.status in UNFINISHED_JOB]
+        try:
+            stuck = lost(state, unfinished, grace_seconds=state.settings.sweep_interval_seconds)
+        except QUEUE_ERRORS:  # the sweep enqueues it once the queue is back
+            return False
+    for job in stuck:
+        after_commit(session, functools.partial(enqueue_soon, state, job))
+    return bool(stuck)
 
 
 def _same_format(existing: Mesh, upload: ReceivedFile) -> None:
@@ -165,7 +193,10 @@ def delete(session: Session, state: AppState, mesh_id: int) -> None:
         # descriptor (it holds the gallery), so its add cannot come after this removal.
         state.gallery.remove(mesh_id)
         for task_id in task_ids:
-            state.queue.cancel(task_id)
+            try:
+                state.queue.cancel(task_id)
+            except QUEUE_ERRORS as exc:  # deleted all the same: its result will be ignored
+                log.warning("mesh %d deleted; its task %s not cancelled: %r", mesh_id, task_id, exc)
 
     after_commit(session, _after)
 

@@ -10,7 +10,8 @@ from ..state import AppState
 
 
 def readiness(state: AppState) -> tuple[bool, dict[str, str]]:
-    """``(ready, checks)``: each check is ``"ok"`` or why it is not (shown by ``/ready``)."""
+    """``(ready, checks)``: each dependency's check is ``"ok..."`` or why it is not (shown
+    by ``/ready``); ready when every one is ok."""
     checks: dict[str, str] = {}
     try:
         with state.read_sessions() as session:
@@ -18,12 +19,16 @@ def readiness(state: AppState) -> tuple[bool, dict[str, str]]:
         checks["database"] = "ok"
     except Exception as exc:  # any failure means not ready, with the reason shown
         checks["database"] = f"error: {exc.__class__.__name__}"
+    try:
+        checks["queue"] = f"ok ({state.queue.waiting_count()} enrollments waiting)"
+    except Exception as exc:
+        checks["queue"] = f"error: {exc.__class__.__name__}"
     gallery = state.gallery
     if gallery.loaded:
         checks["index"] = f"ok ({len(gallery)} shapes)"
     else:
         checks["index"] = gallery.error or "loading"
-    return checks["database"] == "ok" and gallery.loaded, checks
+    return all(check.startswith("ok") for check in checks.values()), checks
 
 
 def description_progress(state: AppState) -> dict[str, object]:

@@ -36,14 +36,20 @@ from typing import Any
 
 from huey import Huey, PriorityRedisHuey, SqliteHuey
 from huey.api import Task
+from huey.exceptions import RetryTask
 
 from .limits import describe_limited, start_fork_server
 from .settings import Queue, QueueSettings
-from .sources import local_file
+from .sources import SourceUnavailableError, local_file, remove_stale_copies
+
+log = logging.getLogger(__name__)
 
 TASK_NAME = "describe_upload"
 TASK_RETRIES = 2
 TASK_RETRY_DELAY_SECONDS = 1
+#: A task whose file is in an unreachable database waits this long and tries again,
+#: as often as it takes (these tries do not count against ``TASK_RETRIES``).
+SOURCE_RETRY_SECONDS = 3
 QUEUE_FILE = "queue.sqlite3"
 
 
@@ -135,20 +141,29 @@ def make_huey(settings: QueueSettings, queue: Queue = "enroll") -> Huey:
         beater = threading.Thread(target=beat, name=f"heartbeat-{task.id}", daemon=True)
         beater.start()
         try:
-            inline = None if data is None else base64.b64decode(data)
-            with local_file(source, inline, data_dir=data_dir, database_url=database_url) as path:
-                outcome = describe_limited(
-                    path,
-                    filename,
-                    preset_name,
-                    max_faces=max_faces,
-                    time_limit=time_limit,
-                    memory_limit_bytes=memory_limit,
-                    with_thumbnail=queue == "enroll",
-                )
-        finally:
-            done.set()
-            beater.join()
+            try:
+                inline = None if data is None else base64.b64decode(data)
+                with local_file(
+                    source, inline, data_dir=data_dir, database_url=database_url
+                ) as path:
+                    outcome = describe_limited(
+                        path,
+                        filename,
+                        preset_name,
+                        max_faces=max_faces,
+                        time_limit=time_limit,
+                        memory_limit_bytes=memory_limit,
+                        with_thumbnail=queue == "enroll",
+                    )
+            finally:
+                done.set()
+                beater.join()
+        except SourceUnavailableError as exc:
+            # Waiting, not running: no heartbeat left to go stale and be taken for a
+            # dead worker; the task stays scheduled, where the service sees it.
+            huey.delete(key)
+            log.warning("task %s: %s; trying again in %d s", task.id, exc, SOURCE_RETRY_SECONDS)
+            raise RetryTask(delay=SOURCE_RETRY_SECONDS) from exc
         if outcome.descriptor is None:  # refused or over a limit: deterministic, no retry
             return {"ok": False, "code": outcome.code, "message": outcome.message}
         return {
@@ -180,6 +195,10 @@ def run_consumer(
     if queue == "enroll" and settings.enroll_nice:
         os.nice(settings.enroll_nice)
     start_fork_server()  # after the nice: the describing processes inherit it
+    if settings.job_time_limit_seconds > 0:  # else no age says a copy's task is over
+        stale = remove_stale_copies(settings.data_dir, settings.job_time_limit_seconds + 60)
+        if stale:
+            log.info("removed %d copies left by killed workers", stale)
     huey = make_huey(settings, queue)
     consumer = huey.create_consumer(
         workers=workers, worker_type="thread", initial_delay=0.1, backoff=1.15, max_delay=0.5

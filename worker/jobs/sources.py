@@ -17,14 +17,22 @@ from __future__ import annotations
 
 import functools
 import tempfile
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 from sqlalchemy import create_engine, text
 from sqlalchemy.engine import Engine
+from sqlalchemy.exc import InterfaceError, OperationalError
 
 DATABASE_PREFIX = "db:"
+COPY_PREFIX = "task-"
+
+
+class SourceUnavailableError(Exception):
+    """The database holding the task's file is unreachable: try again later (the file
+    is not at fault)."""
 
 
 def database_source(sha256: str) -> str:
@@ -49,6 +57,8 @@ def local_file(
         The upload is not in the database (deleted since the task was queued).
     RuntimeError
         A database source, and no database URL to read it with.
+    SourceUnavailableError
+        A database source, and the database is unreachable.
     """
     if data is None and not source.startswith(DATABASE_PREFIX):
         path = Path(source)
@@ -58,15 +68,33 @@ def local_file(
         if database_url is None:
             raise RuntimeError(f"{source} is in the database: set SHAPES_DATABASE_URL")
         sha256 = source.removeprefix(DATABASE_PREFIX)
-        with _engine(database_url).connect() as connection:
-            data = connection.execute(
-                text("SELECT data FROM uploads WHERE sha256 = :sha256"), {"sha256": sha256}
-            ).scalar_one_or_none()
+        try:
+            with _engine(database_url).connect() as connection:
+                data = connection.execute(
+                    text("SELECT data FROM uploads WHERE sha256 = :sha256"), {"sha256": sha256}
+                ).scalar_one_or_none()
+        except (OperationalError, InterfaceError) as exc:
+            raise SourceUnavailableError(f"the database is unreachable: {exc}") from exc
         if data is None:
             raise FileNotFoundError(f"no upload {sha256} in the database")
     scratch = data_dir / "tmp"
     scratch.mkdir(parents=True, exist_ok=True)
-    with tempfile.NamedTemporaryFile(dir=scratch, prefix="task-") as copy:
+    with tempfile.NamedTemporaryFile(dir=scratch, prefix=COPY_PREFIX) as copy:
         copy.write(bytes(data))
         copy.flush()
         yield Path(copy.name)
+
+
+def remove_stale_copies(data_dir: Path, older_than_seconds: float) -> int:
+    """Remove the copies left by workers killed mid-task (older than any task may run:
+    no running task's copy is touched); how many were removed."""
+    deadline = time.time() - older_than_seconds
+    removed = 0
+    for copy in (data_dir / "tmp").glob(f"{COPY_PREFIX}*"):
+        try:
+            if copy.stat().st_mtime < deadline:
+                copy.unlink()
+                removed += 1
+        except FileNotFoundError:  # removed by another worker meanwhile
+            continue
+    return removed
