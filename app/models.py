@@ -1,4 +1,4 @@
-"""Tables: meshes (uploads), descriptors (per preset and version) and jobs."""
+"""Tables: meshes (uploads), descriptors (per preset and version), jobs, previews."""
 
 from __future__ import annotations
 
@@ -129,6 +129,18 @@ class Preview(Base):
     png: Mapped[bytes] = mapped_column(LargeBinary)
 
     mesh: Mapped[Mesh] = relationship(back_populates="preview")
+
+
+class QueryPreview(Base):
+    """The preview (GLB) of a recently searched file, by its content: in the database
+    so that the link in a ``/query`` answer works on every API replica. Only the most
+    recent ``query_previews_kept`` are kept (:mod:`app.search.repository`)."""
+
+    __tablename__ = "query_previews"
+
+    sha256: Mapped[str] = mapped_column(String(64), primary_key=True)
+    glb: Mapped[bytes] = mapped_column(LargeBinary)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow, index=True)
 
 
 class GalleryChange(Base):

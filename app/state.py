@@ -30,4 +30,3 @@ class AppState:
     metrics: Metrics
     gallery: Gallery
     recent_queries: Recent[ShapeDescriptor]
-    recent_previews: Recent[bytes]

@@ -1,5 +1,4 @@
-"""Recent query uploads' descriptors and previews, by content, so asking again costs
-nothing and the web page can show the query beside its matches."""
+"""Recent query uploads' descriptors, by content, so asking again costs nothing."""
 
 from __future__ import annotations
 
@@ -13,7 +12,7 @@ V = TypeVar("V")
 
 class Recent(Generic[V]):
     """A thread-safe least-recently-used map from a query's content key to what was
-    made of it (a descriptor is a few kilobytes, a preview about 70 kB).
+    made of it (a descriptor is a few kilobytes).
 
     Parameters
     ----------

@@ -16,7 +16,13 @@ from ..deps import (
     require_file,
 )
 from ..errors import InvalidInputError, NotFoundError
-from ..schemas import ERROR_RESPONSES, FILE_RESPONSES, UNAUTHORIZED_RESPONSE, multipart_body
+from ..schemas import (
+    ERROR_RESPONSES,
+    FILE_RESPONSES,
+    MESH_FILE,
+    UNAUTHORIZED_RESPONSE,
+    multipart_body,
+)
 from . import service
 from .schemas import MatchOut, PartialOut, QueryOut
 
@@ -58,9 +64,7 @@ OPTION_SCHEMAS: dict[str, dict[str, Any]] = {
     },
 }
 
-QUERY_BODY = multipart_body(
-    {"file": {"type": "string", "format": "binary"}} | OPTION_SCHEMAS, required=("file",)
-)
+QUERY_BODY = multipart_body({"file": MESH_FILE} | OPTION_SCHEMAS, required=("file",))
 
 SIMILAR_PARAMETERS = {
     "parameters": [
@@ -227,11 +231,11 @@ def similar(
 def query_preview(
     sha256: Annotated[str, Path(pattern="^[0-9a-f]{64}$")], session: SessionDep, state: StateDep
 ) -> Response:
-    glb = service.query_preview(session, state, sha256)
+    glb = service.query_preview(session, sha256)
     if glb is None:
         raise NotFoundError(
             "There is no preview of these bytes: they were not searched with recently "
-            "(the service keeps the last SHAPES_QUERY_CACHE_SIZE) nor enrolled.",
+            "(the service keeps the last SHAPES_QUERY_PREVIEWS_KEPT) nor enrolled.",
             code="no_preview",
         )
     return Response(glb, media_type="model/gltf-binary")

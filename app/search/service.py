@@ -8,6 +8,7 @@ results are domain objects the router turns into responses.
 
 from __future__ import annotations
 
+import logging
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -20,13 +21,17 @@ from worker.engine.mesh_io import mesh_format
 from worker.engine.presets import MODALITIES, PRESETS, Preset
 from worker.recognition.calibration import Calibration
 
+from ..db import DATABASE_ERRORS, unit_of_work
 from ..errors import ConflictError, InvalidInputError
-from ..gallery.calibration import FUSED, GalleryCalibration, NotEnoughPairs
+from ..gallery.calibration import GalleryCalibration, NotEnoughPairs
 from ..meshes import repository as meshes
 from ..meshes import service as mesh_service
 from ..models import Mesh, MeshStatus
 from ..state import AppState
 from ..storage import ReceivedFile
+from . import repository
+
+log = logging.getLogger("shapes.search")
 
 #: The search options a client may send, with ``POST /query``'s file.
 OPTION_NAMES = ("k", "preset", "fusion", "modalities", "far")
@@ -51,17 +56,6 @@ class SearchOptions:
     fusion: str | None
     modalities: tuple[str, ...]
     far: float | None = None
-
-    @property
-    def calibration_row(self) -> str | None:
-        """The calibrated score these options rank by: the preset's own fused score,
-        a single modality, or None (another fusion is not calibrated)."""
-        if len(self.modalities) == 1:
-            return self.modalities[0]
-        own = self.preset
-        if self.modalities == tuple(own.fused_modalities) and self.fusion in (None, own.fusion):
-            return FUSED
-        return None
 
 
 @dataclass
@@ -217,12 +211,6 @@ def parse_options(
         modalities=mods,
         far=parse_far(_blank_to_none(far)),
     )
-    if options.far is not None and options.calibration_row is None:
-        raise InvalidInputError(
-            "far needs the preset's own fused score or a single modality: the gallery is "
-            "calibrated for those, not for another fusion.",
-            code="invalid_far",
-        )
     return options
 
 
@@ -319,16 +307,14 @@ def _calibration_for(
     session: Session, state: AppState, options: SearchOptions
 ) -> Calibration | None:
     """The calibration of the score the options rank by; None if there is none (too few
-    labelled pairs, or another fusion), unless a FAR was asked for (then 409)."""
-    row = options.calibration_row
-    if row is None:
-        return None
+    labelled pairs), unless a FAR was asked for (then 409)."""
     try:
-        return current_calibration(session, state).rows[row]
+        fit = current_calibration(session, state)
     except ConflictError:
         if options.far is not None:
             raise
         return None
+    return fit.for_fusion(options.modalities, options.fusion or options.preset.fusion)
 
 
 def query_by_upload(
@@ -336,7 +322,7 @@ def query_by_upload(
 ) -> SearchResult:
     """Rank the gallery against an uploaded mesh (:func:`upload_descriptor`)."""
     state.gallery.check_ready()  # before the worker spends seconds on the query
-    descriptor, source, timings = upload_descriptor(session, state, upload, options.preset)
+    descriptor, source, timings, preview = upload_descriptor(session, state, upload, options.preset)
     result = rank(
         session,
         state,
@@ -345,25 +331,41 @@ def query_by_upload(
         timings=timings,
         descriptor_source=source,
     )
-    if query_preview(session, state, upload.sha256) is not None:
+    if preview or query_preview(session, upload.sha256) is not None:
         result.preview = f"/previews/{upload.sha256}"
     return result
 
 
-def query_preview(session: Session, state: AppState, sha256: str) -> bytes | None:
+def query_preview(session: Session, sha256: str) -> bytes | None:
     """The preview (GLB) of recently searched or enrolled bytes, if one was made."""
-    cached = state.recent_previews.get(sha256)
-    if cached is not None:
-        return cached
+    recent = repository.get_query_preview(session, sha256)
+    if recent is not None:
+        return recent
     mesh = meshes.get_by_sha256(session, sha256)
     stored = None if mesh is None else meshes.get_preview(session, mesh.id)
     return None if stored is None else stored.glb
 
 
+def _keep_preview(state: AppState, sha256: str, glb: bytes) -> bool:
+    """Store a query's preview where every replica finds it (its own short write, so
+    the search holds no write lock); True once stored. A preview is a convenience:
+    if the database refuses it now, the search still answers."""
+    try:
+        with unit_of_work(state.sessions) as session:
+            repository.put_query_preview(
+                session, sha256, glb, keep=state.settings.query_previews_kept
+            )
+    except DATABASE_ERRORS as exc:
+        log.warning("query preview not stored: %r", exc)
+        return False
+    return True
+
+
 def upload_descriptor(
     session: Session, state: AppState, upload: ReceivedFile, preset: Preset
-) -> tuple[ShapeDescriptor, DescriptorSource, dict[str, float]]:
-    """The descriptor of an uploaded file, where it came from, and its timings.
+) -> tuple[ShapeDescriptor, DescriptorSource, dict[str, float], bool]:
+    """The descriptor of an uploaded file, where it came from, its timings, and
+    whether a preview of it was stored just now.
 
     Bytes already described under the preset (an enrolled mesh's file, or a recent
     query's) answer from that descriptor; others are described by a query worker
@@ -375,19 +377,20 @@ def upload_descriptor(
     descriptor = _known_descriptor(session, state, upload, preset)
     if descriptor is None:
         descriptor, source = state.recent_queries.get(key), "recent"
+    stored_preview = False
     if descriptor is None:
         descriptor, preview = state.queue.describe_now(
             uuid.uuid4().hex, upload.path, upload.filename, preset.name
         )
         state.recent_queries.put(key, descriptor)
         if preview is not None:
-            state.recent_previews.put(upload.sha256, preview)
+            stored_preview = _keep_preview(state, upload.sha256, preview)
         source = "computed"
         timings = dict(descriptor.timings)
     else:
         timings = {}
     timings["describe_wall"] = time.perf_counter() - started
-    return descriptor, source, timings
+    return descriptor, source, timings, stored_preview
 
 
 def _known_descriptor(

@@ -1,14 +1,18 @@
-"""The service on PostgreSQL and Redis (real servers): the migrations both ways, and
+"""The service on PostgreSQL and Redis (real servers): the migrations both ways;
 enrollment, search and deletion surviving a worker and the Redis server killed
-with -9 mid-work."""
+with -9 mid-work; outages of the queue and the database answered as the contract
+says; and a fault drill under load."""
 
 from __future__ import annotations
 
 import os
 import signal
+import threading
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
+import httpx
 import pytest
 from alembic import command
 from alembic.autogenerate import compare_metadata
@@ -23,7 +27,15 @@ from benchmarks.common import TIMEOUT, Postgres, Redis, Service
 
 pytestmark = [pytest.mark.scaleout, pytest.mark.service, pytest.mark.slow]
 
-TABLES = {"meshes", "descriptors", "jobs", "previews", "gallery_changes", "uploads"}
+TABLES = {
+    "meshes",
+    "descriptors",
+    "jobs",
+    "previews",
+    "query_previews",
+    "gallery_changes",
+    "uploads",
+}
 
 
 @pytest.fixture(scope="module")
@@ -93,6 +105,7 @@ def _wait_all(service: Service, ids: list[int]) -> dict[int, dict]:
         assert time.monotonic() < deadline, f"still waiting for {set(ids) - set(done)}"
         for mesh_id in set(ids) - set(done):
             body = service.client.get(f"/meshes/{mesh_id}").json()
+            assert "status" in body, (mesh_id, body)
             if body["status"] in ("ready", "failed"):
                 done[mesh_id] = body
         time.sleep(0.2)
@@ -200,4 +213,238 @@ def test_two_api_replicas_and_two_workers_share_nothing_but_the_servers(
         assert not list((tmp_path / "api-a").glob("uploads/*/*"))  # nothing on a disk
     finally:
         for process in (b, a, enroller, searcher):
+            process.close()
+
+
+# ------------------------------------------------------------------ fault drills
+PARTIAL = "partial/quadruped-3-top-cut"  # bytes no test enrolls: a query needs a worker
+
+
+def _unavailable(response: httpx.Response, code: str) -> None:
+    """A dependency's outage as the contract says: 503, JSON, the code, Retry-After."""
+    assert response.status_code == 503, response.text
+    assert response.headers["content-type"] == "application/json", response.text
+    assert response.json()["error"] == code, response.text
+    assert int(response.headers["retry-after"]) > 0
+
+
+def _scaled_out(postgres: Postgres, redis_server: Redis, root, *replicas: str) -> list[Service]:
+    """API replicas and one process each for the two queues' workers, all sharing
+    nothing but the servers; the last one returned runs the workers."""
+    upgrade_head(postgres.url)
+    shared = {
+        "SHAPES_DATABASE_URL": postgres.url,
+        "SHAPES_REDIS_URL": redis_server.url,
+        "SHAPES_UPLOADS": "database",
+        "SHAPES_SWEEP_INTERVAL_SECONDS": "2",
+        "SHAPES_STALLED_AFTER_SECONDS": "8",
+    }
+    services = [Service(root / name) for name in (*replicas, "workers")]
+    for service in services:
+        service.env.update(shared)
+    services[-1].start_worker()
+    services[-1].start_worker("query")
+    for api in services[:-1]:
+        api.start_api()
+    return services
+
+
+def test_an_upload_during_a_queue_outage_is_described_once_it_is_back_without_a_restart(
+    postgres: Postgres, redis_server: Redis, tmp_path
+):
+    api, workers = _scaled_out(postgres, redis_server, tmp_path, "api")
+    try:
+        redis_server.kill()
+        accepted = api.upload("spider-3", "spider")
+        assert accepted.status_code == 202, accepted.text  # stored; queued once it is back
+        _unavailable(api.query(PARTIAL), "queue_unavailable")
+        ready = api.client.get("/ready")
+        assert ready.status_code == 503 and ready.json()["checks"]["queue"].startswith("error")
+        retried = api.upload("spider-3", "spider")  # the client's retry: the same mesh
+        assert retried.json()["id"] == accepted.json()["id"]
+
+        redis_server.start()
+        back = time.monotonic()
+        mesh = api.wait_mesh(accepted.json()["id"])
+        assert mesh["status"] == "ready", mesh
+        assert time.monotonic() - back < 30
+        assert api.client.get("/ready").status_code == 200
+    finally:
+        api.close()
+        workers.close()
+
+
+def test_a_database_outage_answers_json_503s_and_loses_nothing(
+    postgres: Postgres, redis_server: Redis, tmp_path
+):
+    api, workers = _scaled_out(postgres, redis_server, tmp_path, "api")
+    try:
+        before = api.upload("hand-3", "hand")
+        assert api.wait_mesh(before.json()["id"])["status"] == "ready"
+        postgres.kill()
+        _unavailable(api.upload("bird-3", "bird"), "database_unavailable")
+        _unavailable(api.query("hand-3"), "database_unavailable")
+        _unavailable(api.client.get("/meshes"), "database_unavailable")
+        ready = api.client.get("/ready")
+        assert ready.status_code == 503 and ready.json()["checks"]["database"].startswith("error")
+
+        postgres.start()
+        api.wait_ready()
+        assert api.client.get(f"/meshes/{before.json()['id']}").json()["status"] == "ready"
+        after = api.upload("bird-3", "bird")
+        assert after.status_code == 202, after.text
+        assert api.wait_mesh(after.json()["id"])["status"] == "ready"
+    finally:
+        api.close()
+        workers.close()
+
+
+def test_a_query_preview_link_works_on_every_replica(
+    postgres: Postgres, redis_server: Redis, tmp_path
+):
+    a, b, workers = _scaled_out(postgres, redis_server, tmp_path, "api-a", "api-b")
+    try:
+        answer = a.query(PARTIAL, k=1)
+        assert answer.status_code == 200, answer.text
+        link = answer.json()["preview"]
+        for replica in (a, b):
+            preview = replica.client.get(link)
+            assert preview.status_code == 200, preview.text
+            assert preview.content[:4] == b"glTF"
+    finally:
+        for process in (b, a, workers):
+            process.close()
+
+
+class _Load:
+    """A bounded mixed load on the replicas (uploads, queries, deletes) in a thread,
+    keeping every response; a connection refused (a replica being killed) is kept
+    apart, as the balancer in front would send that request elsewhere."""
+
+    def __init__(self, replicas: list[Service], names: list[str]) -> None:
+        self.replicas, self.names = replicas, names
+        self.responses: list[httpx.Response] = []
+        self.refused = 0
+        self.accepted: dict[int, str] = {}  # mesh id -> name, of every 200/202 upload
+        self.deleted: set[int] = set()  # ids a delete was sent for
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self) -> _Load:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self._stop.set()
+        self._thread.join(TIMEOUT)
+
+    def _send(self, step: int, make) -> httpx.Response | None:
+        replica = self.replicas[step % len(self.replicas)]
+        try:
+            response: httpx.Response = make(replica)
+        except httpx.TransportError:
+            self.refused += 1
+            return None
+        self.responses.append(response)
+        return response
+
+    def _run(self) -> None:
+        for step in range(10_000):
+            if self._stop.is_set():
+                return
+            name = self.names[step % len(self.names)]
+            upload = self._send(step, lambda r, name=name: r.upload(name, name.split("-")[0]))
+            if upload is not None and upload.status_code in (200, 202):
+                self.accepted[upload.json()["id"]] = name
+            query = PARTIAL if step % 2 else "biped-0"
+            self._send(step + 1, lambda r, query=query: r.query(query, k=3))
+            if step % 5 == 4 and self.accepted:
+                victim = max(self.accepted)
+                path = f"/meshes/{victim}"
+                # Asked: gone once answered 204, or if the answer was lost on the way.
+                self.deleted.add(victim)
+                self._send(step, lambda r, path=path: r.client.delete(path))
+            self._stop.wait(0.2)
+
+    def unexplained_errors(self) -> list[str]:
+        """Every 5xx that is not a JSON body with an error code."""
+        return [
+            f"{r.request.method} {r.request.url.path}: {r.status_code} {r.text[:200]}"
+            for r in self.responses
+            if r.status_code >= 500
+            and not (r.headers.get("content-type") == "application/json" and "error" in r.json())
+        ]
+
+
+def _grandchildren(pid: int) -> list[int]:
+    """The processes whose parent's parent is ``pid`` (a worker's describing children,
+    forked by its fork server)."""
+    parents: dict[int, int] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        parents[int(stat.parent.name)] = int(fields[1])
+    return [p for p, parent in parents.items() if parents.get(parent) == pid]
+
+
+def _kill_a_describing_child(worker: Service, timeout: float) -> bool:
+    """kill -9 the next describing child of ``worker``'s enrollment consumer."""
+    (consumer,) = worker.workers["enroll"]
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for child in _grandchildren(consumer.pid):
+            os.kill(child, signal.SIGKILL)
+            return True
+        time.sleep(0.02)
+    return False
+
+
+def test_fault_drill_under_load_every_upload_ends_true_and_every_error_is_json(
+    postgres: Postgres, redis_server: Redis, tmp_path
+):
+    """Redis, PostgreSQL, a worker, a describing child and an API replica, each killed
+    and brought back under a mixed load: afterwards every accepted upload is ready,
+    both replicas' indexes equal the descriptor rows, and no answer was a non-JSON 5xx."""
+    a, b, workers = _scaled_out(postgres, redis_server, tmp_path, "api-a", "api-b")
+    names = [f"{kind}-{pose}" for pose in range(4) for kind in ("biped", "bird", "spider")]
+    try:
+        with _Load([a, b], names) as load:
+            time.sleep(2)
+            redis_server.kill()
+            time.sleep(3)
+            redis_server.start()
+            time.sleep(2)
+            postgres.kill()
+            time.sleep(3)
+            postgres.start()
+            time.sleep(2)
+            killed_child = _kill_a_describing_child(workers, TIMEOUT)
+            (consumer,) = workers.workers["enroll"]
+            os.kill(consumer.pid, signal.SIGKILL)
+            consumer.wait()
+            workers.workers["enroll"] = []
+            workers.start_worker()
+            assert b.api is not None
+            os.kill(b.api.pid, signal.SIGKILL)
+            b.api.wait()
+            b.start_api()
+            time.sleep(2)
+        assert killed_child
+        live = [mesh_id for mesh_id in load.accepted if mesh_id not in load.deleted]
+        for mesh_id in load.deleted:  # deleted, or (the delete refused) still there
+            assert a.client.get(f"/meshes/{mesh_id}").status_code in (200, 404)
+        done = _wait_all(a, live)
+        failed = {i: (m["error"], m["detail"]) for i, m in done.items() if m["status"] != "ready"}
+        assert not failed, failed
+        assert load.unexplained_errors() == []
+        outages = {r.json()["error"] for r in load.responses if r.status_code == 503}
+        assert "database_unavailable" in outages, outages  # the load met the outage
+        assert len(load.responses) > 20 and load.refused < len(load.responses)
+        rows = _descriptor_rows(postgres.url)
+        _wait_index_size(a, rows)
+        _wait_index_size(b, rows)
+    finally:
+        for process in (b, a, workers):
             process.close()
