@@ -99,7 +99,7 @@ def verify(
         assert claim_label is not None
         targets = meshes.ids_with_label(session, claim_label)
     if upload is not None:
-        descriptor, _, _ = search.upload_descriptor(session, state, upload, preset)
+        descriptor, *_ = search.upload_descriptor(session, state, upload, preset)
         probe = "upload"
     else:
         assert mesh_id is not None

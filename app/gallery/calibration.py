@@ -15,9 +15,10 @@ labelled shapes) take about a second, the same at 100,000 shapes.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -43,6 +44,10 @@ class GalleryCalibration:
     sampled : whether the pairs are a sample (above the pair budget).
     version : the gallery's change counter when fitted.
     fitted_at : Unix time of the fit.
+    preset : the preset scored with (its dissimilarity and weights).
+    pair_scores : each modality's dissimilarity of every scored pair, and
+        ``genuine`` which of them are genuine: any other fusion a search asks for is
+        calibrated from them (:meth:`for_fusion`).
     """
 
     rows: dict[str, Calibration]
@@ -52,6 +57,33 @@ class GalleryCalibration:
     sampled: bool
     version: int
     fitted_at: float
+    preset: Preset
+    pair_scores: dict[str, np.ndarray] = field(repr=False)
+    genuine: np.ndarray = field(repr=False)
+    _fusions: dict[tuple[tuple[str, ...], str], Calibration] = field(
+        default_factory=dict, repr=False, compare=False
+    )
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False, compare=False)
+
+    def for_fusion(self, modalities: tuple[str, ...], rule: str) -> Calibration:
+        """The calibration of the score a search ranks by: ``modalities`` fused by
+        ``rule`` with the preset's weights, as the index fuses them (one modality: its
+        own row; the preset's own fusion: ``FUSED``). Others are fitted on first use
+        from the stored pair scores (milliseconds) and kept with this fit."""
+        if len(modalities) == 1:
+            return self.rows[modalities[0]]
+        preset = self.preset
+        if modalities == tuple(preset.fused_modalities) and rule == preset.fusion:
+            return self.rows[FUSED]
+        key = (modalities, rule)
+        with self._lock:
+            known = self._fusions.get(key)
+            if known is None:
+                weights = {m: preset.weight(m) for m in modalities}
+                scores = fuse({m: self.pair_scores[m] for m in modalities}, rule, weights)
+                known = calibrate(scores[self.genuine], scores[~self.genuine])
+                self._fusions[key] = known
+            return known
 
 
 class NotEnoughPairs(ValueError):
@@ -120,6 +152,9 @@ def fit_calibration(
         sampled=sampled,
         version=version,
         fitted_at=time.time(),
+        preset=preset,
+        pair_scores=per,
+        genuine=genuine,
     )
 
 

@@ -112,8 +112,18 @@ def test_open_set_query_rejects_a_class_absent_from_the_gallery(verifier: Servic
     assert present["matches"][0]["label"] == "biped"
     assert 0.0 <= present["matches"][0]["confidence"] <= 1.0
     assert present["matches"][0]["accepted"] is None  # no far asked
-    summed = verifier.query("biped-3", k=1, fusion="sum").json()
-    assert summed["matches"][0]["confidence"] is None  # another fusion is not calibrated
+    # Any fusion a search asks for is calibrated too, from the same pairs.
+    summed = verifier.query("biped-3", k=1, fusion="sum", far="0.01").json()
+    assert 0.0 <= summed["matches"][0]["confidence"] <= 1.0
+    assert summed["threshold"] is not None and summed["threshold"] != absent["threshold"]
+    mesh_id = summed["matches"][0]["mesh_id"]
+    pair = verifier.client.post(
+        f"/meshes/{mesh_id}/similar", params={"modalities": "gdm,ddt", "far": "0.01", "k": 1}
+    )
+    assert pair.status_code == 200, pair.text
+    assert (
+        pair.json()["threshold"] is not None and pair.json()["matches"][0]["accepted"] is not None
+    )
 
 
 def test_deleted_shapes_leave_the_calibration(verifier: Service, calibrated):
