@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import hmac
 from collections.abc import AsyncIterator, Iterator
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import Depends, Path, Request
 from fastapi.security import APIKeyHeader
@@ -16,8 +16,10 @@ from .state import AppState
 from .storage import ReceivedFile
 from .uploads import MultipartUpload, receive_multipart
 
-# SQLite's INTEGER is 64-bit: a larger id in a path is invalid input, not a 500.
-RowId = Annotated[int, Path(ge=1, le=2**63 - 1, description="the row's id")]
+# The largest id a JSON number holds exactly (JavaScript's, and the schema's own
+# numbers are doubles); ids are far below it, and a larger one is invalid input, not a 500.
+MAX_ROW_ID = 2**53
+RowId = Annotated[int, Path(ge=1, le=MAX_ROW_ID, description="the row's id")]
 
 
 def get_state(request: Request) -> AppState:
@@ -86,6 +88,19 @@ def require_api_key(
 
 WRITE_ACCESS = [Depends(require_api_key)]
 """``dependencies=`` of every POST and DELETE route."""
+
+
+def document_open_access(openapi: dict[str, Any]) -> None:
+    """Without a configured key nothing asks for one: drop the key's security
+    requirement and its 401 answers from the schema (in place)."""
+    for operations in openapi.get("paths", {}).values():
+        for operation in operations.values():
+            operation.pop("security", None)
+            operation.get("responses", {}).pop("401", None)
+    schemes = openapi.get("components", {}).get("securitySchemes", {})
+    schemes.pop(API_KEY_HEADER.scheme_name, None)
+    if not schemes:
+        openapi.get("components", {}).pop("securitySchemes", None)
 
 
 async def get_multipart(request: Request, state: StateDep) -> AsyncIterator[MultipartUpload]:

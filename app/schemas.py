@@ -8,6 +8,8 @@ from typing import Annotated, Any
 
 from pydantic import AfterValidator, BaseModel, Field
 
+from worker.engine.mesh_io import MESH_FORMATS
+
 
 def _as_utc(value: datetime) -> datetime:
     # SQLite stores naive datetimes; the service writes them in UTC (models.utcnow).
@@ -27,8 +29,46 @@ class ErrorOut(BaseModel):
 
 ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
     422: {"model": ErrorOut, "description": "Invalid input (`invalid_input` or a specific code)"},
+    503: {
+        "model": ErrorOut,
+        "description": "A dependency is down (`database_unavailable`, `queue_unavailable`; "
+        "with `Retry-After`), or the index is still loading (`index_loading`)",
+        "headers": {
+            "Retry-After": {"description": "seconds to wait", "schema": {"type": "integer"}}
+        },
+    },
 }
 """Responses every router declares, replacing FastAPI's default validation-error schema."""
+
+_EXTENSIONS = "|".join(MESH_FORMATS)
+MESH_FILE: dict[str, Any] = {
+    "type": "string",
+    # OpenAPI 3.1's spelling of a file part; "mesh" says which files (JSON Schema's
+    # formats are annotations: a client or fuzzer that knows it generates real meshes).
+    "contentMediaType": "application/octet-stream",
+    "format": "mesh",
+    "description": "a triangle mesh file: "
+    + " ".join(f".{f}" for f in MESH_FORMATS)
+    + ", optionally .gz-compressed, told by the file name's extension (any other is "
+    "415 `unsupported_format`); a file that is not a readable surface of at least 10 "
+    "vertices is 422 (`unreadable_mesh`, `degenerate_mesh`, ...)",
+}
+"""The schema of a mesh file in a multipart form."""
+
+MESH_FILE_ENCODING: dict[str, Any] = {
+    "contentType": "application/octet-stream",
+    "headers": {
+        "Content-Disposition": {
+            "description": "the file name's extension tells the format",
+            "schema": {
+                "type": "string",
+                "pattern": rf'filename="[^"]*\.({_EXTENSIONS})(\.gz)?"',
+                "example": 'form-data; name="file"; filename="wolf0.off"',
+            },
+        }
+    },
+}
+"""The multipart encoding of a mesh file part (its name's extension)."""
 
 FILE_RESPONSES: dict[int | str, dict[str, Any]] = {
     413: {
@@ -53,15 +93,27 @@ def multipart_body(
     properties: dict[str, Any],
     *,
     required: tuple[str, ...] = (),
-    encoding: dict[str, Any] | None = None,
+    one_of_each: tuple[tuple[str, str], ...] = (),
 ) -> dict[str, Any]:
     """``openapi_extra`` of a route that reads its multipart form itself (streaming):
-    the form's fields as OpenAPI describes them."""
-    schema: dict[str, Any] = {"type": "object"}
+    the form's fields as OpenAPI describes them. No other field is accepted;
+    ``one_of_each`` lists the pairs of fields of which exactly one must be sent; a
+    ``file`` field is a mesh file (:data:`MESH_FILE`)."""
+    schema: dict[str, Any] = {"type": "object", "additionalProperties": False}
     if required:
         schema["required"] = list(required)
+    if one_of_each:
+        schema["allOf"] = [
+            {"oneOf": [{"required": [a]}, {"required": [b]}]} for a, b in one_of_each
+        ]
     schema["properties"] = properties
     form: dict[str, Any] = {"schema": schema}
-    if encoding is not None:
+    encoding = {"file": MESH_FILE_ENCODING} if "file" in properties else {}
+    encoding |= {  # objects travel as JSON text
+        name: {"contentType": "application/json"}
+        for name, value in properties.items()
+        if value.get("type") == "object"
+    }
+    if encoding:
         form["encoding"] = encoding
     return {"requestBody": {"required": True, "content": {"multipart/form-data": form}}}

@@ -9,10 +9,24 @@ from fastapi import APIRouter
 
 from worker.recognition.calibration import Calibration
 
-from ..deps import WRITE_ACCESS, MultipartDep, ReadSessionDep, SessionDep, StateDep, require_file
+from ..deps import (
+    MAX_ROW_ID,
+    WRITE_ACCESS,
+    MultipartDep,
+    ReadSessionDep,
+    SessionDep,
+    StateDep,
+    require_file,
+)
 from ..errors import InvalidInputError
 from ..gallery.calibration import FUSED
-from ..schemas import ERROR_RESPONSES, FILE_RESPONSES, UNAUTHORIZED_RESPONSE, multipart_body
+from ..schemas import (
+    ERROR_RESPONSES,
+    FILE_RESPONSES,
+    MESH_FILE,
+    UNAUTHORIZED_RESPONSE,
+    multipart_body,
+)
 from ..search.service import parse_far
 from . import service
 from .schemas import (
@@ -34,23 +48,23 @@ NOT_CALIBRATED: dict[int | str, dict[str, Any]] = {
 }
 VERIFY_BODY = multipart_body(
     {
-        "file": {
-            "type": "string",
-            "format": "binary",
-            "description": "the mesh to verify (or mesh_id)",
-        },
+        "file": MESH_FILE
+        | {"description": f"the mesh to verify (or mesh_id): {MESH_FILE['description']}"},
         "mesh_id": {
             "type": "integer",
             "minimum": 1,
+            "maximum": MAX_ROW_ID,
             "description": "an enrolled mesh to verify (or file)",
         },
         "claim_id": {
             "type": "integer",
             "minimum": 1,
+            "maximum": MAX_ROW_ID,
             "description": "the enrolled mesh it is claimed to be",
         },
         "claim_label": {
             "type": "string",
+            "pattern": "\\S",  # a blank label says nothing
             "description": "the label it is claimed to have (the closest "
             "enrolled mesh of that label decides)",
         },
@@ -61,7 +75,8 @@ VERIFY_BODY = multipart_body(
             "default": DEFAULT_FAR,
             "description": "false acceptance rate of the decision",
         },
-    }
+    },
+    one_of_each=(("file", "mesh_id"), ("claim_id", "claim_label")),
 )
 
 
@@ -123,9 +138,10 @@ def _optional_id(fields: dict[str, str], name: str) -> int | None:
         value = int(text)
     except ValueError:
         value = 0
-    if not 1 <= value <= 2**63 - 1:
+    if not 1 <= value <= MAX_ROW_ID:
         raise InvalidInputError(
-            f"{name} must be a mesh id (a whole number from 1).", code=f"invalid_{name}"
+            f"{name} must be a mesh id (a whole number from 1 to {MAX_ROW_ID}).",
+            code=f"invalid_{name}",
         )
     return value
 

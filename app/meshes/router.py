@@ -11,9 +11,16 @@ from fastapi.responses import FileResponse
 from ..deps import WRITE_ACCESS, MultipartDep, RowId, SessionDep, StateDep, require_file
 from ..errors import InvalidInputError
 from ..models import Descriptor, Mesh, MeshStatus
-from ..schemas import ERROR_RESPONSES, FILE_RESPONSES, UNAUTHORIZED_RESPONSE, multipart_body
+from ..schemas import (
+    ERROR_RESPONSES,
+    FILE_RESPONSES,
+    MESH_FILE,
+    UNAUTHORIZED_RESPONSE,
+    multipart_body,
+)
 from . import service
 from .schemas import DescriptorInfo, Links, MeshOut, MeshPage
+from .service import MAX_NAME
 
 # A mesh id is never reused and its preview never changes: browsers may keep it.
 CACHE_FOREVER = {"Cache-Control": "private, max-age=86400, immutable"}
@@ -51,34 +58,16 @@ MESH_LINKS = {
 
 UPLOAD_BODY = multipart_body(
     {
-        "file": {
-            "type": "string",
-            "format": "binary",
-            "description": ".obj .ply .off .stl .glb .gltf, optionally .gz",
-        },
-        "name": {"type": "string", "description": "default: the file name"},
-        "label": {"type": "string", "description": "class, e.g. 'wolf'"},
+        "file": MESH_FILE,
+        "name": {"type": "string", "maxLength": MAX_NAME, "description": "default: the file name"},
+        "label": {"type": "string", "maxLength": MAX_NAME, "description": "class, e.g. 'wolf'"},
         "metadata": {
-            "type": "string",
-            "description": "a JSON object",
-            "example": '{"source": "TOSCA"}',
+            "type": "object",
+            "description": "any JSON object, kept with the mesh",
+            "example": {"source": "TOSCA"},
         },
     },
     required=("file",),
-    encoding={
-        "file": {
-            "contentType": "application/octet-stream",
-            "headers": {
-                "Content-Disposition": {
-                    "description": "the file name's extension tells the format",
-                    "schema": {
-                        "type": "string",
-                        "example": 'form-data; name="file"; filename="wolf0.off"',
-                    },
-                }
-            },
-        }
-    },
 )
 
 
@@ -131,17 +120,25 @@ def mesh_out(mesh: Mesh, descriptor: Descriptor | None) -> MeshOut:
     description=(
         "Stores the upload (content-addressed), creates the mesh and queues its descriptor "
         "job: **202** with status `queued`. The same bytes again answer **200** with the "
-        "existing mesh. Poll `GET /meshes/{id}` until `ready` (or `failed`, with `detail`).\n\n"
+        "existing mesh, or **202** when this queued it again (it had failed for a reason "
+        "that says nothing about the file, such as `describe_crashed` or `worker_lost`, or "
+        "its job was lost). While the queue is down an upload is still stored and answered; "
+        "it is queued once the queue is back. Poll `GET /meshes/{id}` until `ready` (or "
+        "`failed`, with `detail`).\n\n"
         "`curl -F file=@wolf0.off.gz -F label=wolf http://127.0.0.1:8000/meshes`"
     ),
     responses=Responses(
         {
             200: {
-                "description": "Already enrolled (same sha256)",
+                "description": "Already enrolled (same sha256), nothing queued",
                 "model": MeshOut,
                 "links": MESH_LINKS,
             },
-            202: {"description": "Enrolled, descriptor job queued", "links": MESH_LINKS},
+            202: {
+                "description": "Enrolled (or enrolled before and queued again), descriptor "
+                "job queued",
+                "links": MESH_LINKS,
+            },
         }
     )
     | UPLOAD_ERRORS
@@ -159,7 +156,7 @@ def enroll(
             "use file, name, label and metadata.",
             code="unknown_field",
         )
-    mesh, created = service.enroll(
+    mesh, queued = service.enroll(
         session,
         state,
         file,
@@ -167,7 +164,7 @@ def enroll(
         label=upload.fields.get("label"),
         metadata=upload.fields.get("metadata"),
     )
-    response.status_code = status.HTTP_202_ACCEPTED if created else status.HTTP_200_OK
+    response.status_code = status.HTTP_202_ACCEPTED if queued else status.HTTP_200_OK
     response.headers["Location"] = f"/meshes/{mesh.id}"
     return mesh_out(mesh, service.descriptor_of(session, state, mesh))
 

@@ -16,6 +16,7 @@ import time
 import httpx
 import pytest
 
+from app.deps import MAX_ROW_ID
 from benchmarks.common import Service
 
 from .conftest import MAX_FACES, db_rows, integrity_check
@@ -192,12 +193,13 @@ def test_same_bytes_under_another_format_are_a_conflict_not_the_stored_mesh(hard
     assert f"mesh {first.json()['id']}" in body["detail"]
 
 
-def test_ids_beyond_64_bits_are_invalid_input_not_a_server_error(hardened: Service):
+def test_ids_beyond_what_json_holds_are_invalid_input_not_a_server_error(hardened: Service):
     huge = 2**90  # found by schemathesis: SQLite raised OverflowError (500)
     for method, path in (("GET", f"/meshes/{huge}"), ("GET", f"/meshes/{huge}/file"),
                          ("DELETE", f"/meshes/{huge}"), ("POST", f"/meshes/{huge}/similar"),
                          ("GET", f"/jobs/{huge}")):  # fmt: skip
         _error(hardened.client.request(method, path), 422, ("invalid_input",))
-    _error(hardened.client.get(f"/meshes/{2**63 - 1}"), 404, ("not_found",))
+    _error(hardened.client.get(f"/meshes/{MAX_ROW_ID}"), 404, ("not_found",))
+    _error(hardened.client.get(f"/meshes/{MAX_ROW_ID + 1}"), 422, ("invalid_input",))
     _error(hardened.client.get("/meshes", params={"offset": huge}), 422, ("invalid_input",))
     assert hardened.client.get("/meshes", params={"offset": 2**63 - 1}).json()["items"] == []
