@@ -341,3 +341,16 @@ def test_previews_of_enrolled_and_searched_meshes(service: Service, gallery):
     assert searched.status_code == 200 and searched.content[:4] == b"glTF"
     unknown = service.client.get("/previews/" + "0" * 64)
     assert _error(unknown, 404, "no_preview")["detail"].startswith("There is no preview")
+
+
+def test_without_a_key_the_schema_asks_for_none(service: Service):
+    """No SHAPES_API_KEY: nothing is refused for a missing key, so the schema says so."""
+    schema = service.client.get("/openapi.json").json()
+    operations = [op for path in schema["paths"].values() for op in path.values()]
+    assert not [
+        op["operationId"] for op in operations if "security" in op or "401" in op["responses"]
+    ]
+    assert "securitySchemes" not in schema.get("components", {})
+    upload = schema["paths"]["/meshes"]["post"]["requestBody"]["content"]["multipart/form-data"]
+    assert upload["schema"]["additionalProperties"] is False
+    assert upload["schema"]["properties"]["file"]["format"] == "mesh"

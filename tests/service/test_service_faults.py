@@ -102,3 +102,31 @@ def test_a_new_preset_version_describes_every_stored_mesh_again(tmp_path_factory
         assert ready["descriptors"]["described"] == ready["descriptors"]["enrolled"] == 2
         matches = svc.query("quadruped-1", k=2).json()["matches"]
         assert [m["label"] for m in matches] == ["quadruped", "biped"]
+
+
+def _fail_as(service: Service, mesh_id: int, code: str) -> None:
+    """Mark the mesh and its job failed with ``code``, as the collector would."""
+    with sqlite3.connect(service.data_dir / "shapes.sqlite3") as db:
+        for table, key in (("meshes", "id"), ("jobs", "mesh_id")):
+            db.execute(
+                f"UPDATE {table} SET status = 'failed', error_code = ?, error_detail = ? "
+                f"WHERE {key} = ?",
+                (code, "as the drill left it.", mesh_id),
+            )
+
+
+def test_the_same_bytes_again_describe_a_mesh_that_failed_for_a_transient_reason(
+    service: Service, gallery
+):
+    first = service.upload("spider-2", "spider").json()
+    assert service.wait_mesh(first["id"])["status"] == "ready"
+    _fail_as(service, first["id"], "describe_crashed")  # says nothing about the file
+    again = service.upload("spider-2", "spider")
+    assert again.status_code == 202, again.text
+    assert again.json()["id"] == first["id"] and again.json()["job_id"] != first["job_id"]
+    assert service.wait_mesh(first["id"])["status"] == "ready"
+
+    _fail_as(service, first["id"], "unreadable_mesh")  # the file's own fault: the same again
+    refused = service.upload("spider-2", "spider")
+    assert refused.status_code == 200 and refused.json()["status"] == "failed"
+    assert refused.json()["job_id"] == again.json()["job_id"]
