@@ -126,8 +126,10 @@ class Viewer {
     const gltf = await loader.loadAsync(url);
     if (this.model) this.scene.remove(this.model);
     this.model = gltf.scene;
-    // Files do not agree on which way is up: z up (TOSCA, scans) is turned to three's y.
-    this.model.rotation.x = -Math.PI / 2;
+    // Previews are in the engine's canonical frame (largest spread across, least towards
+    // the viewer), so a query and its match are drawn alike whatever their files' axes.
+    // One made before that is in its file's own axes: z up (TOSCA, scans) turned to y.
+    if (!this.model.getObjectByName(CANONICAL_NODE)) this.model.rotation.x = -Math.PI / 2;
     this.model.traverse((node) => {
       if (node.isMesh) {
         node.material = new THREE.MeshStandardMaterial({
@@ -162,6 +164,9 @@ class Viewer {
     this.renderer.render(this.scene, this.camera);
   }
 }
+
+// The glTF node of a preview in the canonical frame (worker/jobs/previews.py).
+const CANONICAL_NODE = "canonical-frame";
 
 let queryViewer, matchViewer, detailViewer;
 function viewers() {
@@ -255,6 +260,20 @@ function showResults(result, target) {
   status();
 }
 
+function forgetResults() {
+  $("search-results").replaceChildren();
+  $("search-progress").textContent = "";
+  $("compare").hidden = true;
+}
+
+// A deleted mesh leaves the search results, and the 3D view if it was the match shown.
+function forgetMesh(id) {
+  for (const card of document.querySelectorAll(`#search-results .card[data-mesh-id="${id}"]`)) {
+    if (card.classList.contains("selected")) $("compare").hidden = true;
+    card.remove();
+  }
+}
+
 async function compare(match, result, card) {
   for (const other of document.querySelectorAll(".card.selected")) other.classList.remove("selected");
   card.classList.add("selected");
@@ -300,8 +319,7 @@ async function search(file) {
     const seconds = ((performance.now() - started) / 1000).toFixed(0);
     progress.textContent = `Describing ${file.name}: ${seconds} s (a few seconds for a new mesh)`;
   }, 250);
-  $("search-results").replaceChildren();
-  $("compare").hidden = true;
+  forgetResults();
   try {
     const result = await api("/query", { method: "POST", body: form });
     result.queryName = file.name;
@@ -412,6 +430,7 @@ let detailMesh = null;
 async function openDetail(mesh) {
   detailMesh = mesh;
   $("detail").hidden = false;
+  $("detail").scrollIntoView({ block: "start" });
   $("detail-name").textContent = `#${mesh.id} ${mesh.name}`;
   const facts = {
     label: mesh.label || "(none)",
@@ -455,6 +474,7 @@ $("detail-similar").addEventListener("click", async () => {
     $("search-progress").textContent = `Most similar to ${detailMesh.name}:`;
     showResults(result, $("search-results"));
   } catch (err) {
+    forgetResults(); // not the results of another search beside this error
     showError(err);
   }
 });
@@ -464,9 +484,11 @@ $("detail-delete").addEventListener("click", async () => {
   if (!window.confirm(`Delete ${detailMesh.name} (#${detailMesh.id}) and its file? This cannot be undone.`)) return;
   try {
     await api(`/meshes/${detailMesh.id}`, { method: "DELETE" });
+    forgetMesh(detailMesh.id);
     $("detail").hidden = true;
     detailMesh = null;
     loadGallery();
+    status(); // the header's count
   } catch (err) {
     showError(err);
   }

@@ -1,5 +1,5 @@
-"""The previews a descriptor job makes: a small unit-size GLB and a PNG thumbnail
-seen along the mesh's axis of least extent."""
+"""The previews a descriptor job makes: a small unit-size GLB in the canonical frame and a
+PNG thumbnail seen along its axis of least extent."""
 
 from __future__ import annotations
 
@@ -10,9 +10,11 @@ import sys
 import numpy as np
 import trimesh
 from PIL import Image
+from scipy.spatial.transform import Rotation
 
 from worker.engine.mesh_io import Mesh
 from worker.jobs.previews import (
+    CANONICAL_NODE,
     PREVIEW_FACES,
     THUMBNAIL_PIXELS,
     preview_glb,
@@ -50,8 +52,8 @@ def test_a_small_mesh_is_kept_whole():
 
 def test_glb_reads_back_as_the_preview_mesh():
     sphere = _sphere()
-    read = trimesh.load(io.BytesIO(preview_glb(sphere)), file_type="glb", force="mesh")
     small = preview_mesh(sphere)
+    read = trimesh.load(io.BytesIO(preview_glb(small)), file_type="glb", force="mesh")
     assert len(read.faces) == len(small.faces)
     np.testing.assert_allclose(
         np.sort(np.linalg.norm(read.vertices, axis=1)),
@@ -67,29 +69,47 @@ def _silhouette(png: bytes) -> tuple[int, int]:
     return int(np.ptp(rows)) + 1, int(np.ptp(cols)) + 1
 
 
-def test_thumbnail_shows_the_largest_outline_with_z_up():
-    # 2 (x) by 0.2 (y) by 1 (z): seen along y, x across and z up, twice as wide as tall.
-    height, width = _silhouette(thumbnail_png(_box((2.0, 0.2, 1.0))))
-    assert width > 0.8 * THUMBNAIL_PIXELS
-    assert abs(width / height - 2.0) < 0.15
-    # 0.2 (x) by 1 (y) by 2 (z): seen along x, y across and z up, twice as tall as wide.
-    height, width = _silhouette(thumbnail_png(_box((0.2, 1.0, 2.0))))
-    assert abs(height / width - 2.0) < 0.15
+def test_thumbnail_shows_the_largest_outline_across_in_any_file_orientation():
+    # The same 2 by 1 by 0.2 box, however the file lays it: seen along its least extent,
+    # the largest across, twice as wide as tall.
+    for extents in ((2.0, 0.2, 1.0), (0.2, 1.0, 2.0), (1.0, 2.0, 0.2)):
+        height, width = _silhouette(thumbnail_png(preview_mesh(_box(extents))))
+        assert width > 0.8 * THUMBNAIL_PIXELS
+        assert abs(width / height - 2.0) < 0.15, extents
+
+
+def _lumpy() -> Mesh:
+    """No symmetry at all: three spreads and three skews, so its frame is unique."""
+    ball = trimesh.creation.icosphere(subdivisions=3)
+    v = np.asarray(ball.vertices) * [3.0, 2.0, 1.0]
+    v = v + 0.3 * v**2 * [1.0, -0.6, 0.8]
+    return Mesh(vertices=v, faces=np.asarray(ball.faces))
+
+
+def test_previews_are_drawn_in_one_frame_turned_never_mirrored():
+    """A turned copy of a file previews the same (the page draws a query and its match
+    in one frame), and the preview is the file turned, not its mirror image."""
+    mesh = _lumpy()
+    rotation = Rotation.random(random_state=4).as_matrix()
+    turned = Mesh(vertices=mesh.vertices @ rotation.T * 7.0 + 2.0, faces=mesh.faces)
+    np.testing.assert_allclose(
+        preview_mesh(turned).vertices, preview_mesh(mesh).vertices, atol=1e-9
+    )
+    before = mesh.vertices - mesh.vertices.mean(0)
+    after = preview_mesh(mesh).vertices
+    linear = np.linalg.lstsq(before, after - after.mean(0), rcond=None)[0]
+    assert np.linalg.det(linear) > 0
+    glb = trimesh.load(io.BytesIO(preview_glb(preview_mesh(mesh))), file_type="glb")
+    assert list(glb.graph.nodes_geometry) == [CANONICAL_NODE]
 
 
 def test_thumbnail_is_shaded_not_a_flat_stencil():
-    image = np.asarray(Image.open(io.BytesIO(thumbnail_png(_sphere()))).convert("RGBA"))
+    image = np.asarray(
+        Image.open(io.BytesIO(thumbnail_png(preview_mesh(_sphere())))).convert("RGBA")
+    )
     drawn = image[image[:, :, 3] > 0][:, :3].astype(int)
     assert len(drawn) > 0.5 * np.pi / 4 * THUMBNAIL_PIXELS**2  # the disc fills the square
     assert np.ptp(drawn.sum(axis=1)) > 100  # lit and unlit parts differ
-
-
-def test_previews_of_the_preview_mesh_are_the_same_bytes():
-    """What lets a job decimate once for both (worker/jobs/limits.py)."""
-    sphere = _sphere()
-    small = preview_mesh(sphere)
-    assert preview_glb(small) == preview_glb(sphere)
-    assert thumbnail_png(small) == thumbnail_png(sphere)
 
 
 def test_imports_names_every_package_the_previews_load():

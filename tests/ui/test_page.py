@@ -134,6 +134,8 @@ def test_the_gallery_lists_and_opens_a_mesh_in_3d(page):
     assert cards.count() == len(ENROLL)
     cards.nth(1).press("Enter")  # keyboard reachable
     page.locator("#detail").wait_for(state="visible")
+    top = page.locator("#detail").evaluate("(e) => e.getBoundingClientRect().top")
+    assert 0 <= top < page.viewport_size["height"] / 2  # scrolled to, not below the grid
     page.wait_for_function(f"() => ({DRAWN_PIXELS})('view-detail') > 2000", timeout=60_000)
     facts = page.locator("#detail-meta").inner_text()
     assert "ready" in facts and "100% described" in facts
@@ -182,6 +184,9 @@ def test_an_error_shows_the_services_sentence(page, tmp_path):
     alert = page.locator("#alert")
     alert.wait_for(state="visible", timeout=120_000)
     assert "Traceback" not in alert.inner_text() and len(alert.inner_text()) > 20
+    # Nothing of the previous search stays beside the error.
+    assert page.locator("#compare").is_hidden()
+    assert page.locator("#search-results .card").count() == 0
 
 
 def test_calibration_says_what_it_needs_then_draws_the_roc(page, site):
@@ -204,3 +209,30 @@ def test_calibration_says_what_it_needs_then_draws_the_roc(page, site):
     assert "Equal error rate" in summary.inner_text()
     assert page.locator("#calibration-table tbody tr").count() >= 3
     shoot(page, "calibration")
+
+
+def test_deleting_the_match_shown_leaves_no_stale_view(page, site):
+    page.click("#tab-search")
+    page.set_input_files("#file-search", str(example("biped-2")))
+    best = page.locator("#search-results .card").first
+    best.wait_for(timeout=180_000)
+    page.locator("#compare").wait_for(state="visible")
+    assert best.locator(".label").inner_text() == "biped"  # the only biped enrolled
+    mesh_id = best.get_attribute("data-mesh-id")
+    enrolled = site.client.get("/meshes").json()["total"]
+    page.click("#tab-gallery")
+    page.fill("#gallery-label", "biped")
+    page.click("#gallery-filter button[type=submit]")
+    page.locator("#gallery-grid .card").first.click()
+    page.locator("#detail").wait_for(state="visible")
+    page.once("dialog", lambda dialog: dialog.accept())
+    page.click("#detail-delete")
+    page.locator("#detail").wait_for(state="hidden")
+    assert site.client.get(f"/meshes/{mesh_id}").status_code == 404
+    shapes = f"{enrolled - 1} shapes"
+    page.wait_for_function(
+        f"() => document.getElementById('service-status').textContent.includes('{shapes}')"
+    )
+    page.click("#tab-search")
+    assert page.locator(f'#search-results .card[data-mesh-id="{mesh_id}"]').count() == 0
+    assert page.locator("#compare").is_hidden()  # the deleted mesh was the match shown

@@ -83,7 +83,7 @@ def _child(
         )
         preview = thumbnail = None
         try:
-            small = preview_mesh(mesh)  # decimated once for both (the same bytes as twice)
+            small = preview_mesh(mesh)  # decimated and turned once, drawn twice
             preview = preview_glb(small)
             thumbnail = thumbnail_png(small) if with_thumbnail else None
         except Exception:  # the descriptor is what matters; the page shows a placeholder
