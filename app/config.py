@@ -9,7 +9,7 @@ from typing import Literal
 from pydantic import Field, SecretStr
 
 from worker.engine.mesh_io import DEFAULT_MAX_FACES
-from worker.engine.presets import DEFAULT_PRESET
+from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.jobs.settings import QueueSettings
 
 
@@ -121,6 +121,12 @@ class Settings(QueueSettings):
     @property
     def index_directory(self) -> Path:
         return self.index_dir or self.data_dir / "index"
+
+    @property
+    def preset_index_directory(self) -> Path:
+        """Where the index of the preset's current version is saved."""
+        preset = get_preset(self.preset)
+        return self.index_directory / f"{preset.name}-v{preset.version}"
 
 
 @lru_cache

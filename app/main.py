@@ -91,7 +91,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             metrics=metrics,
             gallery=Gallery(
                 preset,
-                settings.index_directory / f"{preset.name}-v{preset.version}",
+                settings.preset_index_directory,
                 refit_fraction=settings.index_refit_fraction,
                 metrics=metrics,
             ),

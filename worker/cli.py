@@ -394,10 +394,12 @@ def build_parser() -> argparse.ArgumentParser:
     samples.add_argument("out_dir", help="directory to write the meshes and labels.csv in")
     samples.set_defaults(run=_samples)
 
-    # The service's HTTP client (httpx only): shapes import, shapes query.
-    from app.client import add_subcommands
+    # The service's HTTP client (httpx only): shapes import, shapes query; and the
+    # embedded deployment's backup and restore.
+    from app import backup, client
 
-    add_subcommands(sub)
+    client.add_subcommands(sub)
+    backup.add_subcommands(sub)
     return parser
 
 
