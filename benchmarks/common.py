@@ -327,6 +327,25 @@ class Service:
         self.client.close()
 
 
+def describing_children(worker: Service, timeout: float) -> list[int]:
+    """The describing processes of ``worker``'s enrollment consumer (forked by its fork
+    server: its children's children), once there is one, or [] after ``timeout``."""
+    (consumer,) = worker.workers["enroll"]
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        parents: dict[int, int] = {}
+        for stat in Path("/proc").glob("[0-9]*/stat"):
+            try:
+                parents[int(stat.parent.name)] = int(stat.read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, ValueError):  # gone meanwhile
+                continue
+        found = [p for p, parent in parents.items() if parents.get(parent) == consumer.pid]
+        if found:
+            return found
+        time.sleep(0.01)
+    return []
+
+
 # --------------------------------------------------------------------------- servers
 
 

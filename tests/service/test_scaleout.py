@@ -10,7 +10,6 @@ import signal
 import threading
 import time
 from collections.abc import Iterator
-from pathlib import Path
 
 import httpx
 import pytest
@@ -23,7 +22,7 @@ from sqlalchemy import create_engine, inspect, text
 from app import models  # noqa: F401  (registers the tables on Base.metadata)
 from app.db import Base
 from app.migrations import alembic_config, upgrade_head
-from benchmarks.common import TIMEOUT, Postgres, Redis, Service
+from benchmarks.common import TIMEOUT, Postgres, Redis, Service, describing_children
 
 pytestmark = [pytest.mark.scaleout, pytest.mark.service, pytest.mark.slow]
 
@@ -376,31 +375,6 @@ class _Load:
         ]
 
 
-def _grandchildren(pid: int) -> list[int]:
-    """The processes whose parent's parent is ``pid`` (a worker's describing children,
-    forked by its fork server)."""
-    parents: dict[int, int] = {}
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            fields = stat.read_text().rsplit(")", 1)[1].split()
-        except OSError:
-            continue
-        parents[int(stat.parent.name)] = int(fields[1])
-    return [p for p, parent in parents.items() if parents.get(parent) == pid]
-
-
-def _kill_a_describing_child(worker: Service, timeout: float) -> bool:
-    """kill -9 the next describing child of ``worker``'s enrollment consumer."""
-    (consumer,) = worker.workers["enroll"]
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        for child in _grandchildren(consumer.pid):
-            os.kill(child, signal.SIGKILL)
-            return True
-        time.sleep(0.02)
-    return False
-
-
 def test_fault_drill_under_load_every_upload_ends_true_and_every_error_is_json(
     postgres: Postgres, redis_server: Redis, tmp_path
 ):
@@ -420,7 +394,9 @@ def test_fault_drill_under_load_every_upload_ends_true_and_every_error_is_json(
             time.sleep(3)
             postgres.start()
             time.sleep(2)
-            killed_child = _kill_a_describing_child(workers, TIMEOUT)
+            children = describing_children(workers, TIMEOUT)
+            for child in children:
+                os.kill(child, signal.SIGKILL)
             (consumer,) = workers.workers["enroll"]
             os.kill(consumer.pid, signal.SIGKILL)
             consumer.wait()
@@ -431,7 +407,7 @@ def test_fault_drill_under_load_every_upload_ends_true_and_every_error_is_json(
             b.api.wait()
             b.start_api()
             time.sleep(2)
-        assert killed_child
+        assert children
         live = [mesh_id for mesh_id in load.accepted if mesh_id not in load.deleted]
         for mesh_id in load.deleted:  # deleted, or (the delete refused) still there
             assert a.client.get(f"/meshes/{mesh_id}").status_code in (200, 404)
