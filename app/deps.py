@@ -8,6 +8,7 @@ from typing import Annotated, Any
 
 from fastapi import Depends, Path, Request
 from fastapi.security import APIKeyHeader
+from pydantic import BeforeValidator
 from sqlalchemy.orm import Session
 
 from .db import unit_of_work
@@ -19,7 +20,21 @@ from .uploads import MultipartUpload, receive_multipart
 # The largest id a JSON number holds exactly (JavaScript's, and the schema's own
 # numbers are doubles); ids are far below it, and a larger one is invalid input, not a 500.
 MAX_ROW_ID = 2**53
-RowId = Annotated[int, Path(ge=1, le=MAX_ROW_ID, description="the row's id")]
+
+
+def _digits_only(value: object) -> object:
+    """An id in a path is its digits: no sign, space or other character around them
+    (Python's int() would take " 5\v")."""
+    if isinstance(value, str) and not (value.isascii() and value.isdigit()):
+        raise ValueError("an id is a whole number written in digits only")
+    return value
+
+
+RowId = Annotated[
+    int,
+    Path(ge=1, le=MAX_ROW_ID, description="the row's id"),
+    BeforeValidator(_digits_only),
+]
 
 
 def get_state(request: Request) -> AppState:

@@ -144,7 +144,13 @@ class _Receiver:
             self.file = ReceivedFile(
                 self._path, self._filename, self._size, self._digest.hexdigest()
             )
-        elif self._name:
+        elif not self._name:
+            raise InvalidInputError(
+                "A part of the form has no name: name every field "
+                "(Content-Disposition: form-data; name=...).",
+                code="unnamed_field",
+            )
+        else:
             if self._name in self.fields:  # keeping one of the values silently would be a guess
                 raise InvalidInputError(
                     f"The form field '{self._name}' was sent more than once; send each field once.",

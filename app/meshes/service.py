@@ -52,10 +52,9 @@ def parse_metadata(text: str | None) -> dict[str, Any]:
 def _text(value: str | None, what: str) -> str | None:
     if value is None:
         return None
-    value = value.strip()
-    if len(value) > MAX_NAME:
+    if len(value) > MAX_NAME:  # as sent, as the schema's maxLength counts
         raise InvalidInputError(f"The {what} is longer than {MAX_NAME} characters.")
-    return value or None
+    return value.strip() or None
 
 
 def enroll(

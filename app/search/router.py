@@ -64,7 +64,21 @@ OPTION_SCHEMAS: dict[str, dict[str, Any]] = {
     },
 }
 
-QUERY_BODY = multipart_body({"file": MESH_FILE} | OPTION_SCHEMAS, required=("file",))
+
+def _or_blank(schema: dict[str, Any]) -> dict[str, Any]:
+    """A form field's schema: the option's, or blank (the default), as an HTML form sends
+    a field left empty."""
+    value = {k: v for k, v in schema.items() if k != "description"}
+    return {
+        "anyOf": [value, {"type": "string", "maxLength": 0}],
+        "description": schema["description"] + " (blank: the default)",
+    }
+
+
+QUERY_BODY = multipart_body(
+    {"file": MESH_FILE} | {name: _or_blank(schema) for name, schema in OPTION_SCHEMAS.items()},
+    required=("file",),
+)
 
 SIMILAR_PARAMETERS = {
     "parameters": [
@@ -104,7 +118,8 @@ def document_limits(openapi: dict[str, Any], *, max_k: int, preset: str) -> None
         operation = openapi["paths"][path]["post"]
         if where == "form":
             content = operation["requestBody"]["content"]["multipart/form-data"]
-            options = content["schema"]["properties"]
+            fields = content["schema"]["properties"]
+            options = {name: fields[name]["anyOf"][0] for name in OPTION_SCHEMAS}
         else:
             options = {p["name"]: p["schema"] for p in operation["parameters"]}
         options["k"]["maximum"] = max_k
