@@ -86,6 +86,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             per_class_limit=args.limit,
             command=shlex.join(["shapes", *args.argv]),
             environment={"git": _git_revision()},
+            fusion=args.fusion,
         )
     except (EvaluationError, OSError) as exc:
         print(f"shapes evaluate: {exc}", file=sys.stderr)
@@ -316,6 +317,13 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--out", help="report directory (default: evaluation-out/PRESET)")
     evaluate.add_argument(
         "--weights", help="fuse with the weights of this file of shapes tune (for the same preset)"
+    )
+    evaluate.add_argument(
+        "--fusion",
+        choices=("preset", "learned"),
+        default="preset",
+        help="learned: add a row with the fusion (weights and comparisons) learned on this "
+        "collection by 5-fold class-stratified cross-validation, every figure held out",
     )
     evaluate.set_defaults(run=_evaluate)
 

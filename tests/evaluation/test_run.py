@@ -249,3 +249,28 @@ def test_cli_reports_bad_input_without_traceback(tmp_path, capsys):
     (tmp_path / "labels.csv").write_text("file,class\nnope.off,x\n")
     assert main(["evaluate", str(tmp_path), "--cache", str(tmp_path / "c")]) == 2
     assert "nope.off" in capsys.readouterr().err
+
+
+def test_the_learned_fusion_row_holds_held_out_figures_only(first_run):
+    """``--fusion learned`` (three of each class: three folds), from the cache but for
+    the one mesh added."""
+    labels = write_labels(first_run["tmp"] / "nine.csv", {**SUBSET, "hand-3.off.gz": "hand"})
+    out = first_run["tmp"] / "learned"
+    argv = ["evaluate", str(EXAMPLES), "--labels", str(labels), "--preset", EVAL_PRESET.name]
+    argv += ["--jobs", "2", "--cache", str(first_run["cache"]), "--fusion", "learned"]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setitem(PRESETS, EVAL_PRESET.name, EVAL_PRESET)
+        assert main([*argv, "--out", str(out)]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert list(report["rows"])[-2:] == ["learned", BASELINE]
+    row, learned = report["rows"]["learned"], report["learned_fusion"]
+    assert len(learned["folds"]) == 3
+    assert sum(f["held_out_objects"] for f in learned["folds"]) == len(SUBSET) + 1
+    # The EER is the folds' mean of their held-out EERs, never one over pooled scales.
+    folds_eer = np.mean([f["held_out"]["learned"]["eer"] for f in learned["folds"]])
+    assert row["eer"] == pytest.approx(folds_eer) == learned["held_out"]["learned"]["eer"]
+    assert set(row["comparisons"].values()) <= {"D1", "D2", "reweighted euclidean"}
+    assert set(row["weights"]) == set(EVAL_PRESET.fused_modalities)
+    frr = np.asarray(row["roc"]["frr"])
+    assert np.all(np.diff(frr) <= 1e-12) and 0.0 <= frr.min() <= frr.max() <= 1.0
+    assert "Learned fusion (held-out folds)" in (out / "report.md").read_text()

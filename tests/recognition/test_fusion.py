@@ -8,12 +8,14 @@ import pytest
 from worker.engine.compare import fuse
 from worker.recognition.fusion import (
     GRID,
+    PRESET_COMPARISON,
     FusionScores,
     choose_weights,
     fusion_scores,
     stratified_folds,
     tune_fusion,
 )
+from worker.recognition.metrics import pair_equal_error_rate
 
 #: Four classes of six objects: five folds leave at least four of each to choose on.
 LABELS = np.repeat(np.arange(4), 6)
@@ -133,3 +135,39 @@ def test_too_small_a_class_or_a_single_modality_is_refused():
     mats = {"a": clustered(larger, 0.1, rng), "b": clustered(larger, 0.1, rng)}
     with pytest.raises(ValueError, match="15 objects cannot fill 20 folds"):
         tune_fusion(mats, larger, "product", {}, folds=20)
+
+
+def test_a_better_comparison_of_a_modality_is_chosen_with_its_weight():
+    rng = np.random.default_rng(3)
+    mats = {"a": noise(len(LABELS), "product", rng), "b": clustered(LABELS, 5.0, rng)}
+    # Modality a compared otherwise separates the classes: that comparison is chosen.
+    alternatives = {"a": {"other": clustered(LABELS, 0.1, rng)}}
+    tuning = tune_fusion(mats, LABELS, "product", {"a": 1.0, "b": 1.0}, alternatives=alternatives)
+    assert tuning.comparisons == {"a": "other", "b": PRESET_COMPARISON}
+    assert all(f.comparisons["a"] == "other" for f in tuning.folds)
+    assert tuning.held_out.loss < tuning.preset_held_out.loss
+    assert tuning.beats_preset(0.05) and not tuning.beats_preset(1.0)
+
+
+def test_the_held_out_matrix_is_each_object_under_its_folds_choice():
+    rng = np.random.default_rng(0)
+    mats = {"a": clustered(LABELS, 5.0, rng), "b": clustered(LABELS, 5.0, rng)}
+    tuning = tune_fusion(mats, LABELS, "product", {"a": 1.0, "b": 1.0})
+    fold = stratified_folds(LABELS, 5)
+    for f, result in enumerate(tuning.folds):
+        rows = np.flatnonzero(fold == f)
+        expected = fuse(mats, "product", result.weights)[rows]
+        np.testing.assert_array_equal(tuning.held_out_matrix[rows], expected)
+    # Its figures per query are the folds' held-out ones.
+    queries = [fusion_scores(tuning.held_out_matrix, LABELS, np.flatnonzero(fold == f)).nn
+               for f in range(5)]  # fmt: skip
+    assert queries == [r.held_out.nn for r in tuning.folds]
+
+
+def test_each_folds_pairs_are_scored_under_its_own_choice():
+    rng = np.random.default_rng(0)
+    mats = {"a": clustered(LABELS, 5.0, rng), "b": clustered(LABELS, 5.0, rng)}
+    tuning = tune_fusion(mats, LABELS, "product", {"a": 1.0, "b": 1.0})
+    for f, result in enumerate(tuning.folds):
+        genuine, impostor = tuning.fold_pairs(f, LABELS)
+        assert pair_equal_error_rate(genuine, impostor) == result.held_out.eer

@@ -15,10 +15,12 @@ from typing import Any
 import numpy as np
 
 from worker.engine.presets import MODALITIES, Preset
+from worker.recognition import metrics
 from worker.recognition.fusion import FOLDS, tune_fusion
 
 from .compute import ComputedSet, compute_descriptors, descriptor_vectors
 from .datasets import EvaluationError, LabeledMesh, pose_set, read_labels
+from .learned import LEARNED, learn_fusion, learned_row
 from .partial import PARTIAL_VARIANTS
 from .partiality import partial_row_titles, partiality_scores, parts_matrix
 from .report import (
@@ -37,6 +39,7 @@ from .robustness import (
     tessellation_scores,
 )
 from .scoring import modality_dissimilarity
+from .shapedna import BASELINE
 from .variants import VARIANTS
 
 
@@ -53,10 +56,14 @@ def run_evaluation(
     environment: Mapping[str, str] | None = None,
     progress: bool = True,
     plot: Callable[[Mapping[str, Any], Path], None] | None = None,
+    fusion: str = "preset",
 ) -> dict[str, Any]:
     """Describe, compare and score a labelled collection; write the report to ``out_dir``.
 
-    Writes ``report.json``, ``report.md``, ``cmc.png`` and ``roc.png``.
+    Writes ``report.json``, ``report.md``, ``cmc.png`` and ``roc.png``. With ``fusion``
+    ``"learned"`` the report also has the fusion learned on the collection, from
+    held-out folds (:mod:`.learned`): a ``learned`` row before ShapeDNA's and a
+    ``learned_fusion`` section.
 
     Returns
     -------
@@ -72,6 +79,8 @@ def run_evaluation(
     report, _ = build_report(
         computed, preset, command=command, environment=env, dataset=str(dataset_dir), jobs=jobs
     )
+    if fusion == LEARNED:
+        _add_learned(report, computed, preset)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if plot is None:
@@ -84,6 +93,22 @@ def run_evaluation(
     (out / "report.json").write_text(json.dumps(report, indent=1) + "\n")
     (out / "report.md").write_text(render_markdown(report))
     return report
+
+
+def _add_learned(report: dict[str, Any], computed: ComputedSet, preset: Preset) -> None:
+    names = [m.name for m in computed.meshes]
+    labels = [m.label for m in computed.meshes]
+    try:
+        tuning = learn_fusion(descriptor_vectors(computed), labels, preset)
+    except ValueError as exc:
+        raise EvaluationError(f"cannot learn the fusion on this collection: {exc}") from exc
+    gallery_idx, probe_idx = metrics.first_instance_split(names, labels)
+    row, section = learned_row(tuning, preset, labels, names, gallery_idx, probe_idx)
+    rows = report["rows"]
+    baseline = rows.pop(BASELINE)
+    rows[LEARNED] = row
+    rows[BASELINE] = baseline
+    report["learned_fusion"] = section
 
 
 def run_tuning(

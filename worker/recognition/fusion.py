@@ -15,9 +15,18 @@ on (:func:`fusion_scores` with ``held_out``): the EER over the pairs that involv
 held-out object, NN and mAP with the held-out objects as queries, each ranking every
 other object.
 
-Pure numpy on all-to-all dissimilarity matrices: ``shapes tune`` (a labelled collection
-described through the evaluation cache) and a gallery learning its own fusion weigh with
-the same code.
+A modality may also come with other comparisons than the preset's (``alternatives``:
+D1 or D2 of eq. 8-9, ShapeDNA's reweighted Euclidean distance of the spectrum): each
+fold then chooses every modality's comparison with its weight, on the same loss.
+
+The held-out choices make one dissimilarity for the whole set
+(:attr:`FusionTuning.held_out_matrix`): row ``i`` fused with the choice of the fold that
+held ``i`` out, so every figure computed from it (per query, or per pair read from its
+first object's row) is a held-out one.
+
+Pure numpy on all-to-all dissimilarity matrices: ``shapes tune``, ``shapes evaluate
+--fusion learned`` (a labelled collection described through the evaluation cache) and a
+gallery learning its own fusion (``app/gallery/fusion.py``) weigh with the same code.
 """
 
 from __future__ import annotations
@@ -37,6 +46,12 @@ from . import metrics
 GRID = (0.0, 0.125, 0.25, 0.5, 1.0)
 #: Folds of the cross-validation.
 FOLDS = 5
+#: The held-out folds must beat the preset's weights by this much loss (the mean of EER
+#: and 1 - mAP, a fraction: half a point) for a gallery to adopt the learned fusion.
+ADOPTION_MARGIN = 0.005
+#: The name of the comparison each modality's matrix in ``dissimilarities`` was made with
+#: (the preset's), when the caller offers ``alternatives``.
+PRESET_COMPARISON = "preset"
 
 
 def stratified_folds(labels: ArrayLike, k: int, seed: int = 0) -> NDArray[np.int64]:
@@ -102,12 +117,14 @@ class FoldResult:
     ----------
     held_out_objects : objects in this fold.
     weights : modality -> weight, chosen on the objects of the other folds.
-    held_out : those weights' scores on this fold (:func:`fusion_scores`, ``held_out``).
+    comparisons : modality -> the comparison chosen with it.
+    held_out : that choice's scores on this fold (:func:`fusion_scores`, ``held_out``).
     preset : the preset's own weights' scores on the same pairs and queries.
     """
 
     held_out_objects: int
     weights: dict[str, float]
+    comparisons: dict[str, str]
     held_out: FusionScores
     preset: FusionScores
 
@@ -121,6 +138,7 @@ class FusionTuning:
     rule : the fusion rule, ``"sum"`` or ``"product"``.
     grid : the weights tried for every modality but the last.
     weights : modality -> weight, chosen on every object (what a preset takes).
+    comparisons : modality -> comparison, chosen with ``weights``.
     loss : the loss of ``weights`` on every object.
     folds : each fold's choice and held-out scores.
     held_out : the mean over the folds of their chosen weights' held-out scores.
@@ -128,16 +146,42 @@ class FusionTuning:
     sensitivity : modality -> (len(grid),) loss on every object with that modality's
         weight at each grid point and the others as chosen (how sharply the set decides;
         every modality but the last).
+    held_out_matrix : (n, n), row ``i`` the fused dissimilarity of object ``i`` under
+        the choice of the fold that held it out (not symmetric; rows of different folds
+        are on different scales, so a pair's score is read from the row of the fold it is
+        scored in: :meth:`fold_pairs`).
+    fold_of : (n,) the fold that held each object out.
     """
 
     rule: str
     grid: tuple[float, ...]
     weights: dict[str, float]
+    comparisons: dict[str, str]
     loss: float
     folds: tuple[FoldResult, ...]
     held_out: FusionScores
     preset_held_out: FusionScores
     sensitivity: dict[str, tuple[float, ...]]
+    held_out_matrix: NDArray[np.float64]
+    fold_of: NDArray[np.int64]
+
+    def fold_pairs(
+        self, fold: int, labels: ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The genuine and impostor scores of the pairs that involve an object of
+        ``fold``, under that fold's choice (its held-out verification)."""
+        labels = np.asarray(labels)
+        i, j = np.triu_indices(len(labels), 1)
+        first = self.fold_of[i] == fold
+        tested = first | (self.fold_of[j] == fold)
+        score = np.where(first, self.held_out_matrix[i, j], self.held_out_matrix[j, i])[tested]
+        same = (labels[i] == labels[j])[tested]
+        return score[same], score[~same]
+
+    def beats_preset(self, margin: float) -> bool:
+        """Whether the held-out folds favour the learned choice over the preset's weights
+        by more than ``margin`` of loss (the mean of EER and 1 - mAP)."""
+        return self.held_out.loss < self.preset_held_out.loss - margin
 
 
 def fusion_scores(
@@ -173,35 +217,53 @@ def fusion_scores(
     return FusionScores(eer=eer, nn=retrieval["nn"], map=retrieval["map"])
 
 
-def choose_weights(
-    dissimilarities: Mapping[str, NDArray[np.float64]],
-    labels: ArrayLike,
-    rule: str,
-    grid: tuple[float, ...] = GRID,
-) -> tuple[dict[str, float], float]:
-    """The grid weights with the lowest loss on these objects.
+Candidates = Mapping[str, Mapping[str, NDArray[np.float64]]]
+"""modality -> comparison -> (n, n) dissimilarity; the first comparison is the preset's."""
+
+
+def choose_fusion(
+    candidates: Candidates, labels: ArrayLike, rule: str, grid: tuple[float, ...] = GRID
+) -> tuple[dict[str, float], dict[str, str], float]:
+    """The comparisons and grid weights with the lowest loss on these objects.
 
     Parameters
     ----------
-    dissimilarities : modality -> (n, n) float, in fusion order; the last keeps weight 1.
+    candidates : modality -> comparison -> (n, n) float, in fusion order; the last
+        modality keeps weight 1.
     labels : (n,) array_like.
     rule : ``"sum"`` or ``"product"``.
     grid : the weights tried for every modality but the last.
 
     Returns
     -------
-    weights : modality -> weight; of equal losses, the earlier grid point (the
-        smaller weights) wins.
+    weights : modality -> weight; comparisons : modality -> comparison. Of equal losses
+        the earlier wins: the first comparisons (the preset's), the smaller weights.
     loss : their :attr:`FusionScores.loss`.
     """
-    names = list(dissimilarities)
+    names = list(candidates)
     if not names:
         raise ValueError("no dissimilarity to weigh")
-    scored = []
-    for w in itertools.product(grid, repeat=len(names) - 1):
-        weights = dict(zip(names, (*w, 1.0), strict=True))
-        scored.append((fusion_scores(fuse(dissimilarities, rule, weights), labels).loss, weights))
-    loss, weights = min(scored, key=lambda item: item[0])  # the first of equal losses
+    best: tuple[float, dict[str, float], dict[str, str]] | None = None
+    for chosen in itertools.product(*(list(candidates[m]) for m in names)):
+        mats = {m: candidates[m][c] for m, c in zip(names, chosen, strict=True)}
+        for w in itertools.product(grid, repeat=len(names) - 1):
+            weights = dict(zip(names, (*w, 1.0), strict=True))
+            loss = fusion_scores(fuse(mats, rule, weights), labels).loss
+            if best is None or loss < best[0]:
+                best = (loss, weights, dict(zip(names, chosen, strict=True)))
+    assert best is not None
+    return best[1], best[2], best[0]
+
+
+def choose_weights(
+    dissimilarities: Mapping[str, NDArray[np.float64]],
+    labels: ArrayLike,
+    rule: str,
+    grid: tuple[float, ...] = GRID,
+) -> tuple[dict[str, float], float]:
+    """:func:`choose_fusion` with one comparison per modality: the weights and their loss."""
+    candidates = {m: {PRESET_COMPARISON: d} for m, d in dissimilarities.items()}
+    weights, _, loss = choose_fusion(candidates, labels, rule, grid)
     return weights, loss
 
 
@@ -214,19 +276,24 @@ def tune_fusion(
     folds: int = FOLDS,
     grid: tuple[float, ...] = GRID,
     seed: int = 0,
+    alternatives: Mapping[str, Mapping[str, ArrayLike]] | None = None,
 ) -> FusionTuning:
-    """Choose one fusion weight per modality by class-stratified cross-validation.
+    """Choose one fusion weight (and comparison) per modality by class-stratified
+    cross-validation.
 
     Parameters
     ----------
     dissimilarities : modality -> (n, n) array_like of float, all-to-all and symmetric,
-        in fusion order (the last keeps weight 1); at least two modalities.
+        in fusion order (the last keeps weight 1); at least two modalities. Made with
+        the preset's comparison (named ``PRESET_COMPARISON`` in the choices).
     labels : (n,) array_like, the class of each object.
     rule : ``"sum"`` or ``"product"``, the preset's rule.
     preset_weights : modality -> the preset's own weight, scored on the same folds.
     folds : number of folds, at least 2.
     grid : the weights tried for every modality but the last.
     seed : of :func:`stratified_folds`.
+    alternatives : modality -> comparison name -> (n, n), other comparisons of some
+        modalities to choose from (the preset's is preferred on equal losses).
 
     Returns
     -------
@@ -240,11 +307,26 @@ def tune_fusion(
         fold must hold an object and leave at least two of every class to choose on.
     """
     mats = {m: np.asarray(d, dtype=np.float64) for m, d in dissimilarities.items()}
+    candidates = {
+        m: {
+            PRESET_COMPARISON: d,
+            **{
+                c: np.asarray(a, dtype=np.float64)
+                for c, a in (alternatives or {}).get(m, {}).items()
+            },
+        }
+        for m, d in mats.items()
+    }
     labels = np.asarray(labels)
     if len(mats) < 2:
         raise ValueError(f"fusion weights need at least two modalities, got {list(mats)}")
     n = len(labels)
-    shapes = {m: d.shape for m, d in mats.items() if d.shape != (n, n)}
+    shapes = {
+        f"{m} {c}": d.shape
+        for m, by in candidates.items()
+        for c, d in by.items()
+        if d.shape != (n, n)
+    }
     if shapes:
         raise ValueError(f"{n} labels need ({n}, {n}) dissimilarities, got {shapes}")
     if folds < 2:
@@ -262,30 +344,40 @@ def tune_fusion(
                 "weights on: use fewer folds or more objects of them"
             )
     results = []
+    held_out_matrix = np.empty((n, n))
     for f in range(folds):
         train, held = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
-        training = {m: d[np.ix_(train, train)] for m, d in mats.items()}
-        weights, _ = choose_weights(training, labels[train], rule, grid)
+        training = {
+            m: {c: d[np.ix_(train, train)] for c, d in by.items()} for m, by in candidates.items()
+        }
+        weights, comparisons, _ = choose_fusion(training, labels[train], rule, grid)
+        fused = fuse({m: candidates[m][comparisons[m]] for m in mats}, rule, weights)
+        held_out_matrix[held] = fused[held]
         results.append(
             FoldResult(
                 held_out_objects=len(held),
                 weights=weights,
-                held_out=fusion_scores(fuse(mats, rule, weights), labels, held),
+                comparisons=comparisons,
+                held_out=fusion_scores(fused, labels, held),
                 preset=fusion_scores(fuse(mats, rule, preset_weights), labels, held),
             )
         )
-    weights, loss = choose_weights(mats, labels, rule, grid)
+    weights, comparisons, loss = choose_fusion(candidates, labels, rule, grid)
+    chosen = {m: candidates[m][comparisons[m]] for m in mats}
     sensitivity = {
-        m: tuple(fusion_scores(fuse(mats, rule, {**weights, m: w}), labels).loss for w in grid)
+        m: tuple(fusion_scores(fuse(chosen, rule, {**weights, m: w}), labels).loss for w in grid)
         for m in list(mats)[:-1]
     }
     return FusionTuning(
         rule=rule,
         grid=grid,
         weights=weights,
+        comparisons=comparisons,
         loss=loss,
         folds=tuple(results),
         held_out=FusionScores.mean([r.held_out for r in results]),
         preset_held_out=FusionScores.mean([r.preset for r in results]),
         sensitivity=sensitivity,
+        held_out_matrix=held_out_matrix,
+        fold_of=fold,
     )
