@@ -6,7 +6,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, SecretStr
+from pydantic import Field, SecretStr, model_validator
 
 from worker.engine.mesh_io import DEFAULT_MAX_FACES
 from worker.engine.presets import DEFAULT_PRESET, get_preset
@@ -87,6 +87,22 @@ class Settings(QueueSettings):
     )
     max_requeues: int = Field(default=2, ge=0)
 
+    # Fusion weights (GET /calibration shows them)
+    fusion: Literal["learned", "preset"] = Field(
+        default="learned",
+        description="learned: the gallery learns its fusion weights from its labelled "
+        "shapes by cross-validation and adopts them when they beat the preset's; preset: "
+        "always the preset's",
+    )
+    fusion_weights: dict[str, float] | None = Field(
+        default=None,
+        description='weights pinned by the operator, e.g. {"gdm": 0, "ddt": 0.5, '
+        '"spectrum": 1} (JSON); nothing is learned then',
+    )
+    fusion_max_shapes: int = Field(
+        default=300, ge=9, description="labelled shapes learned on (a stratified sample above)"
+    )
+
     # Calibration (GET /calibration, POST /verify, match confidences)
     calibration_refit_seconds: float = Field(
         default=10.0, ge=0, description="a stale calibration is refitted at most this often"
@@ -105,6 +121,19 @@ class Settings(QueueSettings):
         description="where this API process saves its index; default <data_dir>/index "
         "(API replicas sharing a data directory each need their own)",
     )
+
+    @model_validator(mode="after")
+    def _weights_of_the_preset(self) -> Settings:
+        if self.fusion_weights is not None:
+            fused = set(get_preset(self.preset).fused_modalities)
+            if set(self.fusion_weights) != fused:
+                raise ValueError(
+                    f"SHAPES_FUSION_WEIGHTS must weigh exactly {sorted(fused)} (the preset's "
+                    f"modalities), not {sorted(self.fusion_weights)}"
+                )
+            if any(not w >= 0 for w in self.fusion_weights.values()):
+                raise ValueError("SHAPES_FUSION_WEIGHTS must be numbers >= 0")
+        return self
 
     @property
     def sqlalchemy_url(self) -> str:

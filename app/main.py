@@ -22,6 +22,7 @@ from .config import Settings, get_settings
 from .db import DATABASE_ERRORS, make_engine, make_session_factory
 from .deps import document_open_access
 from .errors import install_error_handlers
+from .gallery.fusion import pinned_fusion
 from .gallery.service import Gallery
 from .jobs.collector import JobCollector
 from .jobs.router import router as jobs_router
@@ -94,6 +95,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 settings.preset_index_directory,
                 refit_fraction=settings.index_refit_fraction,
                 metrics=metrics,
+                fusion=None
+                if settings.fusion_weights is None
+                else pinned_fusion(preset, settings.fusion_weights),
+                learn_fusion=settings.fusion == "learned" and settings.fusion_weights is None,
+                fusion_max_shapes=settings.fusion_max_shapes,
             ),
             recent_queries=Recent(settings.query_cache_size),
         )

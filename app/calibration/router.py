@@ -7,7 +7,9 @@ from typing import Any
 import numpy as np
 from fastapi import APIRouter
 
+from worker.engine.presets import Preset
 from worker.recognition.calibration import Calibration
+from worker.recognition.fusion import ADOPTION_MARGIN, FusionScores
 
 from ..deps import (
     MAX_ROW_ID,
@@ -20,6 +22,7 @@ from ..deps import (
 )
 from ..errors import InvalidInputError
 from ..gallery.calibration import FUSED
+from ..gallery.fusion import GalleryFusion
 from ..schemas import (
     ERROR_RESPONSES,
     FILE_RESPONSES,
@@ -31,7 +34,10 @@ from ..search.service import parse_far
 from . import service
 from .schemas import (
     CalibrationOut,
+    FusionFold,
+    FusionOut,
     OperatingPoint,
+    RecognitionScores,
     RocOut,
     ScoreCalibration,
     VerificationOut,
@@ -127,6 +133,39 @@ def get_calibration(session: SessionDep, state: StateDep) -> CalibrationOut:
             if m != FUSED
         },
         fitted_at=fit.fitted_at,
+        fusion=fusion_out(state.gallery.fusion, state.preset),
+    )
+
+
+def _scores(scores: FusionScores) -> RecognitionScores:
+    return RecognitionScores(eer=scores.eer, nn=scores.nn, map=scores.map)
+
+
+def fusion_out(fusion: GalleryFusion, preset: Preset) -> FusionOut:
+    tuning = fusion.tuning
+    return FusionOut(
+        weights=fusion.weights,
+        source=fusion.source,
+        reason=fusion.reason,
+        preset_weights={m: preset.weight(m) for m in preset.fused_modalities},
+        labelled_shapes=fusion.shapes,
+        labels=fusion.classes,
+        sampled=fusion.sampled,
+        folds=[]
+        if tuning is None
+        else [
+            FusionFold(
+                held_out_shapes=fold.held_out_objects,
+                weights=fold.weights,
+                held_out=_scores(fold.held_out),
+                preset=_scores(fold.preset),
+            )
+            for fold in tuning.folds
+        ],
+        held_out=None if tuning is None else _scores(tuning.held_out),
+        preset_held_out=None if tuning is None else _scores(tuning.preset_held_out),
+        adoption_margin=ADOPTION_MARGIN,
+        fitted_at=fusion.fitted_at,
     )
 
 

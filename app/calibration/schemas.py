@@ -22,6 +22,40 @@ class RocOut(BaseModel):
     frr: list[float]
 
 
+class RecognitionScores(BaseModel):
+    eer: float = Field(description="equal error rate")
+    nn: float = Field(description="nearest-neighbour rate")
+    map: float = Field(description="mean average precision")
+
+
+class FusionFold(BaseModel):
+    held_out_shapes: int
+    weights: dict[str, float] = Field(description="chosen on the other folds' shapes")
+    held_out: RecognitionScores = Field(description="those weights on this fold's shapes")
+    preset: RecognitionScores = Field(description="the preset's weights on the same shapes")
+
+
+class FusionOut(BaseModel):
+    weights: dict[str, float] = Field(description="the weights the gallery fuses with")
+    source: str = Field(description="preset, pinned (SHAPES_FUSION_WEIGHTS) or learned")
+    reason: str = Field(description="why these weights, in a sentence")
+    preset_weights: dict[str, float]
+    labelled_shapes: int = Field(description="labelled shapes learned on (0: none)")
+    labels: int
+    sampled: bool = Field(description="learned on a stratified sample of the labelled shapes")
+    folds: list[FusionFold] = Field(description="the cross-validation, fold by fold")
+    held_out: RecognitionScores | None = Field(
+        description="the folds' choices on their held-out shapes (mean over the folds)"
+    )
+    preset_held_out: RecognitionScores | None = Field(
+        description="the preset's weights on the same held-out shapes"
+    )
+    adoption_margin: float = Field(
+        description="loss (mean of EER and 1 - mAP) the learned weights must gain to be used"
+    )
+    fitted_at: float
+
+
 class CalibrationOut(BaseModel):
     preset: str
     preset_version: int
@@ -39,6 +73,7 @@ class CalibrationOut(BaseModel):
     roc: RocOut = Field(description="FRR against FAR (at most 200 points)")
     modalities: dict[str, ScoreCalibration] = Field(description="each modality on its own")
     fitted_at: float = Field(description="Unix time of the fit (refitted after changes)")
+    fusion: FusionOut = Field(description="the fusion weights the fused score uses, and why")
 
 
 class VerificationOut(BaseModel):

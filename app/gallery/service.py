@@ -14,6 +14,7 @@ import threading
 import time
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,7 @@ from ..meshes import repository as meshes
 from ..metrics import Metrics
 from . import changes
 from .calibration import GalleryCalibration, fit_calibration
+from .fusion import GalleryFusion, learn_gallery_fusion, preset_fusion
 from .index import GalleryIndex, Match, SearchStats
 from .persistence import load_index, save_index
 
@@ -77,9 +79,23 @@ class Gallery:
     """
 
     def __init__(
-        self, preset: Preset, directory: Path, *, refit_fraction: float, metrics: Metrics
+        self,
+        preset: Preset,
+        directory: Path,
+        *,
+        refit_fraction: float,
+        metrics: Metrics,
+        fusion: GalleryFusion | None = None,
+        learn_fusion: bool = False,
+        fusion_max_shapes: int = 300,
     ) -> None:
-        self.preset = preset
+        #: The service's preset; ``preset`` is it with the fusion weights in use.
+        self.base_preset = preset
+        self._fusion = fusion or preset_fusion(preset, "the preset's weights")
+        self.preset = replace(preset, fusion_weights=self._fusion.weights)
+        self.learn_fusion = learn_fusion
+        self.fusion_max_shapes = fusion_max_shapes
+        self._fusion_thread: threading.Thread | None = None
         self.directory = directory
         self.refit_fraction = refit_fraction
         self.metrics = metrics
@@ -222,8 +238,10 @@ class Gallery:
         index = self._ready()
         with self._calibration_lock:
             fit, version = self._calibration, self._version
-            due = fit is None or (
-                fit.version != version and time.time() - fit.fitted_at >= refit_seconds
+            due = (
+                fit is None
+                or fit.preset is not self.preset  # fitted under other fusion weights
+                or (fit.version != version and time.time() - fit.fitted_at >= refit_seconds)
             )
             if due:
                 fit = fit_calibration(
@@ -232,6 +250,62 @@ class Gallery:
                 self._calibration = fit
             assert fit is not None
             return fit
+
+    @property
+    def fusion(self) -> GalleryFusion:
+        """The fusion weights in use, where they came from and why (:mod:`.fusion`)."""
+        return self._fusion
+
+    def maybe_refit_fusion(self, read_sessions: sessionmaker[Session], every: float) -> bool:
+        """Start learning the fusion weights again in a thread of its own when shapes were
+        added or removed since the last fit, at most every ``every`` seconds (the
+        collector asks each round); True if started."""
+        index = self._index
+        fusion = self._fusion
+        if not self.learn_fusion or index is None or fusion.version == self._version:
+            return False
+        if self._fusion_thread is not None and self._fusion_thread.is_alive():
+            return False
+        # Throttled like the calibration when the last fit learned (seconds of work); a
+        # fit that found too few labels cost nothing and runs again at once.
+        if fusion.tuning is not None and time.time() - fusion.fitted_at < every:
+            return False
+        with read_sessions() as session:
+            labels = meshes.labels(session)
+        version = self._version
+        self._fusion_thread = threading.Thread(
+            target=self._refit_fusion, args=(index, labels, version), name="fusion", daemon=True
+        )
+        self._fusion_thread.start()
+        return True
+
+    def _refit_fusion(self, index: GalleryIndex, labels: dict[int, str], version: int) -> None:
+        try:
+            fit = learn_gallery_fusion(
+                index,
+                labels,
+                self.base_preset,
+                max_shapes=self.fusion_max_shapes,
+                version=version,
+            )
+        except Exception:  # the weights in use stay; the next change tries again
+            log.exception("learning the fusion weights failed")
+            return
+        self.adopt_fusion(fit)
+
+    def adopt_fusion(self, fusion: GalleryFusion) -> None:
+        """Rank and calibrate with ``fusion``'s weights from now on."""
+        with self._lock:
+            self._fusion = fusion
+            if fusion.weights == {m: self.preset.weight(m) for m in fusion.weights}:
+                return
+            self.preset = replace(self.base_preset, fusion_weights=fusion.weights)
+            if self._index is not None:
+                with self._index.lock:
+                    self._index.preset = self.preset
+            with self._calibration_lock:
+                self._calibration = None  # the calibration follows the fusion in use
+        log.info("fusion weights %s (%s)", fusion.weights, fusion.source)
 
     def check_ready(self) -> None:
         """Raise ``index_loading`` now rather than after a query's descriptor is computed."""

@@ -12,7 +12,9 @@ heartbeats of unfinished jobs from the queue's key-value store and
 * re-enqueues a job whose heartbeat went stale (its worker died), at most
   ``max_requeues`` times, then fails it with a sentence saying so;
 * every ``sweep_interval_seconds``, enqueues the unfinished jobs the queue does not
-  know (accepted while it was down, or lost with its data).
+  know (accepted while it was down, or lost with its data);
+* after changes, at most every ``calibration_refit_seconds``, starts learning the
+  gallery's fusion weights again (in a thread of its own: :mod:`app.gallery.fusion`).
 
 Results are read without removing them and deleted only after the commit, so
 a crash in between makes the collector store the same result again (at least
@@ -127,6 +129,9 @@ class JobCollector:
             try:
                 self.run_once()
                 self.state.gallery.follow(self.state.read_sessions)
+                self.state.gallery.maybe_refit_fusion(
+                    self.state.read_sessions, settings.calibration_refit_seconds
+                )
                 self._maybe_save()
                 if time.monotonic() - last_sweep > settings.sweep_interval_seconds:
                     last_sweep = time.monotonic()

@@ -531,11 +531,22 @@ async function loadCalibration() {
       return row;
     }));
     $("calibration-table").hidden = false;
+    showFusion(c.fusion);
   } catch (err) {
     summary.textContent = err.message;
     $("calibration-roc").toggleAttribute("hidden", true); // an SVG element has no .hidden
     $("calibration-table").hidden = true;
+    $("calibration-fusion").hidden = true;
   }
+}
+
+// The weights the fused score uses: learned on the labelled meshes, the preset's, or pinned.
+function showFusion(fusion) {
+  const weights = Object.entries(fusion.weights).map(([m, w]) => `${m.toUpperCase()} ${w}`).join(", ");
+  const source = { learned: "learned on this gallery", preset: "the preset's", pinned: "pinned by the operator" };
+  $("calibration-fusion").textContent = `Fusion weights: ${weights} (${source[fusion.source] || fusion.source}). `
+    + `${fusion.reason.charAt(0).toUpperCase()}${fusion.reason.slice(1)}.`;
+  $("calibration-fusion").hidden = false;
 }
 
 function drawRoc(roc, eer) {

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from itertools import combinations
 
+import numpy as np
 import pytest
 from conftest import example
 
@@ -86,6 +88,29 @@ def test_calibration_counts_every_labelled_pair(verifier: Service, calibrated):
     assert 0.0 <= body["eer"] < 0.5
     assert set(body["modalities"]) == {"gdm", "ddt", "spectrum"}
     assert body["roc"]["far"][0] == 0.0 and body["roc"]["frr"][-1] == 0.0
+
+
+def test_the_fusion_weights_are_learned_from_the_labels_and_ranked_with(
+    verifier: Service, calibrated
+):
+    """Three labels have three or more shapes (the bird's one takes no part): three folds.
+    Whatever was adopted, the fused scores of the answers use exactly those weights."""
+    deadline = time.monotonic() + 60
+    while (fusion := verifier.client.get("/calibration").json()["fusion"])["labelled_shapes"] < 10:
+        assert time.monotonic() < deadline, fusion
+        time.sleep(0.2)
+    assert fusion["labels"] == 3 and len(fusion["folds"]) == 3 and not fusion["sampled"]
+    assert sum(f["held_out_shapes"] for f in fusion["folds"]) == 10
+    assert fusion["source"] in ("learned", "preset") and fusion["reason"]
+    assert fusion["preset_weights"] == {"gdm": 0.0, "ddt": 0.5, "spectrum": 1.0}
+    learned = fusion["held_out"]["eer"] + 1 - fusion["held_out"]["map"]
+    preset = fusion["preset_held_out"]["eer"] + 1 - fusion["preset_held_out"]["map"]
+    assert (fusion["source"] == "learned") == (learned / 2 < preset / 2 - fusion["adoption_margin"])
+    weights = fusion["weights"]
+    match = verifier.client.post(f"/meshes/{calibrated['biped-0']}/similar", params={"k": 1})
+    best = match.json()["matches"][0]
+    fused = np.prod([best["scores"][m] ** w for m, w in weights.items()])
+    assert best["score"] == pytest.approx(fused, rel=1e-9)
 
 
 def test_verify_answers_yes_for_the_same_object_and_no_for_another(verifier: Service, calibrated):

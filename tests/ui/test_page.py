@@ -207,6 +207,11 @@ def test_calibration_says_what_it_needs_then_draws_the_roc(page, site):
     page.click("#tab-calibration")
     page.locator("#calibration-roc").wait_for(state="visible", timeout=60_000)
     assert "Equal error rate" in summary.inner_text()
+    # Next to the ROC, the fusion's weights and why (two labels of three or more: the
+    # preset's, and the sentence says what learning needs).
+    fusion = page.locator("#calibration-fusion").inner_text()
+    assert fusion.startswith("Fusion weights: GDM 0, DDT 0.5, SPECTRUM 1 (the preset's).")
+    assert "learning needs at least 3 labels" in fusion
     assert page.locator("#calibration-table tbody tr").count() >= 3
     shoot(page, "calibration")
 

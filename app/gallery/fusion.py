@@ -1,0 +1,177 @@
+"""The gallery's fusion weights: the preset's, the operator's (pinned), or learned on the
+gallery's own labelled shapes.
+
+The paper leaves the fusion weights to future work (sec. 5); the preset's were chosen on
+TOSCA. A gallery with labels can do better for its own kind of objects: the weights are
+chosen by class-stratified cross-validation on its labelled shapes with the code
+``shapes tune`` and ``shapes evaluate --fusion learned`` use
+(:func:`worker.recognition.fusion.tune_fusion`, the preset's rule and comparison), and
+adopted only if the held-out folds beat the preset's weights by ``ADOPTION_MARGIN`` of
+loss (the mean of EER and 1 - mAP); otherwise the preset's stay, and the answer says why.
+
+Learning needs at least ``MIN_CLASSES`` labels with at least ``MIN_PER_CLASS`` shapes
+each (a fold must leave two of every class to choose on; a class of three gives three
+folds); smaller labels take no part. Its cost is bounded like the calibration's: above
+``max_shapes`` labelled shapes a seeded, class-stratified sample is learned on, so a fit
+takes seconds whatever the gallery's size. It runs in a thread of its own, reading the
+index only to copy the sampled vectors, so no search waits for it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from worker.engine.compare import dissimilarity
+from worker.engine.presets import Preset
+from worker.recognition.fusion import ADOPTION_MARGIN, FOLDS, FusionTuning, tune_fusion
+
+from .index import GalleryIndex
+
+MIN_CLASSES = 3
+MIN_PER_CLASS = 3
+
+Source = Literal["preset", "pinned", "learned"]
+
+
+@dataclass(frozen=True)
+class GalleryFusion:
+    """The weights a gallery fuses with, where they came from, and why.
+
+    Attributes
+    ----------
+    weights : modality -> weight, in use.
+    source : ``preset``, ``pinned`` (``SHAPES_FUSION_WEIGHTS``) or ``learned``.
+    reason : a sentence for the operator.
+    tuning : the cross-validation (each fold's choice, the held-out scores of the choice
+        and of the preset's weights), when one ran.
+    shapes, classes : labelled shapes and labels learned on.
+    sampled : a sample of the labelled shapes was learned on (above ``max_shapes``).
+    version : the gallery's change counter when fitted (-1: never fitted).
+    fitted_at : Unix time of the fit.
+    """
+
+    weights: dict[str, float]
+    source: Source
+    reason: str
+    tuning: FusionTuning | None = None
+    shapes: int = 0
+    classes: int = 0
+    sampled: bool = False
+    version: int = -1
+    fitted_at: float = 0.0
+
+
+def preset_fusion(preset: Preset, reason: str, version: int = -1) -> GalleryFusion:
+    return GalleryFusion(
+        weights={m: preset.weight(m) for m in preset.fused_modalities},
+        source="preset",
+        reason=reason,
+        version=version,
+        fitted_at=time.time(),
+    )
+
+
+def pinned_fusion(preset: Preset, weights: Mapping[str, float]) -> GalleryFusion:
+    """The operator's weights, checked against the preset's modalities.
+
+    Raises
+    ------
+    ValueError
+        Weights of other modalities than the preset fuses, or not numbers >= 0.
+    """
+    if set(weights) != set(preset.fused_modalities):
+        raise ValueError(
+            f"SHAPES_FUSION_WEIGHTS weighs {sorted(weights)}; the preset fuses "
+            f"{sorted(preset.fused_modalities)}"
+        )
+    if any(not np.isfinite(w) or w < 0 for w in weights.values()):
+        raise ValueError(f"SHAPES_FUSION_WEIGHTS must be numbers >= 0, got {dict(weights)}")
+    return GalleryFusion(
+        weights={m: float(weights[m]) for m in preset.fused_modalities},
+        source="pinned",
+        reason="pinned by the operator (SHAPES_FUSION_WEIGHTS)",
+        fitted_at=time.time(),
+    )
+
+
+def learn_gallery_fusion(
+    index: GalleryIndex,
+    labels: Mapping[int, str],
+    preset: Preset,
+    *,
+    max_shapes: int,
+    version: int,
+    seed: int = 0,
+) -> GalleryFusion:
+    """Cross-validate the fusion weights on the labelled shapes of ``index`` (the
+    preset's rule and comparison) and adopt them if they beat the preset's; ``preset``
+    is the service's own (its weights are the ones to beat)."""
+    counts = Counter(labels.values())
+    kept = {label for label, count in counts.items() if count >= MIN_PER_CLASS}
+    if len(kept) < MIN_CLASSES:
+        return preset_fusion(
+            preset,
+            f"the preset's weights: learning needs at least {MIN_CLASSES} labels with at least "
+            f"{MIN_PER_CLASS} described shapes each ({len(kept)} labels have)",
+            version,
+        )
+    with index.lock:  # a copy of the sample's vectors; the fit itself holds nothing
+        ids = np.array([i for i in index.ids() if labels.get(int(i)) in kept], dtype=np.int64)
+        names = np.array([labels[int(i)] for i in ids])
+        chosen, sampled = _sample(names, max_shapes, np.random.default_rng(seed))
+        positions = index.store.positions(ids[chosen])
+        vectors = {m: index.store.vectors[m][positions].copy() for m in preset.fused_modalities}
+        sigma = index.sigma() if preset.dissimilarity == "D2" else None
+    names = names[chosen]
+    mats = {
+        m: dissimilarity(v, v, preset.dissimilarity, None if sigma is None else sigma[m])
+        for m, v in vectors.items()
+    }
+    for d in mats.values():
+        d[:] = 0.5 * (d + d.T)
+        np.fill_diagonal(d, 0.0)
+    own = {m: preset.weight(m) for m in preset.fused_modalities}
+    folds = min(FOLDS, min(Counter(names.tolist()).values()))
+    tuning = tune_fusion(mats, names, preset.fusion, own, folds=folds, seed=seed)
+    held, base = tuning.held_out, tuning.preset_held_out
+    measured = (
+        f"held-out EER {100 * held.eer:.2f}% and mAP {100 * held.map:.2f}% against the "
+        f"preset's {100 * base.eer:.2f}% and {100 * base.map:.2f}% ({folds} folds, "
+        f"{len(names)} labelled shapes)"
+    )
+    adopted = tuning.beats_preset(ADOPTION_MARGIN)
+    return GalleryFusion(
+        weights=dict(tuning.weights) if adopted else own,
+        source="learned" if adopted else "preset",
+        reason=f"learned: {measured}"
+        if adopted
+        else f"the preset's weights: the learned ones were not better by "
+        f"{100 * ADOPTION_MARGIN:g} points of loss ({measured})",
+        tuning=tuning,
+        shapes=len(names),
+        classes=len(set(names.tolist())),
+        sampled=sampled,
+        version=version,
+        fitted_at=time.time(),
+    )
+
+
+def _sample(
+    names: np.ndarray, max_shapes: int, rng: np.random.Generator
+) -> tuple[np.ndarray, bool]:
+    """Indices of at most ``max_shapes`` of ``names``, each label in proportion (at least
+    ``MIN_PER_CLASS`` of each), and whether it is a sample."""
+    if len(names) <= max_shapes:
+        return np.arange(len(names)), False
+    chosen = []
+    for label in np.unique(names):
+        members = np.flatnonzero(names == label)
+        share = max(MIN_PER_CLASS, round(max_shapes * len(members) / len(names)))
+        chosen.append(rng.choice(members, size=min(share, len(members)), replace=False))
+    return np.sort(np.concatenate(chosen)), True
