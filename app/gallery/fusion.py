@@ -10,8 +10,8 @@ adopted only if the held-out folds beat the preset's weights by ``ADOPTION_MARGI
 loss (the mean of EER and 1 - mAP); otherwise the preset's stay, and the answer says why.
 
 Learning needs at least ``MIN_CLASSES`` labels with at least ``MIN_PER_CLASS`` shapes
-each (a fold must leave two of every class to choose on; a class of three gives three
-folds); smaller labels take no part. Its cost is bounded like the calibration's: above
+each (a fold must leave two of every class to choose on); smaller labels take no part.
+Five folds, or the most that hold a shape each. Its cost is bounded like the calibration's: above
 ``max_shapes`` labelled shapes a seeded, class-stratified sample is learned on, so a fit
 takes seconds whatever the gallery's size. It runs in a thread of its own, reading the
 index only to copy the sampled vectors, so no search waits for it.
@@ -29,7 +29,7 @@ import numpy as np
 
 from worker.engine.compare import dissimilarity
 from worker.engine.presets import Preset
-from worker.recognition.fusion import ADOPTION_MARGIN, FOLDS, FusionTuning, tune_fusion
+from worker.recognition.fusion import ADOPTION_MARGIN, FusionTuning, feasible_folds, tune_fusion
 
 from .index import GalleryIndex
 
@@ -137,7 +137,7 @@ def learn_gallery_fusion(
         d[:] = 0.5 * (d + d.T)
         np.fill_diagonal(d, 0.0)
     own = {m: preset.weight(m) for m in preset.fused_modalities}
-    folds = min(FOLDS, min(Counter(names.tolist()).values()))
+    folds = feasible_folds(names)
     tuning = tune_fusion(mats, names, preset.fusion, own, folds=folds, seed=seed)
     held, base = tuning.held_out, tuning.preset_held_out
     measured = (

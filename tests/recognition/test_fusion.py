@@ -11,6 +11,7 @@ from worker.recognition.fusion import (
     PRESET_COMPARISON,
     FusionScores,
     choose_weights,
+    feasible_folds,
     fusion_scores,
     stratified_folds,
     tune_fusion,
@@ -171,3 +172,15 @@ def test_each_folds_pairs_are_scored_under_its_own_choice():
     for f, result in enumerate(tuning.folds):
         genuine, impostor = tuning.fold_pairs(f, LABELS)
         assert pair_equal_error_rate(genuine, impostor) == result.held_out.eer
+
+
+def test_the_most_folds_that_cross_validate_are_used():
+    assert feasible_folds(np.repeat(np.arange(4), [13, 7, 5, 3])) == 5  # a class of 3 too
+    six = np.repeat(np.arange(2), 3)  # dealt into five folds, they leave one empty
+    mats = {"a": distances(np.eye(6)), "b": distances(np.eye(6))}
+    with pytest.raises(ValueError, match="cannot fill 5 folds"):
+        tune_fusion(mats, six, "sum", {})
+    assert feasible_folds(six) == 4
+    assert len(tune_fusion(mats, six, "sum", {}, folds=4).folds) == 4
+    with pytest.raises(ValueError, match="keep fewer than two"):
+        feasible_folds(np.repeat(np.arange(3), [3, 3, 2]))

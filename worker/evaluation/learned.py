@@ -18,7 +18,6 @@ and the preset's weights scored on the same folds.
 
 from __future__ import annotations
 
-from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict
 from typing import Any
@@ -30,9 +29,9 @@ from worker.engine.presets import Preset
 from worker.recognition.calibration import calibrate
 from worker.recognition.fusion import (
     ADOPTION_MARGIN,
-    FOLDS,
     PRESET_COMPARISON,
     FusionTuning,
+    feasible_folds,
     tune_fusion,
 )
 
@@ -61,9 +60,15 @@ def learn_fusion(
     vectors: Mapping[str, np.ndarray], labels: Sequence[str], preset: Preset
 ) -> FusionTuning:
     """Cross-validate the fused modalities' comparisons and weights on a collection, in
-    ``FOLDS`` folds, or as many as its smallest class has meshes (each fold must leave two
-    of every class to choose on: a class of three gives three folds)."""
-    folds = min(FOLDS, min(Counter(labels).values()))
+    ``FOLDS`` folds or the most that can (:func:`feasible_folds`: each holds a mesh and
+    leaves two of every class to choose on).
+
+    Raises
+    ------
+    ValueError
+        A class of fewer than three meshes, or too few meshes for two folds.
+    """
+    folds = feasible_folds(labels)
     own = preset.dissimilarity
     other = "D2" if own == "D1" else "D1"
     dissimilarities = {

@@ -34,6 +34,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -267,6 +268,45 @@ def choose_weights(
     return weights, loss
 
 
+def _checked_folds(labels: NDArray[Any], folds: int, seed: int) -> NDArray[np.int64]:
+    """:func:`stratified_folds`, or ValueError saying why they cannot cross-validate."""
+    if folds < 2:
+        raise ValueError(f"cross-validation needs at least 2 folds, got {folds}")
+    fold = stratified_folds(labels, folds, seed)
+    classes = np.unique(labels)
+    for f in range(folds):
+        if not np.any(fold == f):
+            raise ValueError(f"{len(labels)} objects cannot fill {folds} folds: use fewer folds")
+        left = {str(c): int(np.sum((labels == c) & (fold != f))) for c in classes}
+        thin = sorted(c for c, count in left.items() if count < 2)
+        if thin:
+            raise ValueError(
+                f"with {folds} folds, classes {thin} keep fewer than two objects to choose "
+                "weights on: use fewer folds or more objects of them"
+            )
+    return fold
+
+
+def feasible_folds(labels: ArrayLike, folds: int = FOLDS, seed: int = 0) -> int:
+    """The most folds, at most ``folds``, that cross-validate ``labels`` (every fold holds
+    an object and leaves two of every class to choose on).
+
+    Raises
+    ------
+    ValueError
+        Not even two folds do (a class of fewer than three objects, or too few objects).
+    """
+    labels = np.asarray(labels)
+    for k in range(folds, 2, -1):
+        try:
+            _checked_folds(labels, k, seed)
+        except ValueError:
+            continue
+        return k
+    _checked_folds(labels, 2, seed)  # raises why not even two folds do
+    return 2
+
+
 def tune_fusion(
     dissimilarities: Mapping[str, ArrayLike],
     labels: ArrayLike,
@@ -329,20 +369,7 @@ def tune_fusion(
     }
     if shapes:
         raise ValueError(f"{n} labels need ({n}, {n}) dissimilarities, got {shapes}")
-    if folds < 2:
-        raise ValueError(f"cross-validation needs at least 2 folds, got {folds}")
-    fold = stratified_folds(labels, folds, seed)
-    classes = np.unique(labels)
-    for f in range(folds):
-        if not np.any(fold == f):
-            raise ValueError(f"{n} objects cannot fill {folds} folds: use fewer folds")
-        left = {str(c): int(np.sum((labels == c) & (fold != f))) for c in classes}
-        thin = sorted(c for c, count in left.items() if count < 2)
-        if thin:
-            raise ValueError(
-                f"with {folds} folds, classes {thin} keep fewer than two objects to choose "
-                "weights on: use fewer folds or more objects of them"
-            )
+    fold = _checked_folds(labels, folds, seed)
     results = []
     held_out_matrix = np.empty((n, n))
     for f in range(folds):
