@@ -192,6 +192,8 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         nn = _confusion_summary(row["nn_errors"], "class", "nearest_class") or "none"
         r1 = _confusion_summary(row["rank1_errors"], "class", "matched_class") or "none"
         lines.append(f"| {row['title']} | {nn} | {r1} |")
+    if "learned_fusion" in report:
+        lines += _learned_markdown(report["learned_fusion"])
     if report["failures"]:
         lines += ["", "## Meshes left out", ""]
         lines += [f"- `{name}`: {why}" for name, why in report["failures"].items()]
@@ -211,6 +213,44 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def _learned_markdown(learned: Mapping[str, Any]) -> list[str]:
+    """Each fold's choice and its held-out figures beside the preset's weights'."""
+
+    def choice(weights: Mapping[str, float], comparisons: Mapping[str, str]) -> str:
+        return ", ".join(f"{m} {w:g} ({comparisons[m]})" for m, w in weights.items())
+
+    lines = [
+        "",
+        "## Learned fusion",
+        "",
+        "Each fold's choice on the other folds' meshes, and its figures on the fold's own "
+        "(EER over the pairs involving them; mAP with them as queries), beside the preset's "
+        "weights on the same meshes.",
+        "",
+        "| fold | meshes | weights (comparison) | EER | mAP | preset's EER | preset's mAP |",
+        "|---|---:|---|---:|---:|---:|---:|",
+    ]
+    for i, fold in enumerate(learned["folds"]):
+        own, base = fold["held_out"]["learned"], fold["held_out"]["preset"]
+        lines.append(
+            f"| {i} | {fold['held_out_objects']} | "
+            f"{choice(fold['weights'], fold['comparisons'])} | {_pct(own['eer'], 2)} | "
+            f"{_pct(own['map'], 1)} | {_pct(base['eer'], 2)} | {_pct(base['map'], 1)} |"
+        )
+    own, base = learned["held_out"]["learned"], learned["held_out"]["preset"]
+    chosen = learned["chosen_on_all"]
+    lines += [
+        f"| mean | | | {_pct(own['eer'], 2)} | {_pct(own['map'], 1)} | "
+        f"{_pct(base['eer'], 2)} | {_pct(base['map'], 1)} |",
+        "",
+        f"Chosen on every mesh: {choice(chosen['weights'], chosen['comparisons'])}; "
+        + ("it beats" if learned["beats_preset"] else "it does not beat")
+        + f" the preset's weights by the margin a gallery adopts it at "
+        f"({100 * learned['adoption_margin']:g} points of the mean of EER and 1 - mAP).",
+    ]
+    return lines
 
 
 def environment_info() -> dict[str, str]:
