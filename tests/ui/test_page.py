@@ -228,8 +228,13 @@ def test_deleting_the_match_shown_leaves_no_stale_view(page, site):
     page.click("#tab-gallery")
     page.fill("#gallery-label", "biped")
     page.click("#gallery-filter button[type=submit]")
-    page.locator("#gallery-grid .card").first.click()
-    page.locator("#detail").wait_for(state="visible")
+    name = best.locator(".title").inner_text().split(". ", 1)[1]
+    # The filtered grid's card (not one of the grid before the filter answered), and its
+    # detail (not the one an earlier test left open).
+    page.locator("#gallery-grid .card .title", has_text=name).click()
+    page.wait_for_function(
+        f"() => document.getElementById('detail-name').textContent.startsWith('#{mesh_id} ')"
+    )
     page.once("dialog", lambda dialog: dialog.accept())
     page.click("#detail-delete")
     page.locator("#detail").wait_for(state="hidden")
