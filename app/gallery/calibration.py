@@ -114,13 +114,8 @@ def fit_calibration(
     NotEnoughPairs
         Fewer genuine or impostor pairs than a calibration needs.
     """
-    with index.lock:
-        ids = index.ids()
-        keep = np.array([int(i) in labels for i in ids], dtype=bool)
-        positions = index.store.positions(ids[keep])
-        vectors = {m: index.store.vectors[m][positions].copy() for m in index.modalities}
-        sigma = index.sigma() if preset.dissimilarity == "D2" else None
-    names = np.array([labels[int(i)] for i in ids[keep]])
+    shapes = len(index)
+    names, vectors, sigma = index.labelled_vectors(labels)
     _, codes = np.unique(names, return_inverse=True)
     first, second, sampled = _pairs(codes, max_pairs, np.random.default_rng(seed))
     genuine = codes[first] == codes[second]
@@ -146,8 +141,8 @@ def fit_calibration(
         ) from None
     return GalleryCalibration(
         rows=rows,
-        shapes=len(ids),
-        labelled=int(keep.sum()),
+        shapes=shapes,
+        labelled=len(names),
         labels=int(len(set(names.tolist()))),
         sampled=sampled,
         version=version,

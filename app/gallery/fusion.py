@@ -27,9 +27,14 @@ from typing import Literal
 
 import numpy as np
 
-from worker.engine.compare import dissimilarity
 from worker.engine.presets import Preset
-from worker.recognition.fusion import ADOPTION_MARGIN, FusionTuning, feasible_folds, tune_fusion
+from worker.recognition.fusion import (
+    ADOPTION_MARGIN,
+    FusionTuning,
+    all_to_all,
+    feasible_folds,
+    tune_fusion,
+)
 
 from .index import GalleryIndex
 
@@ -112,30 +117,30 @@ def learn_gallery_fusion(
     """Cross-validate the fusion weights on the labelled shapes of ``index`` (the
     preset's rule and comparison) and adopt them if they beat the preset's; ``preset``
     is the service's own (its weights are the ones to beat)."""
-    counts = Counter(labels.values())
-    kept = {label for label, count in counts.items() if count >= MIN_PER_CLASS}
-    if len(kept) < MIN_CLASSES:
+    rng = np.random.default_rng(seed)
+    described: list[int] = []  # how many labelled shapes there were to choose from
+
+    def learnable(names: np.ndarray) -> np.ndarray:
+        """The labels with enough shapes, a stratified sample above ``max_shapes``."""
+        counts = Counter(names.tolist())
+        kept = np.isin(names, [label for label, n in counts.items() if n >= MIN_PER_CLASS])
+        described.append(int(kept.sum()))
+        picked: np.ndarray = np.flatnonzero(kept)[_sample(names[kept], max_shapes, rng)]
+        return picked
+
+    names, vectors, sigma = index.labelled_vectors(labels, learnable)
+    classes = len(set(names.tolist()))
+    if classes < MIN_CLASSES:
         return preset_fusion(
             preset,
             f"the preset's weights: learning needs at least {MIN_CLASSES} labels with at least "
-            f"{MIN_PER_CLASS} described shapes each ({len(kept)} labels have)",
+            f"{MIN_PER_CLASS} described shapes each ({classes} labels have)",
             version,
         )
-    with index.lock:  # a copy of the sample's vectors; the fit itself holds nothing
-        ids = np.array([i for i in index.ids() if labels.get(int(i)) in kept], dtype=np.int64)
-        names = np.array([labels[int(i)] for i in ids])
-        chosen, sampled = _sample(names, max_shapes, np.random.default_rng(seed))
-        positions = index.store.positions(ids[chosen])
-        vectors = {m: index.store.vectors[m][positions].copy() for m in preset.fused_modalities}
-        sigma = index.sigma() if preset.dissimilarity == "D2" else None
-    names = names[chosen]
     mats = {
-        m: dissimilarity(v, v, preset.dissimilarity, None if sigma is None else sigma[m])
-        for m, v in vectors.items()
+        m: all_to_all(vectors[m], preset.dissimilarity, None if sigma is None else sigma[m])
+        for m in preset.fused_modalities
     }
-    for d in mats.values():
-        d[:] = 0.5 * (d + d.T)
-        np.fill_diagonal(d, 0.0)
     own = {m: preset.weight(m) for m in preset.fused_modalities}
     folds = feasible_folds(names)
     tuning = tune_fusion(mats, names, preset.fusion, own, folds=folds, seed=seed)
@@ -155,23 +160,21 @@ def learn_gallery_fusion(
         f"{100 * ADOPTION_MARGIN:g} points of loss ({measured})",
         tuning=tuning,
         shapes=len(names),
-        classes=len(set(names.tolist())),
-        sampled=sampled,
+        classes=classes,
+        sampled=len(names) < described[0],
         version=version,
         fitted_at=time.time(),
     )
 
 
-def _sample(
-    names: np.ndarray, max_shapes: int, rng: np.random.Generator
-) -> tuple[np.ndarray, bool]:
-    """Indices of at most ``max_shapes`` of ``names``, each label in proportion (at least
-    ``MIN_PER_CLASS`` of each), and whether it is a sample."""
+def _sample(names: np.ndarray, max_shapes: int, rng: np.random.Generator) -> np.ndarray:
+    """Indices of at most about ``max_shapes`` of ``names``, each label in proportion (at
+    least ``MIN_PER_CLASS`` of each); all of them when there are no more."""
     if len(names) <= max_shapes:
-        return np.arange(len(names)), False
+        return np.arange(len(names))
     chosen = []
     for label in np.unique(names):
         members = np.flatnonzero(names == label)
         share = max(MIN_PER_CLASS, round(max_shapes * len(members) / len(names)))
         chosen.append(rng.choice(members, size=min(share, len(members)), replace=False))
-    return np.sort(np.concatenate(chosen)), True
+    return np.sort(np.concatenate(chosen))

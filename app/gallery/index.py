@@ -62,7 +62,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 
 import faiss
@@ -155,6 +155,27 @@ class GalleryIndex:
     def ids(self) -> np.ndarray:
         with self.lock:
             return self.store.current_ids()
+
+    def labelled_vectors(
+        self,
+        labels: Mapping[int, str],
+        choose: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray] | None]:
+        """A copy, taken under the lock, of what a fit on the labelled shapes reads:
+        their labels, their vectors and D2's current sigma (None for D1). ``choose``
+        picks among the labelled shapes (indices, from their labels), so only those are
+        copied."""
+        with self.lock:
+            ids = self.ids()
+            ids = ids[np.array([int(i) in labels for i in ids], dtype=bool)]
+            names = np.array([labels[int(i)] for i in ids])
+            if choose is not None:
+                picked = choose(names)
+                ids, names = ids[picked], names[picked]
+            positions = self.store.positions(ids)
+            vectors = {m: self.store.vectors[m][positions].copy() for m in self.modalities}
+            sigma = self.sigma() if self.preset.dissimilarity == "D2" else None
+        return names, vectors, sigma
 
     def fingerprint(self) -> str:
         """A digest of the set of ids (to compare with the database)."""

@@ -86,6 +86,11 @@ def get_preview(session: Session, mesh_id: int) -> Preview | None:
     return session.get(Preview, mesh_id)
 
 
+def has_preview(session: Session, mesh_id: int) -> bool:
+    """Whether the mesh has a preview (without reading its bytes)."""
+    return session.scalar(select(Preview.mesh_id).where(Preview.mesh_id == mesh_id)) is not None
+
+
 def put_preview(session: Session, mesh_id: int, glb: bytes, png: bytes) -> None:
     """Store (or replace) a mesh's preview and thumbnail."""
     existing = session.get(Preview, mesh_id)

@@ -15,6 +15,12 @@ def get_query_preview(session: Session, sha256: str) -> bytes | None:
     return glb
 
 
+def has_query_preview(session: Session, sha256: str) -> bool:
+    """Whether a recent query of these bytes left a preview (without reading it)."""
+    found = session.scalar(select(QueryPreview.sha256).where(QueryPreview.sha256 == sha256))
+    return found is not None
+
+
 def put_query_preview(session: Session, sha256: str, glb: bytes, *, keep: int) -> None:
     """Store (or refresh) the preview of the file ``sha256``, then drop all but the
     ``keep`` most recent."""

@@ -331,9 +331,18 @@ def query_by_upload(
         timings=timings,
         descriptor_source=source,
     )
-    if preview or query_preview(session, upload.sha256) is not None:
+    if preview or _has_preview(session, upload.sha256):
         result.preview = f"/previews/{upload.sha256}"
     return result
+
+
+def _has_preview(session: Session, sha256: str) -> bool:
+    """Whether :func:`query_preview` has something for these bytes (no bytes read:
+    every search that reuses a descriptor asks)."""
+    if repository.has_query_preview(session, sha256):
+        return True
+    mesh = meshes.get_by_sha256(session, sha256)
+    return mesh is not None and meshes.has_preview(session, mesh.id)
 
 
 def query_preview(session: Session, sha256: str) -> bytes | None:
@@ -419,7 +428,7 @@ def similar_to(
         timings={},
         descriptor_source="stored",
     )
-    if meshes.get_preview(session, mesh_id) is not None:
+    if meshes.has_preview(session, mesh_id):
         result.preview = f"/meshes/{mesh_id}/preview"
     return result
 

@@ -29,7 +29,6 @@ from worker.engine.presets import Preset
 from worker.recognition.calibration import calibrate
 from worker.recognition.fusion import (
     ADOPTION_MARGIN,
-    PRESET_COMPARISON,
     FusionTuning,
     feasible_folds,
     tune_fusion,
@@ -86,14 +85,9 @@ def learn_fusion(
         preset.fusion,
         weights,
         folds=folds,
+        comparison=own,
         alternatives=alternatives,
     )
-
-
-def _named(comparisons: Mapping[str, str], preset: Preset) -> dict[str, str]:
-    return {
-        m: preset.dissimilarity if c == PRESET_COMPARISON else c for m, c in comparisons.items()
-    }
 
 
 def _fold_verification(tuning: FusionTuning, labels: Sequence[str]) -> dict[str, Any]:
@@ -133,7 +127,7 @@ def learned_row(
         "members": list(preset.fused_modalities),
         "rule": preset.fusion,
         "weights": tuning.weights,
-        "comparisons": _named(tuning.comparisons, preset),
+        "comparisons": tuning.comparisons,
         **score_dissimilarity(tuning.held_out_matrix, labels, names, gallery_idx, probe_idx),
         **_fold_verification(tuning, labels),
     }
@@ -142,14 +136,14 @@ def learned_row(
             {
                 "held_out_objects": fold.held_out_objects,
                 "weights": fold.weights,
-                "comparisons": _named(fold.comparisons, preset),
+                "comparisons": fold.comparisons,
                 "held_out": {"learned": asdict(fold.held_out), "preset": asdict(fold.preset)},
             }
             for fold in tuning.folds
         ],
         "chosen_on_all": {
             "weights": tuning.weights,
-            "comparisons": _named(tuning.comparisons, preset),
+            "comparisons": tuning.comparisons,
         },
         "held_out": {
             "learned": asdict(tuning.held_out),

@@ -14,10 +14,11 @@ from typing import Any
 
 import numpy as np
 
-from worker.engine.compare import dissimilarity, fuse, gallery_sigma
+from worker.engine.compare import fuse, gallery_sigma
 from worker.engine.presets import MODALITIES, Preset
 from worker.recognition import metrics
 from worker.recognition.calibration import calibrate
+from worker.recognition.fusion import all_to_all
 
 from .shapedna import BASELINE, shapedna_dissimilarity
 
@@ -77,10 +78,7 @@ def modality_dissimilarity(vectors: np.ndarray, kind: str) -> tuple[np.ndarray, 
     if kind == "D2":  # recorded in the report, so computed here rather than inside
         sigma = gallery_sigma(x)
         info.update(sigma=sigma, sigma_over="all evaluated objects")
-    d = dissimilarity(x, x, kind, sigma)
-    d = 0.5 * (d + d.T)  # exact symmetry: D2's expansion differs from d.T by rounding
-    np.fill_diagonal(d, 0.0)
-    return d, info
+    return all_to_all(x, kind, sigma), info
 
 
 def dissimilarity_matrices(

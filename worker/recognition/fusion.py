@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from worker.engine.compare import fuse
+from worker.engine.compare import dissimilarity, fuse
 
 from . import metrics
 
@@ -53,6 +53,19 @@ ADOPTION_MARGIN = 0.005
 #: The name of the comparison each modality's matrix in ``dissimilarities`` was made with
 #: (the preset's), when the caller offers ``alternatives``.
 PRESET_COMPARISON = "preset"
+
+
+def all_to_all(
+    vectors: NDArray[np.float64], kind: str, sigma: NDArray[np.float64] | None = None
+) -> NDArray[np.float64]:
+    """(n, n) dissimilarity of (n, M) descriptors to each other with D1 (eq. 8) or D2
+    (eq. 9, with ``sigma``): exactly symmetric (D2's expansion differs from its
+    transpose by rounding), zero on the diagonal."""
+    x = np.atleast_2d(np.asarray(vectors, dtype=np.float64))
+    d = np.asarray(dissimilarity(x, x, kind, sigma), dtype=np.float64)
+    d = 0.5 * (d + d.T)
+    np.fill_diagonal(d, 0.0)
+    return d
 
 
 def stratified_folds(labels: ArrayLike, k: int, seed: int = 0) -> NDArray[np.int64]:
@@ -316,6 +329,7 @@ def tune_fusion(
     folds: int = FOLDS,
     grid: tuple[float, ...] = GRID,
     seed: int = 0,
+    comparison: str = PRESET_COMPARISON,
     alternatives: Mapping[str, Mapping[str, ArrayLike]] | None = None,
 ) -> FusionTuning:
     """Choose one fusion weight (and comparison) per modality by class-stratified
@@ -325,13 +339,14 @@ def tune_fusion(
     ----------
     dissimilarities : modality -> (n, n) array_like of float, all-to-all and symmetric,
         in fusion order (the last keeps weight 1); at least two modalities. Made with
-        the preset's comparison (named ``PRESET_COMPARISON`` in the choices).
+        the preset's comparison, named ``comparison`` in the choices.
     labels : (n,) array_like, the class of each object.
     rule : ``"sum"`` or ``"product"``, the preset's rule.
     preset_weights : modality -> the preset's own weight, scored on the same folds.
     folds : number of folds, at least 2.
     grid : the weights tried for every modality but the last.
     seed : of :func:`stratified_folds`.
+    comparison : the name of the comparison ``dissimilarities`` were made with.
     alternatives : modality -> comparison name -> (n, n), other comparisons of some
         modalities to choose from (the preset's is preferred on equal losses).
 
@@ -349,7 +364,7 @@ def tune_fusion(
     mats = {m: np.asarray(d, dtype=np.float64) for m, d in dissimilarities.items()}
     candidates = {
         m: {
-            PRESET_COMPARISON: d,
+            comparison: d,
             **{
                 c: np.asarray(a, dtype=np.float64)
                 for c, a in (alternatives or {}).get(m, {}).items()
