@@ -99,6 +99,12 @@ def read_labels(path: Path) -> dict[str, str]:
         }
 
 
+def collection_prefix(collection: str | None) -> str:
+    """The path prefix of a collection's resources (none: the default collection, which
+    the paths without ``/collections/{name}`` work on)."""
+    return "" if collection in (None, "default") else f"/collections/{collection}"
+
+
 def _client(url: str, api_key: str | None) -> httpx.Client:
     headers = {"X-API-Key": api_key} if api_key else {}
     return httpx.Client(base_url=url.rstrip("/"), timeout=TIMEOUT, headers=headers)
@@ -165,13 +171,16 @@ def import_files(
     url: str = DEFAULT_URL,
     api_key: str | None = None,
     labels: dict[str, str] | None = None,
+    collection: str | None = None,
     concurrency: int = 4,
     wait: bool = False,
     poll_seconds: float = 1.0,
     stream: Any = sys.stderr,
 ) -> ImportResult:
-    """Enroll ``files`` through ``POST /meshes``; with ``wait``, until each is described."""
+    """Enroll ``files`` through ``POST /meshes`` (of ``collection``); with ``wait``, until
+    each is described."""
     labels = labels or {}
+    prefix = collection_prefix(collection)
     result = ImportResult()
     lock = threading.Lock()
     progress = Progress(len(files), "upload  ", stream)
@@ -183,7 +192,7 @@ def import_files(
             try:
                 with open(path, "rb") as handle:
                     response = client.post(
-                        "/meshes", files={"file": (path.name, handle)}, data=data
+                        f"{prefix}/meshes", files={"file": (path.name, handle)}, data=data
                     )
             except httpx.HTTPError as exc:
                 outcome: tuple[str, Any] = ("failed", f"connection: {exc}")
@@ -219,7 +228,7 @@ def import_files(
         progress.close()
         if wait:
             try:
-                _wait_described(client, result, poll_seconds, stream)
+                _wait_described(client, prefix, result, poll_seconds, stream)
             except KeyboardInterrupt:
                 progress.close()
                 raise Interrupted(
@@ -239,14 +248,14 @@ def _check_reachable(client: httpx.Client, url: str) -> None:
 
 
 def _wait_described(
-    client: httpx.Client, result: ImportResult, poll_seconds: float, stream: Any
+    client: httpx.Client, prefix: str, result: ImportResult, poll_seconds: float, stream: Any
 ) -> None:
     """Follow every enrolled or existing mesh until it is ready or failed."""
     pending = {**result.enrolled, **result.existing}
     progress = Progress(len(pending), "describe", stream)
     while pending:
         for path, mesh_id in list(pending.items()):
-            response = client.get(f"/meshes/{mesh_id}")
+            response = client.get(f"{prefix}/meshes/{mesh_id}")
             if response.status_code != 200:
                 result.failed[path] = _refusal(response)
             else:
@@ -268,14 +277,21 @@ def _wait_described(
 
 
 def query_file(
-    path: Path, *, url: str = DEFAULT_URL, api_key: str | None = None, k: int = 10
+    path: Path,
+    *,
+    url: str = DEFAULT_URL,
+    api_key: str | None = None,
+    k: int = 10,
+    collection: str | None = None,
 ) -> dict[str, Any]:
-    """``POST /query`` with ``path``; the response body."""
+    """``POST /query`` (of ``collection``) with ``path``; the response body."""
     with _client(url, api_key) as client:
         _check_reachable(client, url)
         with open(path, "rb") as handle:
             response = client.post(
-                "/query", files={"file": (path.name, handle)}, data={"k": str(k)}
+                f"{collection_prefix(collection)}/query",
+                files={"file": (path.name, handle)},
+                data={"k": str(k)},
             )
     if response.status_code != 200:
         raise ClientError(f"{path.name}: {_refusal(response)}")
@@ -342,7 +358,8 @@ def failure_table(result: ImportResult) -> str:
 
 
 def add_subcommands(sub: Any) -> None:
-    """Register ``import`` and ``query`` on the ``shapes`` parser's subparsers."""
+    """Register ``import``, ``query`` and ``collections`` on the ``shapes`` parser's
+    subparsers."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--url", default=DEFAULT_URL, help=f"the service (default {DEFAULT_URL})")
     common.add_argument(
@@ -350,9 +367,15 @@ def add_subcommands(sub: Any) -> None:
         default=os.environ.get("SHAPES_API_KEY"),
         help="the service's API key, if it has one (default $SHAPES_API_KEY)",
     )
+    scoped = argparse.ArgumentParser(add_help=False, parents=[common])
+    scoped.add_argument(
+        "--collection",
+        default="default",
+        help="the collection to work on (default: the default collection)",
+    )
     enroll = sub.add_parser(
         "import",
-        parents=[common],
+        parents=[scoped],
         help="enroll a folder or files through the service's API",
         description="Enroll mesh files (directories are searched recursively) with a "
         "progress bar; files already enrolled (same bytes) are skipped. Exits non-zero "
@@ -365,13 +388,33 @@ def add_subcommands(sub: Any) -> None:
     enroll.set_defaults(run=_import_command)
     query = sub.add_parser(
         "query",
-        parents=[common],
+        parents=[scoped],
         help="rank the enrolled meshes against a mesh file",
     )
     query.add_argument("file", help="the mesh to search with")
     query.add_argument("-k", type=int, default=10, help="matches (10)")
     query.add_argument("--json", action="store_true", help="print the service's JSON answer")
     query.set_defaults(run=_query_command)
+    collections = sub.add_parser(
+        "collections",
+        help="list, create or delete the service's collections",
+        description="A collection is a gallery of its own: meshes, index, calibration, "
+        "preset and units (any: scale-free; metric: every file in one physical unit, so "
+        "size counts).",
+    )
+    action = collections.add_subparsers(dest="action", required=True)
+    listing = action.add_parser("list", parents=[common], help="each collection and its meshes")
+    listing.set_defaults(run=_collections_command)
+    create = action.add_parser("create", parents=[common], help="a new, empty collection")
+    create.add_argument("name")
+    create.add_argument("--units", choices=("any", "metric"), default="any")
+    create.add_argument("--preset", help="default: the service's")
+    create.set_defaults(run=_collections_command)
+    delete = action.add_parser(
+        "delete", parents=[common], help="a collection with every mesh enrolled in it"
+    )
+    delete.add_argument("name")
+    delete.set_defaults(run=_collections_command)
 
 
 def _import_command(args: argparse.Namespace) -> int:
@@ -385,6 +428,7 @@ def _import_command(args: argparse.Namespace) -> int:
             url=args.url,
             api_key=args.api_key,
             labels=labels,
+            collection=args.collection,
             concurrency=args.concurrency,
             wait=args.wait,
         )
@@ -408,9 +452,62 @@ def _import_command(args: argparse.Namespace) -> int:
 
 def _query_command(args: argparse.Namespace) -> int:
     try:
-        body = query_file(Path(args.file), url=args.url, api_key=args.api_key, k=args.k)
+        body = query_file(
+            Path(args.file),
+            url=args.url,
+            api_key=args.api_key,
+            k=args.k,
+            collection=args.collection,
+        )
     except (ClientError, OSError) as exc:
         print(f"shapes query: {exc}", file=sys.stderr)
         return 2
     print(json.dumps(body, indent=1) if args.json else format_matches(body))
+    return 0
+
+
+def format_collections(items: list[dict[str, Any]]) -> str:
+    """The collections as an aligned text table."""
+    rows = [("name", "units", "preset", "meshes", "ready")] + [
+        (
+            c["name"],
+            c["units"],
+            f"{c['preset']} v{c['preset_version']}",
+            str(c["meshes"]),
+            str(c["ready"]),
+        )
+        for c in items
+    ]
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    return "\n".join(
+        "  ".join(v.ljust(w) for v, w in zip(row, widths, strict=True)).rstrip() for row in rows
+    )
+
+
+def _collections_command(args: argparse.Namespace) -> int:
+    with _client(args.url, args.api_key) as client:
+        try:
+            _check_reachable(client, args.url)
+            if args.action == "list":
+                response = client.get("/collections")
+            elif args.action == "create":
+                body = {"name": args.name, "units": args.units}
+                if args.preset:
+                    body["preset"] = args.preset
+                response = client.post("/collections", json=body)
+            else:
+                response = client.delete(f"/collections/{args.name}")
+        except ClientError as exc:
+            print(f"shapes collections: {exc}", file=sys.stderr)
+            return 2
+    if response.status_code >= 400:
+        print(f"shapes collections {args.action}: {_refusal(response)}", file=sys.stderr)
+        return 1
+    if args.action == "list":
+        print(format_collections(response.json()["items"]))
+    elif args.action == "create":
+        made = response.json()
+        print(f"created collection {made['name']} (units {made['units']}, preset {made['preset']})")
+    else:
+        print(f"deleted collection {args.name} and its meshes")
     return 0

@@ -11,8 +11,11 @@ from fastapi.security import APIKeyHeader
 from pydantic import BeforeValidator
 from sqlalchemy.orm import Session
 
+from .collections.service import NAME_PATTERN
 from .db import unit_of_work
 from .errors import InvalidInputError, UnauthorizedError
+from .gallery.service import Gallery
+from .models import DEFAULT_COLLECTION
 from .state import AppState
 from .storage import ReceivedFile
 from .uploads import MultipartUpload, receive_multipart
@@ -43,6 +46,23 @@ def get_state(request: Request) -> AppState:
 
 
 StateDep = Annotated[AppState, Depends(get_state)]
+
+
+def collection_path(
+    collection: Annotated[
+        str, Path(pattern=NAME_PATTERN, description="the collection's name (GET /collections)")
+    ],
+) -> None:
+    """Declares and checks the ``{collection}`` of every path under
+    ``/collections/{collection}/`` (``dependencies=`` of those routes)."""
+
+
+def get_gallery(request: Request, state: StateDep) -> Gallery:
+    """The gallery a request works on: its path's ``{collection}``, else the default."""
+    return state.galleries.named(request.path_params.get("collection", DEFAULT_COLLECTION))
+
+
+GalleryDep = Annotated[Gallery, Depends(get_gallery)]
 
 
 def get_session(request: Request, state: StateDep) -> Iterator[Session]:

@@ -18,12 +18,14 @@ from fastapi.staticfiles import StaticFiles
 from worker.engine.presets import get_preset
 
 from .calibration.router import router as calibration_router
+from .collections.router import include_scoped, openapi_with_scoped
+from .collections.router import router as collections_router
 from .config import Settings, get_settings
 from .db import DATABASE_ERRORS, make_engine, make_session_factory
 from .deps import document_open_access
 from .errors import install_error_handlers
 from .gallery.fusion import pinned_fusion
-from .gallery.service import Gallery
+from .gallery.registry import Galleries
 from .jobs.collector import JobCollector
 from .jobs.router import router as jobs_router
 from .meshes.router import router as meshes_router
@@ -53,14 +55,15 @@ Enroll meshes with `POST /meshes`, wait until they are `ready`, then search with
 
 
 def _start_background(state: AppState, collector: JobCollector) -> None:
-    """Load the index (can take a while for a big gallery), recover jobs, start collecting."""
+    """Load every collection's index (can take a while for a big gallery), recover jobs,
+    start collecting."""
     try:
-        state.gallery.load(state.read_sessions)
+        state.galleries.sync()
         collector.recover()
         collector.start()
     except Exception as exc:  # shown by /ready; the process stays up for diagnosis
         log.exception("startup failed")
-        state.gallery.error = f"error: {exc}"
+        state.galleries.error = f"error: {exc}"
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -76,13 +79,16 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         for leftover in settings.tmp_dir.glob("upload-*"):
             leftover.unlink(missing_ok=True)
         await anyio.to_thread.run_sync(upgrade_head, settings.sqlalchemy_url)
+        if settings.fusion_weights is not None:  # refused at start, not in the background
+            pinned_fusion(preset, settings.fusion_weights)
         engine = make_engine(settings.sqlalchemy_url)
+        read_sessions = make_session_factory(engine, read_only=True)
         state = AppState(
             settings=settings,
             preset=preset,
             engine=engine,
             sessions=make_session_factory(engine),
-            read_sessions=make_session_factory(engine, read_only=True),
+            read_sessions=read_sessions,
             queue=DescriptorQueue(settings),
             store=(
                 DatabaseStore()
@@ -90,17 +96,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 else DirectoryStore(settings.uploads_dir)
             ),
             metrics=metrics,
-            gallery=Gallery(
-                preset,
-                settings.preset_index_directory,
-                refit_fraction=settings.index_refit_fraction,
-                metrics=metrics,
-                fusion=None
-                if settings.fusion_weights is None
-                else pinned_fusion(preset, settings.fusion_weights),
-                learn_fusion=settings.fusion == "learned" and settings.fusion_weights is None,
-                fusion_max_shapes=settings.fusion_max_shapes,
-            ),
+            galleries=Galleries(settings, metrics, read_sessions),
             recent_queries=Recent(settings.query_cache_size),
         )
         app.state.shapes = state
@@ -114,7 +110,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         finally:
             await anyio.to_thread.run_sync(starter.join)
             await anyio.to_thread.run_sync(collector.stop)
-            await anyio.to_thread.run_sync(state.gallery.save)
+            await anyio.to_thread.run_sync(state.galleries.save)
             engine.dispose()
 
     app = FastAPI(
@@ -132,8 +128,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             allow_methods=["GET", "POST", "DELETE"],
             allow_headers=["X-API-Key", "Content-Type"],
         )
-    for router in (meshes_router, search_router, calibration_router, jobs_router, system_router):
+    scoped = (meshes_router, search_router, calibration_router)
+    for router in (*scoped, collections_router, jobs_router, system_router):
         app.include_router(router)
+    include_scoped(app, scoped)
     # The web page: static files, no build step (three.js vendored under static/vendor).
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
 
@@ -144,7 +142,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     def openapi() -> dict[str, Any]:
         if app.openapi_schema is not None:
             return app.openapi_schema
-        schema = FastAPI.openapi(app)  # builds and caches app.openapi_schema
+        schema = openapi_with_scoped(app)  # builds and caches app.openapi_schema
         document_limits(schema, max_k=settings.max_k, preset=settings.preset)
         if settings.api_key is None:
             document_open_access(schema)

@@ -1,4 +1,5 @@
-"""Tables: meshes (uploads), descriptors (per preset and version), jobs, previews."""
+"""Tables: collections, meshes (uploads), descriptors (per preset and version), jobs,
+previews."""
 
 from __future__ import annotations
 
@@ -33,14 +34,48 @@ class JobStatus(StrEnum):
 UNFINISHED_JOB = (JobStatus.queued.value, JobStatus.processing.value)
 
 
-class Mesh(Base):
-    """One uploaded file, stored content-addressed under ``uploads/``."""
+#: The collection the paths without ``/collections/{name}`` work on (made by migration 0007).
+DEFAULT_COLLECTION = "default"
 
-    __tablename__ = "meshes"
-    __table_args__ = {"sqlite_autoincrement": True}  # ids of deleted meshes are never reused
+
+class Units(StrEnum):
+    """What a collection's files' coordinates mean: ``any``, arbitrary units (shapes are
+    compared scale-free); ``metric``, one physical unit for every file, so size is a cue."""
+
+    any = "any"
+    metric = "metric"
+
+
+class Collection(Base):
+    """One gallery: its own meshes, index, calibration, preset and units."""
+
+    __tablename__ = "collections"
+    __table_args__ = {"sqlite_autoincrement": True}  # a re-made name is another collection
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    sha256: Mapped[str] = mapped_column(String(64), unique=True)
+    name: Mapped[str] = mapped_column(String(64), unique=True)
+    units: Mapped[str] = mapped_column(String(16), default=Units.any.value)
+    # None: the service's preset (SHAPES_PRESET), followed when it changes.
+    preset: Mapped[str | None] = mapped_column(String(64))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Mesh(Base):
+    """One uploaded file in a collection, its bytes stored content-addressed under
+    ``uploads/`` (shared by the collections that enrolled the same bytes)."""
+
+    __tablename__ = "meshes"
+    __table_args__ = (
+        UniqueConstraint("collection_id", "sha256"),
+        {"sqlite_autoincrement": True},  # ids of deleted meshes are never reused
+    )
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    # Server default: a row written by an API process of the version before collections.
+    collection_id: Mapped[int] = mapped_column(
+        ForeignKey("collections.id", ondelete="CASCADE"), index=True, server_default="1"
+    )
+    sha256: Mapped[str] = mapped_column(String(64), index=True)
     name: Mapped[str] = mapped_column(String(255))
     label: Mapped[str | None] = mapped_column(String(255), index=True)
     meta: Mapped[dict[str, Any]] = mapped_column("metadata", JSON, default=dict)
@@ -152,7 +187,8 @@ class GalleryChange(Base):
     __table_args__ = {"sqlite_autoincrement": True}  # sequence numbers are never reused
 
     id: Mapped[int] = mapped_column(primary_key=True)
-    mesh_id: Mapped[int]  # no foreign key: a removal outlives its mesh
+    mesh_id: Mapped[int]  # no foreign keys: a removal outlives its mesh and collection
+    collection_id: Mapped[int] = mapped_column(index=True, server_default="1")
     action: Mapped[str] = mapped_column(String(8))  # "add" or "remove"
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 

@@ -11,7 +11,7 @@ from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.presets import Preset
 
 from .config import Settings
-from .gallery.service import Gallery
+from .gallery.registry import Galleries
 from .metrics import Metrics
 from .queue import DescriptorQueue
 from .search.recent import Recent
@@ -20,6 +20,9 @@ from .storage import UploadStore
 
 @dataclass
 class AppState:
+    """``preset`` is the service's (``SHAPES_PRESET``): the default collection's, and any
+    collection's created without one."""
+
     settings: Settings
     preset: Preset
     engine: Engine
@@ -28,5 +31,5 @@ class AppState:
     queue: DescriptorQueue
     store: UploadStore
     metrics: Metrics
-    gallery: Gallery
+    galleries: Galleries
     recent_queries: Recent[ShapeDescriptor]

@@ -37,6 +37,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
+from app.client import collection_prefix
 from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.intrinsic import averaged_mass, surface_operators
 from worker.engine.mesh_io import Mesh
@@ -286,32 +287,45 @@ class Service:
             out.append(f"--- {path.name}\n{path.read_text(errors='replace')[-3000:]}")
         return "\n".join(out)
 
-    def upload(self, name: str, label: str | None = None, **fields: str) -> httpx.Response:
-        """Enroll the mesh ``name`` of :attr:`meshes` (e.g. ``"quadruped-0"``)."""
+    def upload(
+        self, name: str, label: str | None = None, *, collection: str | None = None, **fields: str
+    ) -> httpx.Response:
+        """Enroll the mesh ``name`` of :attr:`meshes` (e.g. ``"quadruped-0"``), in the
+        default collection or ``collection``."""
         path = self.meshes / f"{name}.off.gz"
         data = {k: v for k, v in {"label": label, **fields}.items() if v is not None}
         with open(path, "rb") as fh:
-            return self.client.post("/meshes", files={"file": (path.name, fh)}, data=data)
+            return self.client.post(
+                f"{collection_prefix(collection)}/meshes",
+                files={"file": (path.name, fh)},
+                data=data,
+            )
 
     def wait_mesh(
-        self, mesh_id: int, statuses: tuple[str, ...] = ("ready", "failed")
+        self,
+        mesh_id: int,
+        statuses: tuple[str, ...] = ("ready", "failed"),
+        *,
+        collection: str | None = None,
     ) -> dict[str, Any]:
         """The mesh's resource once its status is one of ``statuses``."""
         deadline = time.monotonic() + TIMEOUT
         body: dict[str, Any] = {}
         while time.monotonic() < deadline:
-            body = self.client.get(f"/meshes/{mesh_id}").json()
+            body = self.client.get(f"{collection_prefix(collection)}/meshes/{mesh_id}").json()
             if body["status"] in statuses:
                 return body
             time.sleep(0.2)
         raise AssertionError(f"mesh {mesh_id} stuck at {body.get('status')}\n" + self.logs())
 
-    def query(self, name: str, **fields: object) -> httpx.Response:
+    def query(
+        self, name: str, *, collection: str | None = None, **fields: object
+    ) -> httpx.Response:
         """``POST /query`` with the mesh ``name`` of :attr:`meshes`."""
         path = self.meshes / f"{name}.off.gz"
         with open(path, "rb") as fh:
             return self.client.post(
-                "/query",
+                f"{collection_prefix(collection)}/query",
                 files={"file": (path.name, fh)},
                 data={k: str(v) for k, v in fields.items()},
             )

@@ -14,6 +14,7 @@ from worker.recognition.fusion import ADOPTION_MARGIN, FusionScores
 from ..deps import (
     MAX_ROW_ID,
     WRITE_ACCESS,
+    GalleryDep,
     MultipartDep,
     ReadSessionDep,
     SessionDep,
@@ -105,12 +106,13 @@ def _operating_points(row: Calibration) -> list[OperatingPoint]:
     ),
     responses=NOT_CALIBRATED,
 )
-def get_calibration(session: SessionDep, state: StateDep) -> CalibrationOut:
-    fit = service.calibration(session, state)
+def get_calibration(gallery: GalleryDep, session: SessionDep, state: StateDep) -> CalibrationOut:
+    fit = service.calibration(session, state, gallery)
     row = fit.rows[FUSED]
     keep = np.unique(np.linspace(0, len(row.far) - 1, min(ROC_POINTS, len(row.far))).astype(int))
-    preset = state.preset
+    preset = gallery.preset
     return CalibrationOut(
+        collection=gallery.name,
         preset=preset.name,
         preset_version=preset.version,
         score="+".join(preset.fused_modalities) + f" {preset.fusion}",
@@ -133,7 +135,7 @@ def get_calibration(session: SessionDep, state: StateDep) -> CalibrationOut:
             if m != FUSED
         },
         fitted_at=fit.fitted_at,
-        fusion=fusion_out(state.gallery.fusion, state.preset),
+        fusion=fusion_out(gallery.fusion, gallery.base_preset),
     )
 
 
@@ -206,7 +208,9 @@ def _optional_id(fields: dict[str, str], name: str) -> int | None:
     },
     openapi_extra=VERIFY_BODY,
 )
-def verify(upload: MultipartDep, session: ReadSessionDep, state: StateDep) -> VerificationOut:
+def verify(
+    gallery: GalleryDep, upload: MultipartDep, session: ReadSessionDep, state: StateDep
+) -> VerificationOut:
     fields = upload.fields
     unknown = set(fields) - set(VERIFY_FIELDS)
     if unknown:
@@ -220,6 +224,7 @@ def verify(upload: MultipartDep, session: ReadSessionDep, state: StateDep) -> Ve
     result = service.verify(
         session,
         state,
+        gallery,
         upload=require_file(upload) if upload.file is not None else None,
         mesh_id=_optional_id(fields, "mesh_id"),
         claim_id=_optional_id(fields, "claim_id"),

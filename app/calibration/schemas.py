@@ -57,6 +57,7 @@ class FusionOut(BaseModel):
 
 
 class CalibrationOut(BaseModel):
+    collection: str = Field(description="the collection whose pairs are calibrated")
     preset: str
     preset_version: int
     score: str = Field(description="the calibrated score: the preset's fused one")

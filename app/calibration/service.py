@@ -10,6 +10,7 @@ from worker.recognition.calibration import OPERATING_FARS, Calibration
 
 from ..errors import InvalidInputError, NotFoundError
 from ..gallery.calibration import FUSED, GalleryCalibration
+from ..gallery.service import Gallery
 from ..meshes import repository as meshes
 from ..meshes import service as mesh_service
 from ..search import service as search
@@ -23,9 +24,9 @@ TRUST_RULE = (
 )
 
 
-def calibration(session: Session, state: AppState) -> GalleryCalibration:
+def calibration(session: Session, state: AppState, gallery: Gallery) -> GalleryCalibration:
     """The gallery's current calibration (``not_calibrated`` 409 with too few pairs)."""
-    return search.current_calibration(session, state)
+    return search.current_calibration(session, state, gallery)
 
 
 def operating_points(row: Calibration) -> list[tuple[float, float, float, float]]:
@@ -58,6 +59,7 @@ class Verification:
 def verify(
     session: Session,
     state: AppState,
+    gallery: Gallery,
     *,
     upload: ReceivedFile | None,
     mesh_id: int | None,
@@ -90,23 +92,23 @@ def verify(
             "or a label (field 'claim_label'), one of the two.",
             code="invalid_claim",
         )
-    preset = state.preset
-    fit = calibration(session, state)
+    preset = gallery.preset
+    fit = calibration(session, state, gallery)
     if claim_id is not None:
-        mesh_service.get(session, claim_id)  # 404 for an unknown id
+        mesh_service.get(session, gallery, claim_id)  # 404 for an unknown id
         targets = [claim_id]
     else:
         assert claim_label is not None
-        targets = meshes.ids_with_label(session, claim_label)
+        targets = meshes.ids_with_label(session, gallery.collection_id, claim_label)
     if upload is not None:
         descriptor, *_ = search.upload_descriptor(session, state, upload, preset)
         probe = "upload"
     else:
         assert mesh_id is not None
-        descriptor = search.stored_descriptor(session, mesh_id, preset)
+        descriptor = search.stored_descriptor(session, gallery, mesh_id, preset)
         probe = f"mesh {mesh_id}"
         targets = [t for t in targets if t != mesh_id]
-    scored = state.gallery.scores(descriptor, targets)
+    scored = gallery.scores(descriptor, targets)
     if not scored:
         what = f"mesh {claim_id}" if claim_id is not None else f"label {claim_label!r}"
         raise NotFoundError(

@@ -26,12 +26,12 @@ from ..models import GalleryChange
 Action = Literal["add", "remove"]
 
 
-def record(session: Session, mesh_id: int, action: Action) -> None:
-    """Log that ``mesh_id`` enters (``add``) or leaves (``remove``) the gallery."""
+def record(session: Session, mesh_id: int, collection_id: int, action: Action) -> None:
+    """Log that ``mesh_id`` enters (``add``) or leaves (``remove``) its collection's gallery."""
     if session.get_bind().dialect.name == "postgresql":
         # Conflicts with itself only: readers and other tables are not held up.
         session.execute(text("LOCK TABLE gallery_changes IN SHARE ROW EXCLUSIVE MODE"))
-    session.add(GalleryChange(mesh_id=mesh_id, action=action))
+    session.add(GalleryChange(mesh_id=mesh_id, collection_id=collection_id, action=action))
 
 
 def latest(session: Session) -> int:
@@ -39,11 +39,12 @@ def latest(session: Session) -> int:
     return int(session.scalar(select(func.coalesce(func.max(GalleryChange.id), 0))) or 0)
 
 
-def since(session: Session, after: int, limit: int) -> Sequence[GalleryChange]:
-    """Changes after sequence number ``after``, oldest first, at most ``limit``."""
+def since(session: Session, collection_id: int, after: int, limit: int) -> Sequence[GalleryChange]:
+    """A collection's changes after sequence number ``after``, oldest first, at most
+    ``limit``."""
     query = (
         select(GalleryChange)
-        .where(GalleryChange.id > after)
+        .where(GalleryChange.collection_id == collection_id, GalleryChange.id > after)
         .order_by(GalleryChange.id)
         .limit(limit)
     )

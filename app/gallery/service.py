@@ -1,4 +1,5 @@
-"""The gallery: the one owner of the index, and everything the service asks of it.
+"""A collection's gallery: the one owner of its index, and everything the service asks
+of it (every collection has one; :mod:`.registry` holds them).
 
 The collector adds described shapes, the mesh service removes deleted ones, the
 search service searches; all of them through :class:`Gallery`, which also loads
@@ -13,7 +14,6 @@ import logging
 import threading
 import time
 from collections.abc import Iterable, Iterator
-from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -68,28 +68,35 @@ def _decoded(
 
 
 class Gallery:
-    """The enrolled shapes' index under the service's preset.
+    """One collection's enrolled shapes: their index under the collection's preset.
 
     Parameters
     ----------
-    preset : the preset every enrolled descriptor is made with.
-    directory : where the index is saved (``<index dir>/<preset>-v<version>``).
+    collection : the collection's id and name.
+    preset : the preset every enrolled descriptor of the collection is made with.
+    directory : where the index is saved (``<index dir>/<preset>-v<version>`` for the
+        default collection).
     refit_fraction : see :class:`~.index.GalleryIndex`.
     metrics : ``index_size`` and ``search_seconds`` are published here.
+    lock : held while the database and the index change together; one for every
+        collection's gallery (the collector's round stores the results of all).
     """
 
     def __init__(
         self,
+        collection: tuple[int, str],
         preset: Preset,
         directory: Path,
         *,
         refit_fraction: float,
         metrics: Metrics,
+        lock: threading.RLock,
         fusion: GalleryFusion | None = None,
         learn_fusion: bool = False,
         fusion_max_shapes: int = 300,
     ) -> None:
-        #: The service's preset; ``preset`` is it with the fusion weights in use.
+        self.collection_id, self.name = collection
+        #: The collection's preset; ``preset`` is it with the fusion weights in use.
         self.base_preset = preset
         self._fusion = fusion or preset_fusion(preset, "the preset's weights")
         self.preset = replace(preset, fusion_weights=self._fusion.weights)
@@ -103,7 +110,7 @@ class Gallery:
         self._index: GalleryIndex | None = None
         # Held while the database and the index change together (collector, delete),
         # so a shape deleted while its descriptor is being stored never reaches the index.
-        self._lock = threading.RLock()
+        self._lock = lock
         # Counts adds and removes; a calibration fitted at another count is stale.
         self._version = 0
         self._calibration: GalleryCalibration | None = None
@@ -127,15 +134,9 @@ class Gallery:
         return self._index
 
     def _publish_size(self) -> None:
-        self.metrics.index_size.labels(self.preset.name).set(len(self))
+        self.metrics.index_size.labels(self.name).set(len(self))
 
     # ----------------------------------------------------------- changes
-    @contextmanager
-    def changing(self) -> Iterator[None]:
-        """Hold the gallery while a database transaction and its index changes happen."""
-        with self._lock:
-            yield
-
     def add(self, mesh_id: int, descriptor: ShapeDescriptor) -> None:
         """Make a described shape searchable (no-op while the index is not loaded yet:
         loading reconciles with the database)."""
@@ -244,8 +245,9 @@ class Gallery:
                 or (fit.version != version and time.time() - fit.fitted_at >= refit_seconds)
             )
             if due:
+                labels = meshes.labels(session, self.collection_id)
                 fit = fit_calibration(
-                    index, meshes.labels(session), self.preset, max_pairs=max_pairs, version=version
+                    index, labels, self.preset, max_pairs=max_pairs, version=version
                 )
                 self._calibration = fit
             assert fit is not None
@@ -271,7 +273,7 @@ class Gallery:
         if fusion.tuning is not None and time.time() - fusion.fitted_at < every:
             return False
         with read_sessions() as session:
-            labels = meshes.labels(session)
+            labels = meshes.labels(session, self.collection_id)
         version = self._version
         self._fusion_thread = threading.Thread(
             target=self._refit_fusion, args=(index, labels, version), name="fusion", daemon=True
@@ -325,7 +327,9 @@ class Gallery:
             # Read first: a change committed while loading is applied again by follow
             # (adds and removes are idempotent), never missed.
             followed = changes.latest(session)
-            db_ids = meshes.descriptor_mesh_ids(session, preset.name, preset.version)
+            db_ids = meshes.descriptor_mesh_ids(
+                session, self.collection_id, preset.name, preset.version
+            )
             try:
                 index = load_index(directory, preset, refit_fraction=self.refit_fraction)
                 if index.store.parts_shape != preset.parts_shape():
@@ -342,13 +346,16 @@ class Gallery:
                     refit_fraction=self.refit_fraction,
                     parts_shape=preset.parts_shape(),
                 )
-                rows = meshes.iter_descriptors(session, preset.name, preset.version)
+                rows = meshes.iter_descriptors(
+                    session, self.collection_id, preset.name, preset.version
+                )
                 index.add_many(_decoded(rows, preset))
                 how = "rebuilt"
             else:
                 self._reconcile(index, db_ids, session)
         log.info(
-            "index %s: %d shapes (%s) in %.2fs",
+            "index of %s (%s): %d shapes (%s) in %.2fs",
+            self.name,
             preset.name,
             len(index),
             how,
@@ -367,13 +374,14 @@ class Gallery:
         if self._index is None:
             return 0
         with read_sessions() as session:
-            log_rows = changes.since(session, self._followed, FOLLOW_BATCH)
+            log_rows = changes.since(session, self.collection_id, self._followed, FOLLOW_BATCH)
             if not log_rows:
                 return 0
             index = self._index
             added = {r.mesh_id for r in log_rows if r.action == "add" and r.mesh_id not in index}
             p = self.preset
-            stored = dict(_decoded(meshes.iter_descriptors(session, p.name, p.version, added), p))
+            rows = meshes.iter_descriptors(session, self.collection_id, p.name, p.version, added)
+            stored = dict(_decoded(rows, p))
         with self._lock:
             for row in log_rows:
                 if row.action == "add" and row.mesh_id in stored:
@@ -394,7 +402,7 @@ class Gallery:
         if missing:
             p = self.preset
             for mesh_id, vectors in _decoded(
-                meshes.iter_descriptors(session, p.name, p.version, missing), p
+                meshes.iter_descriptors(session, self.collection_id, p.name, p.version, missing), p
             ):
                 index.add(mesh_id, vectors)
 

@@ -84,13 +84,15 @@ class JobCollector:
             log.warning("queue unreachable at startup (%r); the sweep will recover", exc)
             to_enqueue = []
         with unit_of_work(state.sessions) as session:
-            for mesh in meshes.meshes_missing_descriptor(
-                session, state.preset.name, state.preset.version
-            ):
-                job = jobs.add(session, new_job(state, mesh))
-                mesh.status = MeshStatus.queued.value
-                mesh.error_code = mesh.error_detail = None
-                to_enqueue.append(job)
+            for gallery in state.galleries:
+                preset = gallery.base_preset
+                for mesh in meshes.meshes_missing_descriptor(
+                    session, gallery.collection_id, preset.name, preset.version
+                ):
+                    job = jobs.add(session, new_job(preset, mesh))
+                    mesh.status = MeshStatus.queued.value
+                    mesh.error_code = mesh.error_detail = None
+                    to_enqueue.append(job)
         for job in to_enqueue:
             enqueue_soon(state, job)
         if to_enqueue:
@@ -128,10 +130,10 @@ class JobCollector:
         while not self._stop.is_set():
             try:
                 self.run_once()
-                self.state.gallery.follow(self.state.read_sessions)
-                self.state.gallery.maybe_refit_fusion(
-                    self.state.read_sessions, settings.calibration_refit_seconds
-                )
+                galleries = self.state.galleries
+                galleries.sync()  # collections other API processes created or deleted
+                galleries.follow()
+                galleries.maybe_refit_fusion(settings.calibration_refit_seconds)
                 self._maybe_save()
                 if time.monotonic() - last_sweep > settings.sweep_interval_seconds:
                     last_sweep = time.monotonic()
@@ -145,20 +147,20 @@ class JobCollector:
             self._stop.wait(settings.collector_interval_seconds)
 
     def _maybe_save(self) -> None:
-        gallery = self.state.gallery
+        galleries = self.state.galleries
         interval = self.state.settings.index_save_interval_seconds
-        if gallery.dirty and time.monotonic() - self._last_save > interval:
-            gallery.save()
+        if galleries.dirty and time.monotonic() - self._last_save > interval:
+            galleries.save()
             self._last_save = time.monotonic()
 
     def run_once(self) -> int:
         """One pass over unfinished jobs; returns how many changed."""
         state = self.state
-        ready: list[tuple[int, ShapeDescriptor]] = []
+        ready: list[tuple[int, int, ShapeDescriptor]] = []
         finished: list[str] = []
         requeue: list[Job] = []
         changed = 0
-        with state.gallery.changing():
+        with state.galleries.changing():
             with unit_of_work(state.sessions) as session:
                 # Locked (PostgreSQL): the collectors of other API processes skip
                 # these jobs until this round commits, so no result is stored twice.
@@ -175,14 +177,16 @@ class JobCollector:
                     if result is not None:
                         descriptor = self._finish(session, job, result)
                         if descriptor is not None:
-                            ready.append((job.mesh_id, descriptor))
+                            ready.append((job.mesh.collection_id, job.mesh_id, descriptor))
                         finished.append(job.task_id)
                         changed += 1
                     elif (beat := beats.get(job.task_id)) is not None:
                         changed += self._track(job, beat, requeue)
             # Committed: now the index and the queue may follow.
-            for mesh_id, descriptor in ready:
-                state.gallery.add(mesh_id, descriptor)
+            for collection_id, mesh_id, descriptor in ready:
+                gallery = state.galleries.of(collection_id)
+                if gallery is not None:  # else its collection was deleted meanwhile
+                    gallery.add(mesh_id, descriptor)
         for task_id in finished:
             state.queue.forget(task_id)
         for job in requeue:
@@ -217,7 +221,7 @@ class JobCollector:
             _fail(job, "preset_mismatch", "The worker runs another version of the method.")
             state.metrics.jobs.labels("crashed").inc()
             return None
-        changes.record(session, mesh.id, "add")
+        changes.record(session, mesh.id, mesh.collection_id, "add")
         meshes.upsert_descriptor(
             session,
             Descriptor(

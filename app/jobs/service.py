@@ -9,6 +9,8 @@ from datetime import timedelta
 
 from sqlalchemy.orm import Session
 
+from worker.engine.presets import Preset
+
 from ..errors import NotFoundError
 from ..models import Job, JobStatus, Mesh, utcnow
 from ..queue import QUEUE_ERRORS
@@ -22,13 +24,13 @@ log = logging.getLogger("shapes.jobs")
 TRANSIENT_FAILURES = frozenset({"describe_crashed", "worker_lost", "preset_mismatch"})
 
 
-def new_job(state: AppState, mesh: Mesh) -> Job:
-    """A queued job describing ``mesh`` with the service's preset (task id chosen now,
-    so it can be enqueued after the commit that creates the row)."""
+def new_job(preset: Preset, mesh: Mesh) -> Job:
+    """A queued job describing ``mesh`` with its collection's ``preset`` (task id chosen
+    now, so it can be enqueued after the commit that creates the row)."""
     return Job(
         mesh=mesh,
-        preset=state.preset.name,
-        preset_version=state.preset.version,
+        preset=preset.name,
+        preset_version=preset.version,
         task_id=uuid.uuid4().hex,
         status=JobStatus.queued.value,
         enqueues=1,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
+from typing import Any
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, selectinload
@@ -14,18 +15,37 @@ def get(session: Session, mesh_id: int) -> Mesh | None:
     return session.get(Mesh, mesh_id)
 
 
-def get_by_sha256(session: Session, sha256: str) -> Mesh | None:
-    return session.scalar(select(Mesh).where(Mesh.sha256 == sha256))
+def get_by_sha256(session: Session, collection_id: int, sha256: str) -> Mesh | None:
+    """The collection's mesh of these bytes."""
+    return session.scalar(
+        select(Mesh).where(Mesh.collection_id == collection_id, Mesh.sha256 == sha256)
+    )
 
 
-def labels(session: Session) -> dict[int, str]:
-    """mesh id -> label of every mesh that has one."""
-    rows = session.execute(select(Mesh.id, Mesh.label).where(Mesh.label.is_not(None))).tuples()
-    return {mesh_id: label for mesh_id, label in rows if label is not None}
+def all_by_sha256(session: Session, sha256: str) -> list[Mesh]:
+    """Every collection's meshes of these bytes, oldest first."""
+    return list(session.scalars(select(Mesh).where(Mesh.sha256 == sha256).order_by(Mesh.id)))
 
 
-def ids_with_label(session: Session, label: str) -> list[int]:
-    return list(session.scalars(select(Mesh.id).where(Mesh.label == label).order_by(Mesh.id)))
+def storage_shared(session: Session, storage_path: str, collection_id: int) -> bool:
+    """Whether a mesh outside ``collection_id`` keeps its bytes at ``storage_path``."""
+    other = select(Mesh.id).where(
+        Mesh.storage_path == storage_path, Mesh.collection_id != collection_id
+    )
+    return session.scalar(other.limit(1)) is not None
+
+
+def labels(session: Session, collection_id: int) -> dict[int, str]:
+    """mesh id -> label of every mesh of the collection that has one."""
+    query = select(Mesh.id, Mesh.label).where(
+        Mesh.collection_id == collection_id, Mesh.label.is_not(None)
+    )
+    return {mesh_id: label for mesh_id, label in session.execute(query).tuples() if label}
+
+
+def ids_with_label(session: Session, collection_id: int, label: str) -> list[int]:
+    query = select(Mesh.id).where(Mesh.collection_id == collection_id, Mesh.label == label)
+    return list(session.scalars(query.order_by(Mesh.id)))
 
 
 def add(session: Session, mesh: Mesh) -> Mesh:
@@ -40,9 +60,15 @@ def delete(session: Session, mesh: Mesh) -> None:
 
 
 def list_page(
-    session: Session, *, label: str | None, status: str | None, offset: int, limit: int
+    session: Session,
+    collection_id: int,
+    *,
+    label: str | None,
+    status: str | None,
+    offset: int,
+    limit: int,
 ) -> tuple[list[Mesh], int]:
-    query = select(Mesh)
+    query = select(Mesh).where(Mesh.collection_id == collection_id)
     if label is not None:
         query = query.where(Mesh.label == label)
     if status is not None:
@@ -101,36 +127,59 @@ def put_preview(session: Session, mesh_id: int, glb: bytes, png: bytes) -> None:
     session.flush()
 
 
-def descriptor_mesh_ids(session: Session, preset: str, version: int) -> set[int]:
+def _in_collection(collection_id: int) -> Any:
+    """The condition "the descriptor's mesh is in the collection"."""
+    return Descriptor.mesh_id.in_(select(Mesh.id).where(Mesh.collection_id == collection_id))
+
+
+def descriptor_mesh_ids(
+    session: Session, collection_id: int, preset: str, version: int
+) -> set[int]:
     return set(
         session.scalars(
             select(Descriptor.mesh_id).where(
-                Descriptor.preset == preset, Descriptor.preset_version == version
+                _in_collection(collection_id),
+                Descriptor.preset == preset,
+                Descriptor.preset_version == version,
             )
         )
     )
 
 
-def description_progress(session: Session, preset: str, version: int) -> tuple[int, int]:
-    """``(described, describable)``: meshes with a descriptor of this preset version, and
-    meshes that have one or are waiting for one (the failed left out)."""
+def description_progress(
+    session: Session, collection_id: int, preset: str, version: int
+) -> tuple[int, int]:
+    """``(described, describable)`` of a collection: meshes with a descriptor of this
+    preset version, and meshes that have one or are waiting for one (the failed left
+    out)."""
     described = session.scalar(
         select(func.count(Descriptor.id)).where(
-            Descriptor.preset == preset, Descriptor.preset_version == version
+            _in_collection(collection_id),
+            Descriptor.preset == preset,
+            Descriptor.preset_version == version,
         )
     )
     describable = session.scalar(
-        select(func.count(Mesh.id)).where(Mesh.status != MeshStatus.failed.value)
+        select(func.count(Mesh.id)).where(
+            Mesh.collection_id == collection_id, Mesh.status != MeshStatus.failed.value
+        )
     )
     return int(described or 0), int(describable or 0)
 
 
 def iter_descriptors(
-    session: Session, preset: str, version: int, mesh_ids: set[int] | None = None, batch: int = 500
+    session: Session,
+    collection_id: int,
+    preset: str,
+    version: int,
+    mesh_ids: set[int] | None = None,
+    batch: int = 500,
 ) -> Iterator[tuple[int, bytes]]:
-    """(mesh id, npz bytes) of stored descriptors, streamed in batches."""
+    """(mesh id, npz bytes) of a collection's stored descriptors, streamed in batches."""
     query = select(Descriptor.mesh_id, Descriptor.data).where(
-        Descriptor.preset == preset, Descriptor.preset_version == version
+        _in_collection(collection_id),
+        Descriptor.preset == preset,
+        Descriptor.preset_version == version,
     )
     if mesh_ids is not None:
         ids = sorted(mesh_ids)
@@ -141,8 +190,10 @@ def iter_descriptors(
     yield from session.execute(query.execution_options(yield_per=batch)).tuples()
 
 
-def meshes_missing_descriptor(session: Session, preset: str, version: int) -> list[Mesh]:
-    """Meshes with neither a descriptor nor a job for this preset version."""
+def meshes_missing_descriptor(
+    session: Session, collection_id: int, preset: str, version: int
+) -> list[Mesh]:
+    """A collection's meshes with neither a descriptor nor a job for this preset version."""
     has_descriptor = select(Descriptor.id).where(
         Descriptor.mesh_id == Mesh.id,
         Descriptor.preset == preset,
@@ -151,7 +202,10 @@ def meshes_missing_descriptor(session: Session, preset: str, version: int) -> li
     has_job = select(Job.id).where(
         Job.mesh_id == Mesh.id, Job.preset == preset, Job.preset_version == version
     )
-    return list(session.scalars(select(Mesh).where(~has_descriptor.exists(), ~has_job.exists())))
+    query = select(Mesh).where(
+        Mesh.collection_id == collection_id, ~has_descriptor.exists(), ~has_job.exists()
+    )
+    return list(session.scalars(query))
 
 
 def descriptors_for(

@@ -8,7 +8,16 @@ from urllib.parse import quote
 from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import FileResponse
 
-from ..deps import WRITE_ACCESS, MultipartDep, RowId, SessionDep, StateDep, require_file
+from ..collections.service import collection_path
+from ..deps import (
+    WRITE_ACCESS,
+    GalleryDep,
+    MultipartDep,
+    RowId,
+    SessionDep,
+    StateDep,
+    require_file,
+)
 from ..errors import InvalidInputError
 from ..models import Descriptor, Mesh, MeshStatus
 from ..schemas import (
@@ -71,11 +80,13 @@ UPLOAD_BODY = multipart_body(
 )
 
 
-def mesh_out(mesh: Mesh, descriptor: Descriptor | None) -> MeshOut:
+def mesh_out(mesh: Mesh, descriptor: Descriptor | None, collection: str) -> MeshOut:
     job = mesh.jobs[-1] if mesh.jobs else None
     failed = mesh.status == MeshStatus.failed.value
+    base = f"{collection_path(collection)}/meshes/{mesh.id}"
     return MeshOut(
         id=mesh.id,
+        collection=collection,
         name=mesh.name,
         label=mesh.label,
         metadata=mesh.meta or {},
@@ -100,12 +111,12 @@ def mesh_out(mesh: Mesh, descriptor: Descriptor | None) -> MeshOut:
         created_at=mesh.created_at,
         updated_at=mesh.updated_at,
         links=Links(
-            self=f"/meshes/{mesh.id}",
-            file=f"/meshes/{mesh.id}/file",
+            self=base,
+            file=f"{base}/file",
             job=f"/jobs/{job.id}" if job else None,
-            similar=f"/meshes/{mesh.id}/similar",
-            preview=f"/meshes/{mesh.id}/preview",
-            thumbnail=f"/meshes/{mesh.id}/thumbnail",
+            similar=f"{base}/similar",
+            preview=f"{base}/preview",
+            thumbnail=f"{base}/thumbnail",
         ),
     )
 
@@ -146,7 +157,11 @@ def mesh_out(mesh: Mesh, descriptor: Descriptor | None) -> MeshOut:
     openapi_extra=UPLOAD_BODY,
 )
 def enroll(
-    upload: MultipartDep, session: SessionDep, state: StateDep, response: Response
+    gallery: GalleryDep,
+    upload: MultipartDep,
+    session: SessionDep,
+    state: StateDep,
+    response: Response,
 ) -> MeshOut:
     file = require_file(upload)
     unknown = set(upload.fields) - {"name", "label", "metadata"}
@@ -159,18 +174,20 @@ def enroll(
     mesh, queued = service.enroll(
         session,
         state,
+        gallery,
         file,
         name=upload.fields.get("name"),
         label=upload.fields.get("label"),
         metadata=upload.fields.get("metadata"),
     )
     response.status_code = status.HTTP_202_ACCEPTED if queued else status.HTTP_200_OK
-    response.headers["Location"] = f"/meshes/{mesh.id}"
-    return mesh_out(mesh, service.descriptor_of(session, state, mesh))
+    response.headers["Location"] = f"{collection_path(gallery.name)}/meshes/{mesh.id}"
+    return mesh_out(mesh, service.descriptor_of(session, gallery, mesh), gallery.name)
 
 
 @router.get("", response_model=MeshPage, operation_id="list_meshes", summary="List meshes")
 def list_meshes(
+    gallery: GalleryDep,
     session: SessionDep,
     state: StateDep,
     label: Annotated[str | None, Query(description="only this class")] = None,
@@ -179,10 +196,10 @@ def list_meshes(
     limit: Annotated[int, Query(ge=1, le=1000)] = 50,
 ) -> MeshPage:
     page = service.list_page(
-        session, state, label=label, status=status_, offset=offset, limit=limit
+        session, state, gallery, label=label, status=status_, offset=offset, limit=limit
     )
     return MeshPage(
-        items=[mesh_out(m, d) for m, d in page.items],
+        items=[mesh_out(m, d, gallery.name) for m, d in page.items],
         total=page.total,
         offset=page.offset,
         limit=page.limit,
@@ -196,9 +213,9 @@ def list_meshes(
     summary="One mesh",
     responses=ERRORS | {200: {"description": "The mesh", "links": JOB_LINK}},
 )
-def get_mesh(mesh_id: RowId, session: SessionDep, state: StateDep) -> MeshOut:
-    mesh = service.get(session, mesh_id)
-    return mesh_out(mesh, service.descriptor_of(session, state, mesh))
+def get_mesh(mesh_id: RowId, gallery: GalleryDep, session: SessionDep) -> MeshOut:
+    mesh = service.get(session, gallery, mesh_id)
+    return mesh_out(mesh, service.descriptor_of(session, gallery, mesh), gallery.name)
 
 
 def _attachment(filename: str) -> str:
@@ -216,8 +233,8 @@ def _attachment(filename: str) -> str:
     response_class=FileResponse,
     responses=ERRORS,
 )
-def get_file(mesh_id: RowId, session: SessionDep, state: StateDep) -> Response:
-    mesh, file = service.original_file(session, state, mesh_id)
+def get_file(mesh_id: RowId, gallery: GalleryDep, session: SessionDep, state: StateDep) -> Response:
+    mesh, file = service.original_file(session, state, gallery, mesh_id)
     if isinstance(file, bytes):  # kept in the database
         return Response(
             file,
@@ -234,8 +251,8 @@ def get_file(mesh_id: RowId, session: SessionDep, state: StateDep) -> Response:
     response_class=Response,
     responses=PREVIEW_ERRORS | {200: {"content": {"model/gltf-binary": {}}}},
 )
-def get_preview(mesh_id: RowId, session: SessionDep) -> Response:
-    stored = service.preview(session, mesh_id)
+def get_preview(mesh_id: RowId, gallery: GalleryDep, session: SessionDep) -> Response:
+    stored = service.preview(session, gallery, mesh_id)
     return Response(stored.glb, media_type="model/gltf-binary", headers=CACHE_FOREVER)
 
 
@@ -246,8 +263,8 @@ def get_preview(mesh_id: RowId, session: SessionDep) -> Response:
     response_class=Response,
     responses=PREVIEW_ERRORS | {200: {"content": {"image/png": {}}}},
 )
-def get_thumbnail(mesh_id: RowId, session: SessionDep) -> Response:
-    stored = service.preview(session, mesh_id)
+def get_thumbnail(mesh_id: RowId, gallery: GalleryDep, session: SessionDep) -> Response:
+    stored = service.preview(session, gallery, mesh_id)
     return Response(stored.png, media_type="image/png", headers=CACHE_FOREVER)
 
 
@@ -259,6 +276,8 @@ def get_thumbnail(mesh_id: RowId, session: SessionDep) -> Response:
     summary="Delete a mesh (leaves the index at once)",
     responses=ERRORS | UNAUTHORIZED_RESPONSE,
 )
-def delete_mesh(mesh_id: RowId, session: SessionDep, state: StateDep) -> Response:
-    service.delete(session, state, mesh_id)
+def delete_mesh(
+    mesh_id: RowId, gallery: GalleryDep, session: SessionDep, state: StateDep
+) -> Response:
+    service.delete(session, state, gallery, mesh_id)
     return Response(status_code=status.HTTP_204_NO_CONTENT)

@@ -40,6 +40,7 @@ class MeshOut(BaseModel):
             "examples": [
                 {
                     "id": 1,
+                    "collection": "default",
                     "name": "wolf0",
                     "label": "wolf",
                     "metadata": {"source": "TOSCA"},
@@ -75,6 +76,7 @@ class MeshOut(BaseModel):
     )
 
     id: int
+    collection: str = Field(description="the collection it is enrolled in")
     name: str
     label: str | None
     metadata: dict[str, Any]

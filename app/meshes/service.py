@@ -17,6 +17,7 @@ from worker.engine.mesh_io import mesh_format
 from ..db import after_commit
 from ..errors import ConflictError, InvalidInputError, NotFoundError
 from ..gallery import changes
+from ..gallery.service import Gallery
 from ..jobs import repository as jobs
 from ..jobs.service import TRANSIENT_FAILURES, enqueue_soon, lost, new_job
 from ..models import UNFINISHED_JOB, Descriptor, Mesh, MeshStatus, Preview
@@ -60,29 +61,32 @@ def _text(value: str | None, what: str) -> str | None:
 def enroll(
     session: Session,
     state: AppState,
+    gallery: Gallery,
     upload: ReceivedFile,
     *,
     name: str | None,
     label: str | None,
     metadata: str | None,
 ) -> tuple[Mesh, bool]:
-    """Store an upload and queue its descriptor; ``(mesh, queued)``: whether this
-    request queued a description.
+    """Store an upload in ``gallery``'s collection and queue its descriptor; ``(mesh,
+    queued)``: whether this request queued a description.
 
-    The same bytes uploaded again return the existing mesh, described again when it
-    failed for a transient reason or its job was lost (:func:`_retry`). The job is
+    The same bytes uploaded again to the collection return the existing mesh, described
+    again when it failed for a transient reason or its job was lost (:func:`_retry`). The
+    job is
     enqueued only after the commit that creates its row; while the queue is down,
     by the collector's sweep once it is back.
     """
     meta = parse_metadata(metadata)
     name = _text(name, "name") or upload.filename.split(".")[0] or upload.filename
     label = _text(label, "label")
-    existing = meshes.get_by_sha256(session, upload.sha256)
+    existing = meshes.get_by_sha256(session, gallery.collection_id, upload.sha256)
     if existing is not None:
         _same_format(existing, upload)
-        return existing, _retry(session, state, existing)
+        return existing, _retry(session, state, gallery, existing)
     reference = state.store.put(session, upload)
     mesh = Mesh(
+        collection_id=gallery.collection_id,
         sha256=upload.sha256,
         name=name,
         label=label,
@@ -96,17 +100,17 @@ def enroll(
         meshes.add(session, mesh)
     except IntegrityError:  # the same bytes, uploaded concurrently, won the race
         session.rollback()
-        existing = meshes.get_by_sha256(session, upload.sha256)
+        existing = meshes.get_by_sha256(session, gallery.collection_id, upload.sha256)
         if existing is None:
             raise
         _same_format(existing, upload)
         return existing, False
-    job = jobs.add(session, new_job(state, mesh))
+    job = jobs.add(session, new_job(gallery.base_preset, mesh))
     after_commit(session, lambda: enqueue_soon(state, job))
     return mesh, True
 
 
-def _retry(session: Session, state: AppState, mesh: Mesh) -> bool:
+def _retry(session: Session, state: AppState, gallery: Gallery, mesh: Mesh) -> bool:
     """Describe ``mesh`` again if its last try failed for a reason that says nothing
     about the file, or its job is unknown to the queue (stuck); True if queued."""
     if mesh.status == MeshStatus.failed.value:
@@ -114,7 +118,7 @@ def _retry(session: Session, state: AppState, mesh: Mesh) -> bool:
             return False  # the file's own fault: the same bytes fail the same way
         mesh.status = MeshStatus.queued.value
         mesh.error_code = mesh.error_detail = None
-        stuck = [jobs.add(session, new_job(state, mesh))]
+        stuck = [jobs.add(session, new_job(gallery.base_preset, mesh))]
     else:
         unfinished = [j for j in mesh.jobs if j.status in UNFINISHED_JOB]
         try:
@@ -138,16 +142,19 @@ def _same_format(existing: Mesh, upload: ReceivedFile) -> None:
         )
 
 
-def get(session: Session, mesh_id: int) -> Mesh:
+def get(session: Session, gallery: Gallery, mesh_id: int) -> Mesh:
+    """The collection's mesh ``mesh_id`` (another collection's is not found here)."""
     mesh = meshes.get(session, mesh_id)
-    if mesh is None:
-        raise NotFoundError(f"There is no mesh with id {mesh_id}.")
+    if mesh is None or mesh.collection_id != gallery.collection_id:
+        raise NotFoundError(f"There is no mesh with id {mesh_id} in collection {gallery.name!r}.")
     return mesh
 
 
-def original_file(session: Session, state: AppState, mesh_id: int) -> tuple[Mesh, Path | bytes]:
+def original_file(
+    session: Session, state: AppState, gallery: Gallery, mesh_id: int
+) -> tuple[Mesh, Path | bytes]:
     """The mesh and its uploaded file (a local path, or the bytes from the database)."""
-    mesh = get(session, mesh_id)
+    mesh = get(session, gallery, mesh_id)
     file = state.store.read(session, mesh.storage_path)
     if file is None:
         raise NotFoundError(
@@ -156,7 +163,7 @@ def original_file(session: Session, state: AppState, mesh_id: int) -> tuple[Mesh
     return mesh, file
 
 
-def preview(session: Session, mesh_id: int) -> Preview:
+def preview(session: Session, gallery: Gallery, mesh_id: int) -> Preview:
     """A mesh's preview and thumbnail.
 
     Raises
@@ -167,7 +174,7 @@ def preview(session: Session, mesh_id: int) -> Preview:
     ConflictError
         ``mesh_not_ready``: it is queued or being described; the preview comes with it.
     """
-    mesh = get(session, mesh_id)
+    mesh = get(session, gallery, mesh_id)
     stored = meshes.get_preview(session, mesh_id)
     if stored is not None:
         return stored
@@ -179,18 +186,20 @@ def preview(session: Session, mesh_id: int) -> Preview:
     raise NotFoundError(f"Mesh {mesh_id} is {mesh.status} and has no preview.", code="no_preview")
 
 
-def delete(session: Session, state: AppState, mesh_id: int) -> None:
-    """Delete a mesh, its descriptors and jobs; it leaves the index at once (after commit)."""
-    mesh = get(session, mesh_id)
-    task_ids = [j.task_id for j in mesh.jobs if j.status in ("queued", "processing")]
-    state.store.remove(session, mesh.storage_path)
+def delete(session: Session, state: AppState, gallery: Gallery, mesh_id: int) -> None:
+    """Delete a mesh, its descriptors and jobs, and its file unless another collection
+    enrolled the same bytes; it leaves the index at once (after commit)."""
+    mesh = get(session, gallery, mesh_id)
+    task_ids = [j.task_id for j in mesh.jobs if j.status in UNFINISHED_JOB]
+    if not meshes.storage_shared(session, mesh.storage_path, gallery.collection_id):
+        state.store.remove(session, mesh.storage_path)
     meshes.delete(session, mesh)
-    changes.record(session, mesh_id, "remove")
+    changes.record(session, mesh_id, gallery.collection_id, "remove")
 
     def _after() -> None:
         # Waits for a collector round that may have just stored this mesh's
         # descriptor (it holds the gallery), so its add cannot come after this removal.
-        state.gallery.remove(mesh_id)
+        gallery.remove(mesh_id)
         for task_id in task_ids:
             try:
                 state.queue.cancel(task_id)
@@ -200,9 +209,10 @@ def delete(session: Session, state: AppState, mesh_id: int) -> None:
     after_commit(session, _after)
 
 
-def descriptor_of(session: Session, state: AppState, mesh: Mesh) -> Descriptor | None:
-    """The mesh's descriptor under the service's preset, if it has one yet."""
-    return meshes.get_descriptor(session, mesh.id, state.preset.name, state.preset.version)
+def descriptor_of(session: Session, gallery: Gallery, mesh: Mesh) -> Descriptor | None:
+    """The mesh's descriptor under its collection's preset, if it has one yet."""
+    preset = gallery.base_preset
+    return meshes.get_descriptor(session, mesh.id, preset.name, preset.version)
 
 
 @dataclass
@@ -218,22 +228,24 @@ class MeshPage:
 def list_page(
     session: Session,
     state: AppState,
+    gallery: Gallery,
     *,
     label: str | None,
     status: MeshStatus | None,
     offset: int,
     limit: int,
 ) -> MeshPage:
-    """Meshes in id order, filtered by label and status; ``limit`` capped by the settings."""
+    """A collection's meshes in id order, filtered by label and status; ``limit`` capped
+    by the settings."""
     limit = min(limit, state.settings.max_page_size)
     rows, total = meshes.list_page(
         session,
+        gallery.collection_id,
         label=label,
         status=status.value if status else None,
         offset=offset,
         limit=limit,
     )
-    descriptors = meshes.descriptors_for(
-        session, [m.id for m in rows], state.preset.name, state.preset.version
-    )
+    preset = gallery.base_preset
+    descriptors = meshes.descriptors_for(session, [m.id for m in rows], preset.name, preset.version)
     return MeshPage([(m, descriptors.get(m.id)) for m in rows], total, offset, limit)

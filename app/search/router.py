@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import itertools
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Path, Request, Response
 
+from ..collections.service import SCOPED_PREFIX
 from ..deps import (
     WRITE_ACCESS,
+    GalleryDep,
     MultipartDep,
     ReadSessionDep,
     RowId,
@@ -40,7 +43,7 @@ OPTION_SCHEMAS: dict[str, dict[str, Any]] = {
     "preset": {
         "type": "string",
         "example": "smeets2010-shrec",
-        "description": "must be the enrolled preset",
+        "description": "must be the collection's preset",
     },
     "fusion": {
         "type": "string",
@@ -112,10 +115,11 @@ SIMILAR_ERRORS: dict[int | str, dict[str, Any]] = {
 
 def document_limits(openapi: dict[str, Any], *, max_k: int, preset: str) -> None:
     """Write the deployment's own limits into the options' schemas (in place): ``k`` at
-    most ``SHAPES_MAX_K``, ``preset`` only the enrolled one, so that documented and
-    accepted values agree."""
-    for path, where in (("/query", "form"), ("/meshes/{mesh_id}/similar", "query")):
-        operation = openapi["paths"][path]["post"]
+    most ``SHAPES_MAX_K``, ``preset`` only the service's (the default collection's, and
+    every collection's created without one), so that documented and accepted values agree."""
+    searches = (("/query", "form"), ("/meshes/{mesh_id}/similar", "query"))
+    for prefix, (path, where) in itertools.product(("", SCOPED_PREFIX), searches):
+        operation = openapi["paths"][prefix + path]["post"]
         if where == "form":
             content = operation["requestBody"]["content"]["multipart/form-data"]
             fields = content["schema"]["properties"]
@@ -180,7 +184,9 @@ def query_out(result: service.SearchResult) -> QueryOut:
     responses=QUERY_ERRORS | UNAUTHORIZED_RESPONSE,
     openapi_extra=QUERY_BODY,
 )
-def query(upload: MultipartDep, session: ReadSessionDep, state: StateDep) -> QueryOut:
+def query(
+    gallery: GalleryDep, upload: MultipartDep, session: ReadSessionDep, state: StateDep
+) -> QueryOut:
     file = require_file(upload)
     fields = upload.fields
     unknown = set(fields) - set(service.OPTION_NAMES)
@@ -192,20 +198,24 @@ def query(upload: MultipartDep, session: ReadSessionDep, state: StateDep) -> Que
         )
     options = service.parse_options(
         state,
+        gallery,
         k=fields.get("k"),
         preset=fields.get("preset"),
         fusion=fields.get("fusion"),
         modalities=fields.get("modalities"),
         far=fields.get("far"),
     )
-    return query_out(service.query_by_upload(session, state, file, options))
+    return query_out(service.query_by_upload(session, state, gallery, file, options))
 
 
-def similar_options(request: Request, state: StateDep) -> service.SearchOptions:
+def similar_options(
+    request: Request, state: StateDep, gallery: GalleryDep
+) -> service.SearchOptions:
     """The options of /similar, read as sent (documented by ``SIMILAR_PARAMETERS``)."""
     params = request.query_params
     return service.parse_options(
         state,
+        gallery,
         k=params.get("k"),
         preset=params.get("preset"),
         fusion=params.get("fusion"),
@@ -226,11 +236,12 @@ def similar_options(request: Request, state: StateDep) -> service.SearchOptions:
 )
 def similar(
     mesh_id: RowId,
+    gallery: GalleryDep,
     session: ReadSessionDep,
     state: StateDep,
     options: Annotated[service.SearchOptions, Depends(similar_options)],
 ) -> QueryOut:
-    return query_out(service.similar_to(session, state, mesh_id, options))
+    return query_out(service.similar_to(session, state, gallery, mesh_id, options))
 
 
 @router.get(

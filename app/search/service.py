@@ -21,9 +21,11 @@ from worker.engine.mesh_io import mesh_format
 from worker.engine.presets import MODALITIES, PRESETS, Preset
 from worker.recognition.calibration import Calibration
 
+from ..collections.service import collection_path
 from ..db import DATABASE_ERRORS, unit_of_work
 from ..errors import ConflictError, InvalidInputError
 from ..gallery.calibration import GalleryCalibration, NotEnoughPairs
+from ..gallery.service import Gallery
 from ..meshes import repository as meshes
 from ..meshes import service as mesh_service
 from ..models import Mesh, MeshStatus
@@ -120,18 +122,18 @@ def _blank_to_none(value: str | None) -> str | None:
     return (value or "").strip(" ") or None
 
 
-def resolve_preset(state: AppState, name: str | None) -> Preset:
-    """The preset a query asks for; only the enrolled one can be searched."""
-    if name is None or name == state.preset.name:
-        return state.preset
+def resolve_preset(gallery: Gallery, name: str | None) -> Preset:
+    """The preset a query asks for; only the collection's can be searched."""
+    if name is None or name == gallery.preset.name:
+        return gallery.preset
     if name not in PRESETS:
         known = ", ".join(sorted(PRESETS))
         raise InvalidInputError(
             f"There is no preset called {name!r}; known presets: {known}.", code="unknown_preset"
         )
     raise InvalidInputError(
-        f"The gallery is described with preset {state.preset.name!r}, so it can only be "
-        f"searched with that preset, not {name!r}.",
+        f"Collection {gallery.name!r} is described with preset {gallery.preset.name!r}, so "
+        f"it can only be searched with that preset, not {name!r}.",
         code="preset_not_enrolled",
     )
 
@@ -183,6 +185,7 @@ def parse_far(text: str | None) -> float | None:
 
 def parse_options(
     state: AppState,
+    gallery: Gallery,
     *,
     k: str | None,
     preset: str | None,
@@ -202,7 +205,7 @@ def parse_options(
     if rule not in (None, "sum", "product"):
         raise InvalidInputError("fusion must be 'sum' or 'product'.", code="invalid_fusion")
     count = parse_k(_blank_to_none(k))
-    chosen = resolve_preset(state, _blank_to_none(preset))
+    chosen = resolve_preset(gallery, _blank_to_none(preset))
     mods = parse_modalities(_blank_to_none(modalities), chosen)
     options = SearchOptions(
         k=check_k(state, count),
@@ -214,7 +217,7 @@ def parse_options(
     return options
 
 
-def current_calibration(session: Session, state: AppState) -> GalleryCalibration:
+def current_calibration(session: Session, state: AppState, gallery: Gallery) -> GalleryCalibration:
     """The gallery's calibration.
 
     Raises
@@ -224,7 +227,7 @@ def current_calibration(session: Session, state: AppState) -> GalleryCalibration
     """
     settings = state.settings
     try:
-        return state.gallery.calibration(
+        return gallery.calibration(
             session,
             max_pairs=settings.calibration_max_pairs,
             refit_seconds=settings.calibration_refit_seconds,
@@ -249,6 +252,7 @@ def query_facts(descriptor: ShapeDescriptor) -> dict[str, int | float]:
 def rank(
     session: Session,
     state: AppState,
+    gallery: Gallery,
     descriptor: ShapeDescriptor,
     options: SearchOptions,
     *,
@@ -256,7 +260,7 @@ def rank(
     timings: dict[str, float],
     descriptor_source: DescriptorSource,
 ) -> SearchResult:
-    matches, stats = state.gallery.search(
+    matches, stats = gallery.search(
         descriptor,
         options.k,
         fusion=options.fusion,
@@ -269,7 +273,7 @@ def rank(
         kept = stats.kept_share * (descriptor.kept_area_fraction or 1.0)
         partial = PartialQuery(stats.partiality, max(0.0, 1.0 - kept))
     # The calibration is of whole queries' scores; a part's are on another scale.
-    calibration = None if partial else _calibration_for(session, state, options)
+    calibration = None if partial else _calibration_for(session, state, gallery, options)
     threshold = None
     if options.far is not None and calibration is not None:
         assert calibration is not None  # _calibration_for raised otherwise
@@ -293,7 +297,7 @@ def rank(
         )
     return SearchResult(
         options=options,
-        gallery_size=len(state.gallery),
+        gallery_size=len(gallery),
         matches=ranked,
         timings={**timings, "search": stats.seconds},
         query=query_facts(descriptor),
@@ -304,12 +308,12 @@ def rank(
 
 
 def _calibration_for(
-    session: Session, state: AppState, options: SearchOptions
+    session: Session, state: AppState, gallery: Gallery, options: SearchOptions
 ) -> Calibration | None:
     """The calibration of the score the options rank by; None if there is none (too few
     labelled pairs), unless a FAR was asked for (then 409)."""
     try:
-        fit = current_calibration(session, state)
+        fit = current_calibration(session, state, gallery)
     except ConflictError:
         if options.far is not None:
             raise
@@ -318,14 +322,19 @@ def _calibration_for(
 
 
 def query_by_upload(
-    session: Session, state: AppState, upload: ReceivedFile, options: SearchOptions
+    session: Session,
+    state: AppState,
+    gallery: Gallery,
+    upload: ReceivedFile,
+    options: SearchOptions,
 ) -> SearchResult:
     """Rank the gallery against an uploaded mesh (:func:`upload_descriptor`)."""
-    state.gallery.check_ready()  # before the worker spends seconds on the query
+    gallery.check_ready()  # before the worker spends seconds on the query
     descriptor, source, timings, preview = upload_descriptor(session, state, upload, options.preset)
     result = rank(
         session,
         state,
+        gallery,
         descriptor,
         options,
         timings=timings,
@@ -341,18 +350,20 @@ def _has_preview(session: Session, sha256: str) -> bool:
     every search that reuses a descriptor asks)."""
     if repository.has_query_preview(session, sha256):
         return True
-    mesh = meshes.get_by_sha256(session, sha256)
-    return mesh is not None and meshes.has_preview(session, mesh.id)
+    return any(meshes.has_preview(session, m.id) for m in meshes.all_by_sha256(session, sha256))
 
 
 def query_preview(session: Session, sha256: str) -> bytes | None:
-    """The preview (GLB) of recently searched or enrolled bytes, if one was made."""
+    """The preview (GLB) of recently searched or enrolled bytes (in any collection: the
+    same bytes look the same), if one was made."""
     recent = repository.get_query_preview(session, sha256)
     if recent is not None:
         return recent
-    mesh = meshes.get_by_sha256(session, sha256)
-    stored = None if mesh is None else meshes.get_preview(session, mesh.id)
-    return None if stored is None else stored.glb
+    for mesh in meshes.all_by_sha256(session, sha256):
+        stored = meshes.get_preview(session, mesh.id)
+        if stored is not None:
+            return stored.glb
+    return None
 
 
 def _keep_preview(state: AppState, sha256: str, glb: bytes) -> bool:
@@ -405,23 +416,26 @@ def upload_descriptor(
 def _known_descriptor(
     session: Session, state: AppState, upload: ReceivedFile, preset: Preset
 ) -> ShapeDescriptor | None:
-    """The stored descriptor of an enrolled mesh with these very bytes, read as the
-    same format (the same bytes named .stl and .obj are different meshes)."""
-    mesh = meshes.get_by_sha256(session, upload.sha256)
-    if mesh is None or mesh_format(mesh.filename) != mesh_format(upload.filename):
-        return None
-    stored = meshes.get_descriptor(session, mesh.id, preset.name, preset.version)
-    return None if stored is None else ShapeDescriptor.from_npz_bytes(stored.data)
+    """The stored descriptor of a mesh enrolled (in any collection) with these very bytes,
+    read as the same format (the same bytes named .stl and .obj are different meshes)."""
+    for mesh in meshes.all_by_sha256(session, upload.sha256):
+        if mesh_format(mesh.filename) != mesh_format(upload.filename):
+            continue
+        stored = meshes.get_descriptor(session, mesh.id, preset.name, preset.version)
+        if stored is not None:
+            return ShapeDescriptor.from_npz_bytes(stored.data)
+    return None
 
 
 def similar_to(
-    session: Session, state: AppState, mesh_id: int, options: SearchOptions
+    session: Session, state: AppState, gallery: Gallery, mesh_id: int, options: SearchOptions
 ) -> SearchResult:
     """Rank the gallery against an enrolled mesh's stored descriptor (itself left out)."""
-    descriptor = stored_descriptor(session, mesh_id, options.preset)
+    descriptor = stored_descriptor(session, gallery, mesh_id, options.preset)
     result = rank(
         session,
         state,
+        gallery,
         descriptor,
         options,
         exclude=(mesh_id,),
@@ -429,12 +443,14 @@ def similar_to(
         descriptor_source="stored",
     )
     if meshes.has_preview(session, mesh_id):
-        result.preview = f"/meshes/{mesh_id}/preview"
+        result.preview = f"{collection_path(gallery.name)}/meshes/{mesh_id}/preview"
     return result
 
 
-def stored_descriptor(session: Session, mesh_id: int, preset: Preset) -> ShapeDescriptor:
-    """An enrolled mesh's descriptor under ``preset``.
+def stored_descriptor(
+    session: Session, gallery: Gallery, mesh_id: int, preset: Preset
+) -> ShapeDescriptor:
+    """A mesh's descriptor under ``preset``, enrolled in ``gallery``'s collection.
 
     Raises
     ------
@@ -443,7 +459,7 @@ def stored_descriptor(session: Session, mesh_id: int, preset: Preset) -> ShapeDe
     ConflictError
         ``mesh_not_ready``: it has no descriptor yet (queued, processing or failed).
     """
-    mesh = mesh_service.get(session, mesh_id)
+    mesh = mesh_service.get(session, gallery, mesh_id)
     stored = meshes.get_descriptor(session, mesh_id, preset.name, preset.version)
     if stored is None or mesh.status != MeshStatus.ready.value:
         raise ConflictError(

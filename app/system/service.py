@@ -23,21 +23,29 @@ def readiness(state: AppState) -> tuple[bool, dict[str, str]]:
         checks["queue"] = f"ok ({state.queue.waiting_count()} enrollments waiting)"
     except Exception as exc:
         checks["queue"] = f"error: {exc.__class__.__name__}"
-    gallery = state.gallery
-    if gallery.loaded:
-        checks["index"] = f"ok ({len(gallery)} shapes)"
+    galleries = state.galleries
+    if galleries.loaded:
+        count = sum(1 for _ in galleries)
+        plural = "" if count == 1 else "s"
+        checks["index"] = f"ok ({len(galleries)} shapes in {count} collection{plural})"
     else:
-        checks["index"] = gallery.error or "loading"
+        checks["index"] = galleries.error or "loading"
     return all(check.startswith("ok") for check in checks.values()), checks
 
 
 def description_progress(state: AppState) -> dict[str, object]:
-    """How many enrolled meshes have a descriptor of the service's preset version (all,
-    except while the meshes of an earlier version are described again in the
-    background: only those are searchable meanwhile)."""
+    """How many enrolled meshes (of every collection) have a descriptor of their
+    collection's preset version (all, except while the meshes of an earlier version are
+    described again in the background: only those are searchable meanwhile)."""
     preset = state.preset
+    described = describable = 0
     with state.read_sessions() as session:
-        described, describable = meshes.description_progress(session, preset.name, preset.version)
+        for gallery in state.galleries:
+            base = gallery.base_preset
+            done, total = meshes.description_progress(
+                session, gallery.collection_id, base.name, base.version
+            )
+            described, describable = described + done, describable + total
     return {
         "preset": f"{preset.name} v{preset.version}",
         "described": described,

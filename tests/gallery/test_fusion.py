@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from dataclasses import replace
 from pathlib import Path
 
@@ -32,7 +33,14 @@ def _noisy_gdm(n: int, seed: int = 0) -> tuple[dict[str, np.ndarray], dict[int, 
 
 def _loaded(preset, gallery) -> Gallery:
     """A gallery whose index holds ``gallery`` (as loading would; nothing saved)."""
-    g = Gallery(preset, Path("not-saved"), refit_fraction=0.05, metrics=Metrics())
+    g = Gallery(
+        (1, "default"),
+        preset,
+        Path("not-saved"),
+        refit_fraction=0.05,
+        metrics=Metrics(),
+        lock=threading.RLock(),
+    )
     index = GalleryIndex(g.preset, preset.modality_sizes())
     index.add_many((i, {m: gallery[m][i] for m in MODALITIES}) for i in range(len(gallery["gdm"])))
     g._index = index

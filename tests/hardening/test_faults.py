@@ -49,7 +49,10 @@ def _kill_api(service: Service) -> None:
 
 def _index_agrees_with_the_database(service: Service) -> None:
     ready = _db(service, "SELECT count(*) FROM descriptors")[0][0]
-    assert service.client.get("/ready").json()["checks"]["index"] == f"ok ({ready} shapes)"
+    assert (
+        service.client.get("/ready").json()["checks"]["index"]
+        == f"ok ({ready} shapes in 1 collection)"
+    )
     statuses = {s for (s,) in _db(service, "SELECT status FROM meshes")}
     assert statuses <= {"queued", "processing", "ready", "failed"}
     assert integrity_check(service) == "ok"

@@ -12,12 +12,13 @@ from app.errors import InvalidInputError
 from app.search.service import MODALITIES_PATTERN, parse_options
 from worker.engine.presets import get_preset
 
-STATE = SimpleNamespace(preset=get_preset("smeets2010-shrec"), settings=SimpleNamespace(max_k=100))
+STATE = SimpleNamespace(settings=SimpleNamespace(max_k=100))
+GALLERY = SimpleNamespace(name="default", preset=get_preset("smeets2010-shrec"))
 
 
 def options(**fields: str | None):
     values = {"k": None, "preset": None, "fusion": None, "modalities": None} | fields
-    return parse_options(STATE, **values)
+    return parse_options(STATE, GALLERY, **values)
 
 
 @pytest.mark.parametrize(

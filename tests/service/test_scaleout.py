@@ -150,7 +150,7 @@ def test_the_service_on_postgresql_and_redis_survives_kill_9(
         done = _wait_all(service, ids)
         assert all(body["status"] == "ready" for body in done.values()), done
         ready = service.client.get("/ready").json()
-        assert ready["checks"]["index"] == f"ok ({len(ids)} shapes)"
+        assert ready["checks"]["index"] == f"ok ({len(ids)} shapes in 1 collection)"
         assert _descriptor_rows(postgres.url) == len(ids)
 
         answer = service.query("quadruped-2", k=2)

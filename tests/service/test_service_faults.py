@@ -98,7 +98,7 @@ def test_a_new_preset_version_describes_every_stored_mesh_again(tmp_path_factory
                 assert body["status"] != "failed" and time.monotonic() < deadline, body
                 time.sleep(0.2)
         ready = svc.client.get("/ready").json()
-        assert ready["checks"]["index"] == "ok (2 shapes)"
+        assert ready["checks"]["index"] == "ok (2 shapes in 1 collection)"
         assert ready["descriptors"]["described"] == ready["descriptors"]["enrolled"] == 2
         matches = svc.query("quadruped-1", k=2).json()["matches"]
         assert [m["label"] for m in matches] == ["quadruped", "biped"]

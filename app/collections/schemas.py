@@ -1,0 +1,52 @@
+"""Request and response models of the collection endpoints."""
+
+from __future__ import annotations
+
+from pydantic import BaseModel, ConfigDict, Field, JsonValue
+
+from worker.engine.presets import PRESETS
+
+from ..models import Units
+from ..schemas import UtcDatetime
+from .service import NAME_PATTERN
+
+PRESET_NAMES: list[JsonValue] = [name for name in sorted(PRESETS)]
+
+
+class CollectionIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(pattern=NAME_PATTERN, description="part of the collection's paths")
+    units: Units = Field(
+        Units.any,
+        description="`any`: the files' units are arbitrary, shapes are compared scale-free; "
+        "`metric`: every file is in one physical unit (a scanner's millimetres or metres), "
+        "so the size of a shape is a cue of its own in the fused score",
+    )
+    preset: str | None = Field(
+        None,
+        description="the preset its meshes are described with (default: the service's)",
+        json_schema_extra={"enum": PRESET_NAMES},
+    )
+
+
+class CollectionLinks(BaseModel):
+    self: str
+    meshes: str
+    query: str
+    calibration: str
+
+
+class CollectionOut(BaseModel):
+    name: str
+    units: Units
+    preset: str
+    preset_version: int
+    meshes: int = Field(description="enrolled meshes")
+    ready: int = Field(description="meshes described and searchable")
+    created_at: UtcDatetime
+    links: CollectionLinks
+
+
+class CollectionList(BaseModel):
+    items: list[CollectionOut]

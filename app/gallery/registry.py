@@ -1,0 +1,191 @@
+"""Every collection's gallery (:class:`Galleries`): made from the ``collections`` table,
+kept equal to it on every API process.
+
+A collection created or deleted through one process reaches the others when their
+collector next syncs (every round), or at once when a request names a collection
+this process does not know yet.
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+from sqlalchemy.orm import Session, sessionmaker
+
+from worker.engine.presets import Preset, get_preset
+
+from ..collections import repository as collections
+from ..config import Settings
+from ..errors import NotFoundError
+from ..metrics import Metrics
+from ..models import DEFAULT_COLLECTION, Collection
+from .fusion import pinned_fusion
+from .service import Gallery
+
+log = logging.getLogger("shapes.gallery")
+
+
+@dataclass(frozen=True)
+class CollectionSpec:
+    """What a collection's gallery is made of (a ``collections`` row)."""
+
+    id: int
+    name: str
+    units: str
+    preset: Preset
+
+    @classmethod
+    def of(cls, row: Collection, default_preset: str) -> CollectionSpec:
+        return cls(row.id, row.name, row.units, get_preset(row.preset or default_preset))
+
+
+class Galleries:
+    """The galleries of the service's collections, by collection id."""
+
+    def __init__(
+        self, settings: Settings, metrics: Metrics, read_sessions: sessionmaker[Session]
+    ) -> None:
+        self.settings = settings
+        self.metrics = metrics
+        self.read_sessions = read_sessions
+        self.error: str | None = None  # why loading failed, shown by /ready
+        self._by_id: dict[int, Gallery] = {}
+        self._specs: dict[int, CollectionSpec] = {}
+        # One for every gallery: a collector round stores the results of all of them.
+        self._lock = threading.RLock()
+        self._sync_lock = threading.Lock()
+        self._synced = False
+
+    # ------------------------------------------------------------ access
+    @property
+    def loaded(self) -> bool:
+        """Synced with the collections table, and every gallery's index loaded."""
+        return self._synced and all(g.loaded for g in list(self._by_id.values()))
+
+    def __iter__(self) -> Iterator[Gallery]:
+        return iter(list(self._by_id.values()))
+
+    def __len__(self) -> int:
+        """Shapes in every collection's index."""
+        return sum(len(g) for g in self)
+
+    def of(self, collection_id: int) -> Gallery | None:
+        """The gallery of a collection (None if it was deleted)."""
+        return self._by_id.get(collection_id)
+
+    def named(self, name: str) -> Gallery:
+        """The gallery of the collection called ``name``.
+
+        Raises
+        ------
+        NotFoundError
+            ``collection_not_found``: there is no such collection (also after asking the
+            database, for one another API process created a moment ago).
+        """
+        gallery = self._find(name)
+        if gallery is None:
+            self.sync()
+            gallery = self._find(name)
+        if gallery is None:
+            raise NotFoundError(
+                f"There is no collection called {name!r}; GET /collections lists them.",
+                code="collection_not_found",
+            )
+        return gallery
+
+    @property
+    def default(self) -> Gallery:
+        return self.named(DEFAULT_COLLECTION)
+
+    def _find(self, name: str) -> Gallery | None:
+        for gallery in self:
+            if gallery.name == name:
+                return gallery
+        return None
+
+    @contextmanager
+    def changing(self) -> Iterator[None]:
+        """Hold every gallery while a database transaction and its index changes happen."""
+        with self._lock:
+            yield
+
+    # -------------------------------------------------------------- sync
+    def sync(self) -> None:
+        """Make a gallery for each new collection (its index loaded now) and drop the
+        deleted ones' (their saved index removed)."""
+        with self._sync_lock:
+            with self.read_sessions() as session:
+                rows = collections.all_rows(session)
+            specs = {row.id: CollectionSpec.of(row, self.settings.preset) for row in rows}
+            gone = [i for i in self._by_id if i not in specs]
+            for collection_id in gone:
+                self._drop(collection_id)
+            new = [spec for i, spec in specs.items() if i not in self._by_id]
+            for spec in new:
+                gallery = self._make(spec)
+                gallery.load(self.read_sessions)
+                self._specs[spec.id] = spec
+                self._by_id[spec.id] = gallery
+            self._synced = True
+
+    def _drop(self, collection_id: int) -> None:
+        with self._lock:
+            gallery = self._by_id.pop(collection_id)
+            self._specs.pop(collection_id)
+        self.metrics.index_size.remove(gallery.name)
+        if collection_id != 1:  # never the default's, which other versions share
+            shutil.rmtree(self._directory(collection_id, gallery.base_preset).parent, True)
+        log.info("collection %s deleted: its gallery is gone", gallery.name)
+
+    def _directory(self, collection_id: int, preset: Preset) -> Path:
+        """Where a collection's index is saved: the default collection's where the
+        service kept its one gallery's, the others' under ``collections/<id>``."""
+        settings = self.settings
+        if collection_id == 1:
+            return settings.index_directory / f"{preset.name}-v{preset.version}"
+        return (
+            settings.index_directory
+            / "collections"
+            / str(collection_id)
+            / f"{preset.name}-v{preset.version}"
+        )
+
+    def _make(self, spec: CollectionSpec) -> Gallery:
+        settings = self.settings
+        pin = settings.fusion_weights
+        # The operator's pinned weights are the service preset's modalities'.
+        pinned = pin is not None and spec.preset.name == settings.preset
+        return Gallery(
+            (spec.id, spec.name),
+            spec.preset,
+            self._directory(spec.id, spec.preset),
+            refit_fraction=settings.index_refit_fraction,
+            metrics=self.metrics,
+            lock=self._lock,
+            fusion=pinned_fusion(spec.preset, pin) if pinned and pin is not None else None,
+            learn_fusion=settings.fusion == "learned" and not pinned,
+            fusion_max_shapes=settings.fusion_max_shapes,
+        )
+
+    # --------------------------------------------------------- each round
+    def follow(self) -> int:
+        """Apply every collection's change-log entries (:meth:`Gallery.follow`)."""
+        return sum(g.follow(self.read_sessions) for g in self)
+
+    def maybe_refit_fusion(self, every: float) -> None:
+        for gallery in self:
+            gallery.maybe_refit_fusion(self.read_sessions, every)
+
+    @property
+    def dirty(self) -> bool:
+        return any(g.dirty for g in self)
+
+    def save(self) -> None:
+        for gallery in self:
+            gallery.save()
