@@ -41,7 +41,9 @@ def run_migrations_online() -> None:
             # old one would delete the rows that refer to it (ON DELETE CASCADE). The
             # pragma only takes effect outside a transaction: on the driver's connection,
             # before SQLAlchemy's BEGIN (app.db).
-            connection.connection.driver_connection.execute("PRAGMA foreign_keys=OFF")
+            driver = connection.connection.driver_connection
+            assert driver is not None
+            driver.execute("PRAGMA foreign_keys=OFF")
         context.configure(
             connection=connection, target_metadata=target_metadata, render_as_batch=True
         )

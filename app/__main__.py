@@ -18,7 +18,7 @@ import sys
 import time
 from types import FrameType
 
-from .config import Settings
+from .config import Settings, access_notice
 from .migrations import upgrade_head
 
 log = logging.getLogger("shapes.serve")
@@ -55,6 +55,12 @@ def _stop(processes: list[subprocess.Popen[bytes]], first_signal: int) -> None:
 
 
 def serve(settings: Settings) -> int:
+    try:
+        notice = access_notice(settings)
+    except ValueError as refusal:
+        log.error("%s", refusal)
+        return 2
+    log.log(logging.WARNING if settings.api_key is None else logging.INFO, "%s", notice)
     settings.data_dir.mkdir(parents=True, exist_ok=True)
     log.info("migrating %s", settings.sqlalchemy_url)
     upgrade_head(settings.sqlalchemy_url)

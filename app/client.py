@@ -358,8 +358,8 @@ def failure_table(result: ImportResult) -> str:
 
 
 def add_subcommands(sub: Any) -> None:
-    """Register ``import``, ``query`` and ``collections`` on the ``shapes`` parser's
-    subparsers."""
+    """Register ``import``, ``query``, ``collections`` and ``keys`` on the ``shapes``
+    parser's subparsers."""
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--url", default=DEFAULT_URL, help=f"the service (default {DEFAULT_URL})")
     common.add_argument(
@@ -415,6 +415,25 @@ def add_subcommands(sub: Any) -> None:
     )
     delete.add_argument("name")
     delete.set_defaults(run=_collections_command)
+    keys = sub.add_parser(
+        "keys",
+        help="make, list or revoke API keys (with the admin key, $SHAPES_API_KEY)",
+        description="A key opens one collection (or * for all) with a scope: read (list, "
+        "download, search, verify), write (also enroll and delete meshes) or admin (also "
+        "delete the collection; for *, create collections and manage keys).",
+    )
+    key_action = keys.add_subparsers(dest="action", required=True)
+    key_list = key_action.add_parser("list", parents=[common], help="every key's id and scope")
+    key_list.set_defaults(run=_keys_command)
+    key_create = key_action.add_parser(
+        "create", parents=[common], help="a new key, printed once (only its hash is stored)"
+    )
+    key_create.add_argument("collection", help="a collection's name, or '*' for all")
+    key_create.add_argument("scope", choices=("read", "write", "admin"))
+    key_create.set_defaults(run=_keys_command)
+    key_revoke = key_action.add_parser("revoke", parents=[common], help="revoke a key by id")
+    key_revoke.add_argument("id", type=int)
+    key_revoke.set_defaults(run=_keys_command)
 
 
 def _import_command(args: argparse.Namespace) -> int:
@@ -484,30 +503,60 @@ def format_collections(items: list[dict[str, Any]]) -> str:
     )
 
 
-def _collections_command(args: argparse.Namespace) -> int:
+def _call(args: argparse.Namespace, command: str, method: str, path: str, **kwargs: Any) -> Any:
+    """One request of ``shapes collections`` or ``shapes keys``: its JSON answer (None for
+    204); ClientError with the service's sentence when refused."""
     with _client(args.url, args.api_key) as client:
-        try:
-            _check_reachable(client, args.url)
-            if args.action == "list":
-                response = client.get("/collections")
-            elif args.action == "create":
-                body = {"name": args.name, "units": args.units}
-                if args.preset:
-                    body["preset"] = args.preset
-                response = client.post("/collections", json=body)
-            else:
-                response = client.delete(f"/collections/{args.name}")
-        except ClientError as exc:
-            print(f"shapes collections: {exc}", file=sys.stderr)
-            return 2
+        _check_reachable(client, args.url)
+        response = client.request(method, path, **kwargs)
     if response.status_code >= 400:
-        print(f"shapes collections {args.action}: {_refusal(response)}", file=sys.stderr)
+        raise ClientError(f"shapes {command} {args.action}: {_refusal(response)}")
+    return None if response.status_code == 204 else response.json()
+
+
+def _collections_command(args: argparse.Namespace) -> int:
+    try:
+        if args.action == "list":
+            print(format_collections(_call(args, "collections", "GET", "/collections")["items"]))
+        elif args.action == "create":
+            body = {"name": args.name, "units": args.units}
+            if args.preset:
+                body["preset"] = args.preset
+            made = _call(args, "collections", "POST", "/collections", json=body)
+            units, preset = made["units"], made["preset"]
+            print(f"created collection {made['name']} (units {units}, preset {preset})")
+        else:
+            _call(args, "collections", "DELETE", f"/collections/{args.name}")
+            print(f"deleted collection {args.name} and its meshes")
+    except ClientError as exc:
+        print(exc, file=sys.stderr)
         return 1
-    if args.action == "list":
-        print(format_collections(response.json()["items"]))
-    elif args.action == "create":
-        made = response.json()
-        print(f"created collection {made['name']} (units {made['units']}, preset {made['preset']})")
-    else:
-        print(f"deleted collection {args.name} and its meshes")
+    return 0
+
+
+def _keys_command(args: argparse.Namespace) -> int:
+    try:
+        if args.action == "list":
+            items = _call(args, "keys", "GET", "/keys")["items"]
+            rows = [("id", "collection", "scope", "created")] + [
+                (str(k["id"]), k["collection"], k["scope"], k["created_at"][:19]) for k in items
+            ]
+            widths = [max(len(row[i]) for row in rows) for i in range(4)]
+            for row in rows:
+                print("  ".join(v.ljust(w) for v, w in zip(row, widths, strict=True)).rstrip())
+        elif args.action == "create":
+            body = {"collection": args.collection, "scope": args.scope}
+            made = _call(args, "keys", "POST", "/keys", json=body)
+            print(made["key"])
+            print(
+                f"key {made['id']}: {made['scope']} on {made['collection']}; shown this once, "
+                "keep it now",
+                file=sys.stderr,
+            )
+        else:
+            _call(args, "keys", "DELETE", f"/keys/{args.id}")
+            print(f"revoked key {args.id}")
+    except ClientError as exc:
+        print(exc, file=sys.stderr)
+        return 1
     return 0

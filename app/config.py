@@ -41,7 +41,14 @@ class Settings(QueueSettings):
     # Access
     api_key: SecretStr | None = Field(
         default=None,
-        description="when set, every POST and DELETE needs it in the X-API-Key header",
+        description="the admin key: when set, every request for a collection's resources "
+        "needs a key in the X-API-Key header (this one, or one it made with POST /keys); "
+        "unset, the service is open, and serves on a loopback address only",
+    )
+    open_access: bool = Field(
+        default=False,
+        description="serve without a key on a non-loopback address (e.g. 0.0.0.0 inside a "
+        "container whose port is published on the host's loopback only)",
     )
     cors_origins: list[str] = Field(
         default=[],
@@ -156,6 +163,33 @@ class Settings(QueueSettings):
         """Where the index of the preset's current version is saved."""
         preset = get_preset(self.preset)
         return self.index_directory / f"{preset.name}-v{preset.version}"
+
+
+#: Addresses only this machine reaches.
+LOOPBACK = frozenset({"127.0.0.1", "::1", "localhost"})
+
+
+def access_notice(settings: Settings) -> str:
+    """The sentence the service says at start about who may use it.
+
+    Raises
+    ------
+    ValueError
+        No key, bound to an address other machines reach, and not ``SHAPES_OPEN_ACCESS``:
+        the service would be open to anyone on the network, who could delete everything.
+    """
+    where = f"http://{settings.host}:{settings.port}"
+    if settings.api_key is not None:
+        return f"API keys required at {where} (SHAPES_API_KEY is the admin key)"
+    if settings.host in LOOPBACK:
+        return f"no API key (SHAPES_API_KEY): open to everyone on this machine at {where}"
+    if settings.open_access:
+        return f"no API key, open to everyone who reaches {where} (SHAPES_OPEN_ACCESS)"
+    raise ValueError(
+        f"refusing to serve on {settings.host} without an API key: anyone on the network "
+        "could enroll and delete. Set SHAPES_API_KEY (the admin key), serve on 127.0.0.1, "
+        "or set SHAPES_OPEN_ACCESS=true if only trusted clients reach this address."
+    )
 
 
 @lru_cache

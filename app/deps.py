@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import hmac
 from collections.abc import AsyncIterator, Iterator
 from typing import Annotated, Any
 
@@ -13,9 +12,10 @@ from sqlalchemy.orm import Session
 
 from .collections.service import NAME_PATTERN
 from .db import unit_of_work
-from .errors import InvalidInputError, UnauthorizedError
+from .errors import ForbiddenError, InvalidInputError, UnauthorizedError
 from .gallery.service import Gallery
-from .models import DEFAULT_COLLECTION
+from .keys.service import Grant
+from .models import DEFAULT_COLLECTION, Scope
 from .state import AppState
 from .storage import ReceivedFile
 from .uploads import MultipartUpload, receive_multipart
@@ -95,43 +95,81 @@ ReadSessionDep = Annotated[Session, Depends(get_read_session, scope="function")]
 API_KEY_HEADER = APIKeyHeader(
     name="X-API-Key",
     auto_error=False,
-    description="Needed by POST and DELETE when the service sets SHAPES_API_KEY.",
+    description="Needed by every request for a collection's resources when the service "
+    "sets SHAPES_API_KEY: that key (the admin), or one it made with POST /keys.",
 )
 
 
-def require_api_key(
+def get_grant(
     state: StateDep, key: Annotated[str | None, Depends(API_KEY_HEADER)] = None
-) -> None:
-    """Refuse a write without the configured key (no key configured: open, for local use).
+) -> Grant | None:
+    """What the request's key may do; None when the service is open (no key configured).
 
     Runs before the body is read, so an unauthorized upload costs no disk.
     """
-    expected = state.settings.api_key
-    if expected is None:
-        return
-    # Constant time: how much of a guess matches must not show in the response time.
-    if key is None or not hmac.compare_digest(
-        key.encode("utf-8"), expected.get_secret_value().encode("utf-8")
-    ):
+    if state.keys.open:
+        return None
+    grant = None if key is None else state.keys.grant(key)
+    if grant is None:
         raise UnauthorizedError(
-            "This service needs an API key for changes and searches: "
-            "send it in the X-API-Key header."
+            "This service needs an API key: send it in the X-API-Key header."
             if key is None
-            else "The API key in the X-API-Key header is not valid."
+            else "The API key in the X-API-Key header is not valid (or was revoked)."
+        )
+    return grant
+
+
+GrantDep = Annotated[Grant | None, Depends(get_grant)]
+
+
+def check_grant(grant: Grant | None, collection_id: int | None, needed: Scope, what: str) -> None:
+    """Refuse (403) a key that may not do ``needed`` in the collection (None: in all)."""
+    if grant is not None and not grant.allows(collection_id, needed):
+        raise ForbiddenError(f"This API key may not {what}.")
+
+
+_WHAT = {
+    Scope.read: "read this collection",
+    Scope.write: "change this collection",
+    Scope.admin: "administer this collection",
+}
+
+
+def _access(needed: Scope, *, everything: bool = False) -> Any:
+    def check(request: Request, state: StateDep, grant: GrantDep) -> None:
+        if grant is None:
+            return
+        if everything:
+            check_grant(grant, None, needed, "administer the service")
+            return
+        params = request.path_params
+        name = params.get("collection") or params.get("name") or DEFAULT_COLLECTION
+        gallery = state.galleries.find(name)  # unknown: 403 unless the key may see all
+        check_grant(
+            grant, None if gallery is None else gallery.collection_id, needed, _WHAT[needed]
         )
 
+    return Depends(check)
 
-WRITE_ACCESS = [Depends(require_api_key)]
-"""``dependencies=`` of every POST and DELETE route."""
+
+READ_ACCESS = [_access(Scope.read)]
+"""``dependencies=`` of the routes that read a collection (its path's, or the default)."""
+WRITE_ACCESS = [_access(Scope.write)]
+"""``dependencies=`` of the routes that change a collection's meshes."""
+ADMIN_ACCESS = [_access(Scope.admin)]
+"""``dependencies=`` of the routes that delete a collection."""
+SERVICE_ADMIN = [_access(Scope.admin, everything=True)]
+"""``dependencies=`` of the routes that create collections and manage keys."""
 
 
 def document_open_access(openapi: dict[str, Any]) -> None:
     """Without a configured key nothing asks for one: drop the key's security
-    requirement and its 401 answers from the schema (in place)."""
+    requirement and its 401 and 403 answers from the schema (in place)."""
     for operations in openapi.get("paths", {}).values():
         for operation in operations.values():
             operation.pop("security", None)
             operation.get("responses", {}).pop("401", None)
+            operation.get("responses", {}).pop("403", None)
     schemes = openapi.get("components", {}).get("securitySchemes", {})
     schemes.pop(API_KEY_HEADER.scheme_name, None)
     if not schemes:

@@ -42,6 +42,11 @@ class UnauthorizedError(DomainError):
     code = "unauthorized"
 
 
+class ForbiddenError(DomainError):
+    status = 403
+    code = "forbidden"
+
+
 class NotFoundError(DomainError):
     status = 404
     code = "not_found"

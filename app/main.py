@@ -28,6 +28,8 @@ from .gallery.fusion import pinned_fusion
 from .gallery.registry import Galleries
 from .jobs.collector import JobCollector
 from .jobs.router import router as jobs_router
+from .keys.router import router as keys_router
+from .keys.service import KeyRing
 from .meshes.router import router as meshes_router
 from .metrics import Metrics, RequestMetricsMiddleware
 from .migrations import upgrade_head
@@ -97,6 +99,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             ),
             metrics=metrics,
             galleries=Galleries(settings, metrics, read_sessions),
+            keys=KeyRing(settings.api_key, read_sessions),
             recent_queries=Recent(settings.query_cache_size),
         )
         app.state.shapes = state
@@ -129,7 +132,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             allow_headers=["X-API-Key", "Content-Type"],
         )
     scoped = (meshes_router, search_router, calibration_router)
-    for router in (*scoped, collections_router, jobs_router, system_router):
+    for router in (*scoped, collections_router, keys_router, jobs_router, system_router):
         app.include_router(router)
     include_scoped(app, scoped)
     # The web page: static files, no build step (three.js vendored under static/vendor).

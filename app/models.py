@@ -60,6 +60,35 @@ class Collection(Base):
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 
+class Scope(StrEnum):
+    """What an API key may do in its collections, each including the one before."""
+
+    read = "read"  # list, download, search, verify, read the calibration
+    write = "write"  # also enroll and delete meshes
+    admin = "admin"  # also create and delete collections and keys
+
+    def allows(self, needed: Scope) -> bool:
+        order = list(Scope)
+        return order.index(self) >= order.index(needed)
+
+
+class ApiKey(Base):
+    """A key made with ``POST /keys``: only its SHA-256 is stored (a key is 32 random
+    bytes, so its hash cannot be reversed by guessing)."""
+
+    __tablename__ = "api_keys"
+    __table_args__ = {"sqlite_autoincrement": True}  # a revoked key's id is never reused
+
+    id: Mapped[int] = mapped_column(primary_key=True)
+    key_sha256: Mapped[str] = mapped_column(String(64), unique=True)
+    # None: every collection ("*").
+    collection_id: Mapped[int | None] = mapped_column(
+        ForeignKey("collections.id", ondelete="CASCADE"), index=True
+    )
+    scope: Mapped[str] = mapped_column(String(8))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
 class Mesh(Base):
     """One uploaded file in a collection, its bytes stored content-addressed under
     ``uploads/`` (shared by the collections that enrolled the same bytes)."""

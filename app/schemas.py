@@ -83,10 +83,15 @@ FILE_RESPONSES: dict[int | str, dict[str, Any]] = {
 }
 """Declared by every request that can carry a mesh file."""
 
-UNAUTHORIZED_RESPONSE: dict[int | str, dict[str, Any]] = {
-    401: {"model": ErrorOut, "description": "API key missing or wrong (`unauthorized`)"},
+ACCESS_RESPONSES: dict[int | str, dict[str, Any]] = {
+    401: {"model": ErrorOut, "description": "API key missing, wrong or revoked (`unauthorized`)"},
+    403: {
+        "model": ErrorOut,
+        "description": "The key may not do this: another collection's, or too small a scope "
+        "(`forbidden`)",
+    },
 }
-"""Declared by every POST and DELETE (they need the API key when one is configured)."""
+"""Declared by every route that needs a key when the service sets one."""
 
 
 def multipart_body(

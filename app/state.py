@@ -12,6 +12,7 @@ from worker.engine.presets import Preset
 
 from .config import Settings
 from .gallery.registry import Galleries
+from .keys.service import KeyRing
 from .metrics import Metrics
 from .queue import DescriptorQueue
 from .search.recent import Recent
@@ -32,4 +33,5 @@ class AppState:
     store: UploadStore
     metrics: Metrics
     galleries: Galleries
+    keys: KeyRing
     recent_queries: Recent[ShapeDescriptor]

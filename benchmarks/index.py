@@ -3,6 +3,7 @@
     python -m benchmarks.index                        # TOSCA + 1k/10k/100k synthetic
     python -m benchmarks.index --sizes 1000 10000     # fewer sizes
     python -m benchmarks.index --tosca-presets --sizes 1000000 --queries 100
+    python -m benchmarks.index --tosca-presets --sizes 100000 --collections 10
 
 * TOSCA: every mesh is a query against the other 82 (leave-one-out), under the
   default preset and any other ``--tosca-presets``.
@@ -16,6 +17,13 @@ one query at a time, after one warm-up query. "index MB" is the growth of the
 process's resident memory while the index was built (vectors, transformed rows,
 faiss); "build s" adds every shape and fits once, "refit s" is one more refit
 (what searches wait for after 5 % churn).
+
+With ``--collections C``, each size is also enrolled spread over C indexes (whole
+classes each: the service keeps one index per collection, ``app.gallery.registry``, and
+a search ranks its own collection only), and every query is searched in its own
+collection's index too, interleaved with the one gallery's query by query, so that the
+machine's load falls on both alike; recall@10 is against the exhaustive ranking of the
+collection.
 
 Synthetic descriptors: every modality is modelled in log space from the real
 TOSCA descriptors. A synthetic class centre is the real mean plus a random
@@ -221,6 +229,77 @@ def synthetic_rows(preset_name: str, sizes: list[int], n_queries: int, seed: int
     return rows
 
 
+def collection_rows(
+    preset_name: str, size: int, collections: int, n_queries: int, seed: int
+) -> list[Row]:
+    """``size`` synthetic shapes as one gallery and spread over ``collections`` indexes
+    (whole classes each): the same held-out queries searched in both, interleaved."""
+    preset = get_preset(preset_name)
+    rng = np.random.default_rng(seed)
+    per_class = 10
+    n_classes = max(1, size // per_class)
+    data = synthetic(synthetic_model(preset_name), n_classes, per_class + 1, rng)
+    member = np.arange(n_classes * (per_class + 1)) % (per_class + 1)
+    collection_of = (np.arange(len(member)) // (per_class + 1)) % collections
+    enrolled = np.flatnonzero(member < per_class)
+    picks = rng.choice(np.flatnonzero(member == per_class), size=n_queries, replace=False)
+    queries = [{m: data[m][i] for m in MODALITIES} for i in picks]
+    shards = [enrolled] + [enrolled[collection_of[enrolled] == c] for c in range(collections)]
+    built: list[tuple[GalleryIndex, Vectors, np.ndarray, float]] = []
+    for ids in shards:
+        gallery = {m: data[m][ids] for m in MODALITIES}
+        started = time.perf_counter()
+        index = build(preset, gallery, ids)
+        built.append((index, gallery, ids, time.perf_counter() - started))
+        index.search(queries[0], K)  # warm-up
+    hits = np.zeros(2)
+    times: list[list[float]] = [[], []]
+    for query, i in zip(queries, picks, strict=True):  # interleaved, query by query
+        for j, shard in enumerate((0, 1 + collection_of[i])):
+            index, gallery, ids, _ = built[shard]
+            sigma = (
+                {m: gallery_sigma(gallery[m]) for m in MODALITIES}
+                if preset.dissimilarity == "D2"
+                else None
+            )
+            ref = {int(ids[r]) for r in exhaustive_topk(preset, gallery, sigma, [query], K)[0]}
+            start = time.perf_counter()
+            found = index.search(query, K)
+            times[j].append((time.perf_counter() - start) * 1000)
+            hits[j] += len({m.id for m in found} & ref) / K
+    sizes = sorted({len(ids) for _, _, ids, _ in built[1:]})
+    rows = []
+    for j, what in enumerate(("one gallery", f"its own of {collections} collections")):
+        ms = np.array(times[j])
+        rows.append(
+            {
+                "data": f"synthetic ({preset.name}), {what}",
+                "n": len(enrolled) if j == 0 else sizes[0],
+                "recall": hits[j] / len(queries),
+                "p50": float(np.percentile(ms, 50)),
+                "p95": float(np.percentile(ms, 95)),
+                "max": float(ms.max()),
+                "build": built[0][3] if j == 0 else sum(b[3] for b in built[1:]),
+            }
+        )
+    ratio = float(np.median(np.array(times[1]) / np.array(times[0])))
+    rows[1]["data"] += f" (median ratio to one gallery {ratio:.2f})"
+    return rows
+
+
+COLLECTION_HEADER = (
+    "| data | shapes searched | recall@10 | search p50 ms | p95 ms | max ms | build s |\n"
+    "|---|---|---|---|---|---|---|"
+)
+
+
+def _format_collection(row: Row) -> str:
+    return (
+        f"| {row['data']} | {row['n']:,} | {row['recall']:.4f} | {row['p50']:.2f} | "
+        f"{row['p95']:.2f} | {row['max']:.2f} | {row['build']:.1f} |"
+    )
+
+
 HEADER = (
     "| data | enrolled | recall@10 | search p50 ms | p95 ms | max ms | "
     "faiss candidates | scored exactly | certified exact | build s | refit s | index MB |\n"
@@ -244,12 +323,22 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--preset", default=DEFAULT_PRESET)
     parser.add_argument("--tosca-presets", nargs="*", default=[DEFAULT_PRESET])
+    parser.add_argument(
+        "--collections", type=int, help="also spread each size over this many collections"
+    )
     args = parser.parse_args(argv)
     print(HEADER, flush=True)
     for name in args.tosca_presets:
         for row in tosca_rows(name):
             print(_format(row), flush=True)
     synthetic_rows(args.preset, args.sizes, args.queries, args.seed)
+    if args.collections:
+        print(f"\n{COLLECTION_HEADER}", flush=True)
+        for size in args.sizes:
+            for row in collection_rows(
+                args.preset, size, args.collections, args.queries, args.seed
+            ):
+                print(_format_collection(row), flush=True)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,7 @@ from worker.recognition.fusion import ADOPTION_MARGIN, FusionScores
 
 from ..deps import (
     MAX_ROW_ID,
-    WRITE_ACCESS,
+    READ_ACCESS,
     GalleryDep,
     MultipartDep,
     ReadSessionDep,
@@ -25,10 +25,10 @@ from ..errors import InvalidInputError
 from ..gallery.calibration import FUSED
 from ..gallery.fusion import GalleryFusion
 from ..schemas import (
+    ACCESS_RESPONSES,
     ERROR_RESPONSES,
     FILE_RESPONSES,
     MESH_FILE,
-    UNAUTHORIZED_RESPONSE,
     multipart_body,
 )
 from ..search.service import parse_far
@@ -44,7 +44,11 @@ from .schemas import (
     VerificationOut,
 )
 
-router = APIRouter(tags=["verification"], responses=ERROR_RESPONSES)
+router = APIRouter(
+    tags=["verification"],
+    dependencies=READ_ACCESS,
+    responses=ERROR_RESPONSES | ACCESS_RESPONSES,
+)
 
 ROC_POINTS = 200
 DEFAULT_FAR = 0.01
@@ -96,6 +100,7 @@ def _operating_points(row: Calibration) -> list[OperatingPoint]:
 
 @router.get(
     "/calibration",
+    operation_id="get_calibration",
     response_model=CalibrationOut,
     summary="How the gallery's scores separate same from different objects",
     description=(
@@ -189,7 +194,7 @@ def _optional_id(fields: dict[str, str], name: str) -> int | None:
 
 @router.post(
     "/verify",
-    dependencies=WRITE_ACCESS,
+    operation_id="verify",
     response_model=VerificationOut,
     summary="Is this mesh the claimed object? Yes or no at a chosen FAR",
     description=(
@@ -201,7 +206,6 @@ def _optional_id(fields: dict[str, str], name: str) -> int | None:
     ),
     responses=NOT_CALIBRATED
     | FILE_RESPONSES
-    | UNAUTHORIZED_RESPONSE
     | {
         404: {"description": "No such claimed mesh or label in the gallery"},
         503: {"description": "Index loading, or no worker answered in time"},

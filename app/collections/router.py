@@ -7,16 +7,43 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, FastAPI, Path, Response, status
 
-from ..deps import WRITE_ACCESS, ReadSessionDep, SessionDep, StateDep, collection_path
-from ..models import Units
-from ..schemas import ERROR_RESPONSES, UNAUTHORIZED_RESPONSE
+from ..deps import (
+    ADMIN_ACCESS,
+    READ_ACCESS,
+    SERVICE_ADMIN,
+    GrantDep,
+    ReadSessionDep,
+    SessionDep,
+    StateDep,
+    collection_path,
+)
+from ..models import Scope, Units
+from ..schemas import ACCESS_RESPONSES, ERROR_RESPONSES
 from . import service
 from .schemas import CollectionIn, CollectionLinks, CollectionList, CollectionOut
 from .service import NAME_PATTERN, SCOPED_PREFIX
 
-router = APIRouter(prefix="/collections", tags=["collections"], responses=ERROR_RESPONSES)
+router = APIRouter(
+    prefix="/collections", tags=["collections"], responses=ERROR_RESPONSES | ACCESS_RESPONSES
+)
 
 Name = Annotated[str, Path(pattern=NAME_PATTERN, description="the collection's name")]
+# OpenAPI links from a new collection to its own operations (clients and stateful
+# fuzzers follow them).
+_NAME = {"collection": "$response.body#/name"}
+COLLECTION_LINKS = {
+    "GetCollection": {
+        "operationId": "get_collection",
+        "parameters": {"name": "$response.body#/name"},
+    },
+    "EnrollMesh": {"operationId": "collection_enroll_mesh", "parameters": _NAME},
+    "ListMeshes": {"operationId": "collection_list_meshes", "parameters": _NAME},
+    "GetCalibration": {"operationId": "collection_get_calibration", "parameters": _NAME},
+    "DeleteCollection": {
+        "operationId": "delete_collection",
+        "parameters": {"name": "$response.body#/name"},
+    },
+}
 CREATE_ERRORS: dict[int | str, dict[str, Any]] = {
     409: {"description": "The name is taken (`collection_exists`)"},
     422: {"description": "Bad name (`invalid_name`) or preset (`unknown_preset`)"},
@@ -51,7 +78,7 @@ def collection_out(view: service.CollectionView) -> CollectionOut:
 
 @router.post(
     "",
-    dependencies=WRITE_ACCESS,
+    dependencies=SERVICE_ADMIN,
     status_code=status.HTTP_201_CREATED,
     response_model=CollectionOut,
     operation_id="create_collection",
@@ -63,7 +90,7 @@ def collection_out(view: service.CollectionView) -> CollectionOut:
         '`curl -H \'Content-Type: application/json\' -d \'{"name": "casts", "units": '
         '"metric"}\' http://127.0.0.1:8000/collections`'
     ),
-    responses=CREATE_ERRORS | UNAUTHORIZED_RESPONSE,
+    responses=CREATE_ERRORS | {201: {"description": "Created, empty", "links": COLLECTION_LINKS}},
 )
 def create_collection(
     body: CollectionIn, session: SessionDep, state: StateDep, response: Response
@@ -77,15 +104,18 @@ def create_collection(
     "",
     response_model=CollectionList,
     operation_id="list_collections",
-    summary="List collections",
+    summary="List collections (those the request's key may read)",
 )
-def list_collections(session: ReadSessionDep, state: StateDep) -> CollectionList:
-    return CollectionList(items=[collection_out(v) for v in service.list_all(session, state)])
+def list_collections(session: ReadSessionDep, state: StateDep, grant: GrantDep) -> CollectionList:
+    views = service.list_all(session, state)
+    readable = [v for v in views if grant is None or grant.allows(v.row.id, Scope.read)]
+    return CollectionList(items=[collection_out(v) for v in readable])
 
 
 @router.get(
     "/{name}",
     response_model=CollectionOut,
+    dependencies=READ_ACCESS,
     operation_id="get_collection",
     summary="One collection",
     responses=NOT_FOUND,
@@ -96,13 +126,12 @@ def get_collection(name: Name, session: ReadSessionDep, state: StateDep) -> Coll
 
 @router.delete(
     "/{name}",
-    dependencies=WRITE_ACCESS,
+    dependencies=ADMIN_ACCESS,
     status_code=status.HTTP_204_NO_CONTENT,
     operation_id="delete_collection",
     summary="Delete a collection with all its meshes",
     responses=NOT_FOUND
-    | {409: {"description": "The default collection stays (`default_collection`)"}}
-    | UNAUTHORIZED_RESPONSE,
+    | {409: {"description": "The default collection stays (`default_collection`)"}},
 )
 def delete_collection(name: Name, session: SessionDep, state: StateDep) -> Response:
     service.delete(session, state, name)

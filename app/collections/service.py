@@ -133,11 +133,12 @@ def delete(session: Session, state: AppState, name: str) -> None:
         task_ids += [j.task_id for j in mesh.jobs if j.status in UNFINISHED_JOB]
         if not meshes.storage_shared(session, mesh.storage_path, row.id):
             state.store.remove(session, mesh.storage_path)
-    session.delete(row)  # its meshes, descriptors, jobs and previews with it (cascade)
+    session.delete(row)  # its meshes, descriptors, jobs, previews and keys with it (cascade)
     session.flush()
 
     def _after() -> None:
         state.galleries.sync()
+        state.keys.forget()  # its keys went with it
         for task_id in task_ids:
             try:
                 state.queue.cancel(task_id)

@@ -88,10 +88,7 @@ class Galleries:
             ``collection_not_found``: there is no such collection (also after asking the
             database, for one another API process created a moment ago).
         """
-        gallery = self._find(name)
-        if gallery is None:
-            self.sync()
-            gallery = self._find(name)
+        gallery = self.find(name)
         if gallery is None:
             raise NotFoundError(
                 f"There is no collection called {name!r}; GET /collections lists them.",
@@ -103,7 +100,16 @@ class Galleries:
     def default(self) -> Gallery:
         return self.named(DEFAULT_COLLECTION)
 
-    def _find(self, name: str) -> Gallery | None:
+    def find(self, name: str) -> Gallery | None:
+        """The gallery of the collection called ``name``, None if there is none (also
+        after asking the database, for one another API process created a moment ago)."""
+        gallery = self._known(name)
+        if gallery is None:
+            self.sync()
+            gallery = self._known(name)
+        return gallery
+
+    def _known(self, name: str) -> Gallery | None:
         for gallery in self:
             if gallery.name == name:
                 return gallery

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from ..deps import RowId, SessionDep
-from ..models import JobStatus
-from ..schemas import ERROR_RESPONSES
+from ..collections.service import collection_path
+from ..deps import GrantDep, RowId, SessionDep, StateDep, check_grant
+from ..models import DEFAULT_COLLECTION, JobStatus, Scope
+from ..schemas import ACCESS_RESPONSES, ERROR_RESPONSES
 from . import service
 from .schemas import JobOut
 
-router = APIRouter(prefix="/jobs", tags=["jobs"], responses=ERROR_RESPONSES)
+router = APIRouter(prefix="/jobs", tags=["jobs"], responses=ERROR_RESPONSES | ACCESS_RESPONSES)
 
 
 @router.get(
@@ -20,8 +21,12 @@ router = APIRouter(prefix="/jobs", tags=["jobs"], responses=ERROR_RESPONSES)
     summary="A descriptor job",
     responses={404: {"description": "Unknown id"}},
 )
-def get_job(job_id: RowId, session: SessionDep) -> JobOut:
+def get_job(job_id: RowId, session: SessionDep, state: StateDep, grant: GrantDep) -> JobOut:
     job = service.get(session, job_id)
+    collection_id = job.mesh.collection_id
+    check_grant(grant, collection_id, Scope.read, "read this job's collection")
+    gallery = state.galleries.of(collection_id)
+    base = collection_path(DEFAULT_COLLECTION if gallery is None else gallery.name)
     return JobOut(
         id=job.id,
         mesh_id=job.mesh_id,
@@ -35,5 +40,5 @@ def get_job(job_id: RowId, session: SessionDep) -> JobOut:
         created_at=job.created_at,
         started_at=job.started_at,
         finished_at=job.finished_at,
-        links={"self": f"/jobs/{job.id}", "mesh": f"/meshes/{job.mesh_id}"},
+        links={"self": f"/jobs/{job.id}", "mesh": f"{base}/meshes/{job.mesh_id}"},
     )

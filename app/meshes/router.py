@@ -10,6 +10,7 @@ from fastapi.responses import FileResponse
 
 from ..collections.service import collection_path
 from ..deps import (
+    READ_ACCESS,
     WRITE_ACCESS,
     GalleryDep,
     MultipartDep,
@@ -21,10 +22,10 @@ from ..deps import (
 from ..errors import InvalidInputError
 from ..models import Descriptor, Mesh, MeshStatus
 from ..schemas import (
+    ACCESS_RESPONSES,
     ERROR_RESPONSES,
     FILE_RESPONSES,
     MESH_FILE,
-    UNAUTHORIZED_RESPONSE,
     multipart_body,
 )
 from . import service
@@ -34,7 +35,12 @@ from .service import MAX_NAME
 # A mesh id is never reused and its preview never changes: browsers may keep it.
 CACHE_FOREVER = {"Cache-Control": "private, max-age=86400, immutable"}
 
-router = APIRouter(prefix="/meshes", tags=["meshes"], responses=ERROR_RESPONSES)
+router = APIRouter(
+    prefix="/meshes",
+    tags=["meshes"],
+    dependencies=READ_ACCESS,
+    responses=ERROR_RESPONSES | ACCESS_RESPONSES,
+)
 
 Responses = dict[int | str, dict[str, Any]]
 ERRORS: Responses = {
@@ -152,8 +158,7 @@ def mesh_out(mesh: Mesh, descriptor: Descriptor | None, collection: str) -> Mesh
             },
         }
     )
-    | UPLOAD_ERRORS
-    | UNAUTHORIZED_RESPONSE,
+    | UPLOAD_ERRORS,
     openapi_extra=UPLOAD_BODY,
 )
 def enroll(
@@ -274,7 +279,7 @@ def get_thumbnail(mesh_id: RowId, gallery: GalleryDep, session: SessionDep) -> R
     status_code=status.HTTP_204_NO_CONTENT,
     operation_id="delete_mesh",
     summary="Delete a mesh (leaves the index at once)",
-    responses=ERRORS | UNAUTHORIZED_RESPONSE,
+    responses=ERRORS,
 )
 def delete_mesh(
     mesh_id: RowId, gallery: GalleryDep, session: SessionDep, state: StateDep

@@ -9,7 +9,7 @@ from fastapi import APIRouter, Depends, Path, Request, Response
 
 from ..collections.service import SCOPED_PREFIX
 from ..deps import (
-    WRITE_ACCESS,
+    READ_ACCESS,
     GalleryDep,
     MultipartDep,
     ReadSessionDep,
@@ -20,16 +20,18 @@ from ..deps import (
 )
 from ..errors import InvalidInputError, NotFoundError
 from ..schemas import (
+    ACCESS_RESPONSES,
     ERROR_RESPONSES,
     FILE_RESPONSES,
     MESH_FILE,
-    UNAUTHORIZED_RESPONSE,
     multipart_body,
 )
 from . import service
 from .schemas import MatchOut, PartialOut, QueryOut
 
-router = APIRouter(tags=["search"], responses=ERROR_RESPONSES)
+router = APIRouter(
+    tags=["search"], dependencies=READ_ACCESS, responses=ERROR_RESPONSES | ACCESS_RESPONSES
+)
 
 # The options, documented once: form fields of /query, query parameters of /similar.
 # Both arrive as strings and are validated by service.parse_options.
@@ -171,7 +173,6 @@ def query_out(result: service.SearchResult) -> QueryOut:
 
 @router.post(
     "/query",
-    dependencies=WRITE_ACCESS,
     response_model=QueryOut,
     operation_id="query",
     summary="Rank the gallery by similarity to an uploaded mesh",
@@ -181,7 +182,7 @@ def query_out(result: service.SearchResult) -> QueryOut:
         "default preset; lower is more similar).\n\n"
         "`curl -F file=@wolf2.off.gz -F k=3 http://127.0.0.1:8000/query`"
     ),
-    responses=QUERY_ERRORS | UNAUTHORIZED_RESPONSE,
+    responses=QUERY_ERRORS,
     openapi_extra=QUERY_BODY,
 )
 def query(
@@ -226,12 +227,11 @@ def similar_options(
 
 @router.post(
     "/meshes/{mesh_id}/similar",
-    dependencies=WRITE_ACCESS,
     response_model=QueryOut,
     operation_id="similar_meshes",
     summary="Shapes most similar to an enrolled mesh",
     description="Uses the stored descriptor (nothing is recomputed); the mesh itself is left out.",
-    responses=SIMILAR_ERRORS | UNAUTHORIZED_RESPONSE,
+    responses=SIMILAR_ERRORS,
     openapi_extra=SIMILAR_PARAMETERS,
 )
 def similar(

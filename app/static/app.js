@@ -18,6 +18,12 @@ function onActivate(element, action) {
 }
 const PAGE = 24;
 const KEY = "modalshape-api-key";
+const COLLECTION = "modalshape-collection";
+
+// The collection the page works on; the default one's resources have the paths without
+// /collections/{name}.
+let collection = localStorage.getItem(COLLECTION) || "default";
+const base = () => (collection === "default" ? "" : `/collections/${encodeURIComponent(collection)}`);
 
 // --------------------------------------------------------------------------- API
 class ApiError extends Error {
@@ -28,10 +34,13 @@ class ApiError extends Error {
   }
 }
 
-async function api(path, { method = "GET", body = null, retry = true } = {}) {
-  const headers = {};
+function keyHeaders() {
   const key = sessionStorage.getItem(KEY);
-  if (key) headers["X-API-Key"] = key;
+  return key ? { "X-API-Key": key } : {};
+}
+
+async function api(path, { method = "GET", body = null, retry = true } = {}) {
+  const headers = keyHeaders();
   let response;
   try {
     response = await fetch(path, { method, body, headers });
@@ -123,6 +132,7 @@ class Viewer {
   }
 
   async show(url) {
+    loader.setRequestHeader(keyHeaders());
     const gltf = await loader.loadAsync(url);
     if (this.model) this.scene.remove(this.model);
     this.model = gltf.scene;
@@ -194,9 +204,18 @@ function percent(value) {
 function thumbnail(id, name, ready) {
   if (!ready) return placeholder("not described yet");
   const img = document.createElement("img");
-  img.src = `/meshes/${id}/thumbnail`;
+  const path = `${base()}/meshes/${id}/thumbnail`;
   img.alt = `Thumbnail of ${name}`;
   img.onerror = () => img.replaceWith(placeholder("no preview"));
+  const headers = keyHeaders();
+  if (!headers["X-API-Key"]) {
+    img.src = path;
+  } else { // an <img> cannot send the key: fetched with it, shown from memory
+    fetch(path, { headers })
+      .then((r) => (r.ok ? r.blob() : Promise.reject(new Error(r.statusText))))
+      .then((blob) => { img.src = URL.createObjectURL(blob); })
+      .catch(() => img.onerror());
+  }
   return img;
 }
 
@@ -282,7 +301,7 @@ async function compare(match, result, card) {
   $("caption-query").textContent = result.queryName ? `Query: ${result.queryName}` : "Query";
   $("caption-match").textContent = `Match ${match.rank}: ${match.name} (${match.label || "no label"})`;
   try {
-    const jobs = [matchViewer.show(`/meshes/${match.mesh_id}/preview`)];
+    const jobs = [matchViewer.show(`${base()}/meshes/${match.mesh_id}/preview`)];
     if (result.preview) jobs.push(queryViewer.show(result.preview));
     await Promise.all(jobs);
   } catch (err) {
@@ -321,7 +340,7 @@ async function search(file) {
   }, 250);
   forgetResults();
   try {
-    const result = await api("/query", { method: "POST", body: form });
+    const result = await api(`${base()}/query`, { method: "POST", body: form });
     result.queryName = file.name;
     const how = { computed: "described now", enrolled: "enrolled already", recent: "searched recently" };
     progress.textContent = `${file.name}: ${result.matches.length} matches among ${result.gallery_size} `
@@ -361,7 +380,7 @@ $("enroll-form").addEventListener("submit", async (e) => {
     form.append("file", file);
     if (label) form.append("label", label);
     try {
-      const mesh = await api("/meshes", { method: "POST", body: form });
+      const mesh = await api(`${base()}/meshes`, { method: "POST", body: form });
       rows[i].cells[1].textContent = `#${mesh.id} ${mesh.name}`;
       follow(mesh.id, rows[i].cells[2]);
     } catch (err) {
@@ -375,7 +394,7 @@ async function follow(meshId, cell) {
   for (;;) {
     let mesh;
     try {
-      mesh = await api(`/meshes/${meshId}`);
+      mesh = await api(`${base()}/meshes/${meshId}`);
     } catch (err) {
       cell.textContent = err.message;
       return;
@@ -395,7 +414,7 @@ async function loadGallery() {
   if ($("gallery-label").value.trim()) params.set("label", $("gallery-label").value.trim());
   if ($("gallery-status").value) params.set("status", $("gallery-status").value);
   try {
-    const page = await api(`/meshes?${params}`);
+    const page = await api(`${base()}/meshes?${params}`);
     const grid = $("gallery-grid");
     grid.replaceChildren(...page.items.map(galleryCard));
     if (!page.items.length) grid.replaceChildren(placeholder("Nothing enrolled matches."));
@@ -458,7 +477,7 @@ async function openDetail(mesh) {
   viewers();
   if (mesh.status === "ready") {
     try {
-      await detailViewer.show(`/meshes/${mesh.id}/preview`);
+      await detailViewer.show(`${base()}/meshes/${mesh.id}/preview`);
     } catch (err) {
       showError(err);
     }
@@ -468,7 +487,7 @@ async function openDetail(mesh) {
 $("detail-similar").addEventListener("click", async () => {
   if (!detailMesh) return;
   try {
-    const result = await api(`/meshes/${detailMesh.id}/similar?k=${$("search-k").value || 8}`, { method: "POST" });
+    const result = await api(`${base()}/meshes/${detailMesh.id}/similar?k=${$("search-k").value || 8}`, { method: "POST" });
     result.queryName = detailMesh.name;
     selectTab("search");
     $("search-progress").textContent = `Most similar to ${detailMesh.name}:`;
@@ -483,7 +502,7 @@ $("detail-delete").addEventListener("click", async () => {
   if (!detailMesh) return;
   if (!window.confirm(`Delete ${detailMesh.name} (#${detailMesh.id}) and its file? This cannot be undone.`)) return;
   try {
-    await api(`/meshes/${detailMesh.id}`, { method: "DELETE" });
+    await api(`${base()}/meshes/${detailMesh.id}`, { method: "DELETE" });
     forgetMesh(detailMesh.id);
     $("detail").hidden = true;
     detailMesh = null;
@@ -512,7 +531,7 @@ $("gallery-next").addEventListener("click", () => {
 async function loadCalibration() {
   const summary = $("calibration-summary");
   try {
-    const c = await api("/calibration");
+    const c = await api(`${base()}/calibration`);
     summary.textContent = `${c.labelled_shapes} labelled meshes (${c.labels} labels): `
       + `${c.genuine_pairs} pairs of the same label, ${c.impostor_pairs} of different labels. `
       + `Equal error rate ${percent(c.eer)}. `
@@ -568,6 +587,39 @@ function drawRoc(roc, eer) {
   svg.toggleAttribute("hidden", false);
 }
 
+// --------------------------------------------------------------------------- collections
+// The picker lists the collections the key may read; each has its own meshes and calibration.
+async function loadCollections() {
+  const select = $("collection");
+  try {
+    const { items } = await api("/collections");
+    if (!items.some((c) => c.name === collection) && items.length) collection = items[0].name;
+    select.replaceChildren(...items.map((c) => {
+      const option = document.createElement("option");
+      option.value = c.name;
+      option.textContent = `${c.name} (${c.ready}${c.units === "metric" ? ", metric" : ""})`;
+      option.selected = c.name === collection;
+      return option;
+    }));
+    const chosen = items.find((c) => c.name === collection);
+    $("collection-help").textContent = chosen ? `units ${chosen.units}, preset ${chosen.preset}` : "";
+  } catch (err) {
+    showError(err);
+  }
+}
+
+$("collection").addEventListener("change", () => {
+  collection = $("collection").value;
+  localStorage.setItem(COLLECTION, collection);
+  forgetResults();
+  $("detail").hidden = true;
+  detailMesh = null;
+  galleryOffset = 0;
+  const open = TABS.find((tab) => !$(`view-${tab}`).hidden);
+  selectTab(open || "search");
+  loadCollections();
+});
+
 // --------------------------------------------------------------------------- start
 async function status() {
   try {
@@ -581,5 +633,6 @@ async function status() {
     $("service-status").textContent = "service unreachable";
   }
 }
+loadCollections();
 status();
 setInterval(status, 15000);

@@ -1,4 +1,5 @@
-"""Access: an optional API key on every write, file names kept out of paths, CORS closed."""
+"""Access: an optional API key on every request for a collection, file names kept out of
+paths, CORS closed."""
 
 from __future__ import annotations
 
@@ -35,38 +36,48 @@ def _unauthorized(response, sentence: str) -> None:
     assert response.headers["www-authenticate"] == "X-API-Key"
 
 
-def test_every_write_needs_the_key_and_reads_do_not(guarded: Service):
+def test_every_request_for_a_collection_needs_the_key(guarded: Service):
     files = {"file": ("quadruped-0.off.gz", example("quadruped-0").read_bytes())}
-    writes = [
+    requests = [
         ("POST", "/meshes", {"files": files}),
         ("POST", "/query", {"files": files}),
         ("DELETE", "/meshes/1", {}),
         ("POST", "/meshes/1/similar", {}),
+        ("GET", "/meshes", {}),
+        ("GET", "/meshes/1/file", {}),
+        ("GET", "/calibration", {}),
+        ("GET", "/collections", {}),
+        ("GET", "/collections/default/meshes", {}),
+        ("GET", "/jobs/1", {}),
+        ("GET", "/keys", {}),
     ]
-    for method, path, kwargs in writes:
+    for method, path, kwargs in requests:
         _unauthorized(guarded.client.request(method, path, **kwargs), "X-API-Key header")
         wrong = guarded.client.request(method, path, headers={"X-API-Key": KEY[:-1]}, **kwargs)
         _unauthorized(wrong, "not valid")
         longer = guarded.client.request(method, path, headers={"X-API-Key": KEY + "x"}, **kwargs)
         _unauthorized(longer, "not valid")
-    assert guarded.client.get("/meshes").json()["total"] == 0  # nothing got in
     assert not list((guarded.data_dir / "tmp").glob("upload-*"))  # refused before reading
+    for path in ("/health", "/ready", "/", "/openapi.json"):
+        assert guarded.client.get(path).status_code == 200, path
 
-    created = guarded.client.post("/meshes", files=files, headers={"X-API-Key": KEY})
+    admin = {"X-API-Key": KEY}
+    assert guarded.client.get("/meshes", headers=admin).json()["total"] == 0  # nothing got in
+    created = guarded.client.post("/meshes", files=files, headers=admin)
     assert created.status_code == 202, created.text
     mesh_id = created.json()["id"]
-    for path in ("/meshes", f"/meshes/{mesh_id}", f"/meshes/{mesh_id}/file", "/health"):
-        assert guarded.client.get(path).status_code == 200, path
-    assert (
-        guarded.client.delete(f"/meshes/{mesh_id}", headers={"X-API-Key": KEY}).status_code == 204
-    )
+    for path in ("/meshes", f"/meshes/{mesh_id}", f"/meshes/{mesh_id}/file"):
+        assert guarded.client.get(path, headers=admin).status_code == 200, path
+    assert guarded.client.delete(f"/meshes/{mesh_id}", headers=admin).status_code == 204
 
 
 def test_the_key_is_documented_in_the_schema(guarded: Service):
     schema = guarded.client.get("/openapi.json").json()
     assert schema["components"]["securitySchemes"]["APIKeyHeader"]["name"] == "X-API-Key"
-    assert "401" in schema["paths"]["/meshes"]["post"]["responses"]
-    assert "401" not in schema["paths"]["/meshes"]["get"]["responses"]
+    for path, method in (("/meshes", "post"), ("/meshes", "get"), ("/keys", "post")):
+        responses = schema["paths"][path][method]["responses"]
+        assert {"401", "403"} <= set(responses), (path, method)
+    assert "security" not in schema["paths"]["/health"]["get"]
 
 
 def test_file_names_never_reach_a_path(guarded: Service):
@@ -81,7 +92,7 @@ def test_file_names_never_reach_a_path(guarded: Service):
     stored = [p for p in guarded.data_dir.rglob("*") if p.is_file() and p.read_bytes() == data]
     assert stored == [guarded.data_dir / "uploads" / body["sha256"][:2] / body["sha256"]]
     assert not (guarded.data_dir.parent / "etc").exists()
-    download = guarded.client.get(f"/meshes/{body['id']}/file")
+    download = guarded.client.get(f"/meshes/{body['id']}/file", headers={"X-API-Key": KEY})
     assert download.content == data
     assert "passwd.obj" in download.headers["content-disposition"]
     assert ".." not in download.headers["content-disposition"]

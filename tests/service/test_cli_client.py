@@ -159,3 +159,29 @@ def test_the_commands_find_the_service_where_its_settings_put_it():
     assert default_url({"SHAPES_HOST": "::1"}) == "http://[::1]:8000"
     remote = {"SHAPES_URL": "https://shapes.example.org/", "SHAPES_PORT": "8765"}
     assert default_url(remote) == "https://shapes.example.org"
+
+
+def test_collections_from_the_command_line(served: Service, folder):
+    made = shapes(served, "collections", "create", "casts", "--units", "metric")
+    assert made.returncode == 0, made.stderr
+    assert made.stdout.startswith("created collection casts (units metric")
+    again = shapes(served, "collections", "create", "casts")
+    assert again.returncode == 1 and "collection_exists" in again.stderr
+    imported = shapes(
+        served, "import", str(folder / "quadruped-0.off.gz"), "--collection", "casts", "--wait"
+    )
+    assert imported.returncode == 0, imported.stderr
+    assert imported.stdout.startswith("1 files: 1 enrolled")
+    listed = shapes(served, "collections", "list")
+    rows = {line.split()[0]: line.split() for line in listed.stdout.splitlines()[1:]}
+    assert rows["casts"][1] == "metric" and rows["casts"][-2:] == ["1", "1"]
+    found = shapes(served, "query", str(folder / "quadruped-0.off.gz"), "--collection", "casts")
+    assert found.returncode == 0 and "quadruped-0" in found.stdout
+    assert shapes(served, "collections", "delete", "casts").returncode == 0
+    missing = shapes(served, "query", str(folder / "biped-0.off.gz"), "--collection", "casts")
+    assert missing.returncode == 2 and "collection_not_found" in missing.stderr
+
+
+def test_keys_need_the_admin_key_from_the_command_line(served: Service):
+    refused = shapes(served, "keys", "list")
+    assert refused.returncode == 1 and "no_admin_key" in refused.stderr

@@ -246,3 +246,23 @@ def test_deleting_the_match_shown_leaves_no_stale_view(page, site):
     page.click("#tab-search")
     assert page.locator(f'#search-results .card[data-mesh-id="{mesh_id}"]').count() == 0
     assert page.locator("#compare").is_hidden()  # the deleted mesh was the match shown
+
+
+def test_the_collection_picker_switches_gallery_and_search(page, site):
+    assert site.client.post("/collections", json={"name": "museum"}).status_code == 201
+    mesh_id = site.upload("spider-0", "spider", collection="museum").json()["id"]
+    assert site.wait_mesh(mesh_id, collection="museum")["status"] == "ready"
+    page.reload()
+    page.locator('#collection option[value="museum"]').wait_for(state="attached")
+    page.select_option("#collection", "museum")
+    page.click("#tab-gallery")
+    cards = page.locator("#gallery-grid .card")
+    page.wait_for_function("() => document.querySelectorAll('#gallery-grid .card').length === 1")
+    assert "spider-0" in cards.first.inner_text()
+    page.click("#tab-search")
+    page.set_input_files("#file-search", str(example("spider-1")))
+    best = page.locator("#search-results .card").first
+    best.wait_for(timeout=180_000)
+    assert page.locator("#search-results .card").count() == 1
+    assert best.get_attribute("data-mesh-id") == str(mesh_id)
+    page.select_option("#collection", "default")  # as the page was before this test

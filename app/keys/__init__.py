@@ -1,0 +1,1 @@
+"""API keys with scopes: who may read, write or administer which collections."""
