@@ -321,7 +321,8 @@ def format_matches(body: dict[str, Any]) -> str:
     lines += ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
     title = (
         f"{body['preset']} v{body['preset_version']}, {body['fusion']} of "
-        f"{'+'.join(modalities)}, {body['gallery_size']} enrolled (lower score = more alike)"
+        f"{'+'.join(modalities)}, {body['gallery_size']} enrolled in {body['collection']} "
+        "(lower score = more alike)"
     )
     kept = body.get("query", {}).get("kept_area_fraction")
     if _partial(kept):

@@ -141,6 +141,7 @@ def query_out(result: service.SearchResult) -> QueryOut:
         fusion=result.fusion,
         modalities=list(options.modalities),
         k=options.k,
+        collection=result.collection,
         gallery_size=result.gallery_size,
         matches=[
             MatchOut(

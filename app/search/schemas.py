@@ -48,6 +48,7 @@ class QueryOut(BaseModel):
                     "fusion": "product",
                     "modalities": ["gdm", "ddt"],
                     "k": 2,
+                    "collection": "default",
                     "gallery_size": 3,
                     "matches": [
                         {
@@ -78,6 +79,7 @@ class QueryOut(BaseModel):
     fusion: str
     modalities: list[str]
     k: int
+    collection: str = Field(description="the collection searched")
     gallery_size: int
     matches: list[MatchOut]
     timings: dict[str, float] = Field(

@@ -98,6 +98,7 @@ class SearchResult:
     """The answer to a search: the options used, the matches best first, timings."""
 
     options: SearchOptions
+    collection: str
     gallery_size: int
     matches: list[RankedMatch]
     timings: dict[str, float]
@@ -297,6 +298,7 @@ def rank(
         )
     return SearchResult(
         options=options,
+        collection=gallery.name,
         gallery_size=len(gallery),
         matches=ranked,
         timings={**timings, "search": stats.seconds},

@@ -81,6 +81,7 @@ def test_a_query_ranks_its_own_collection_only(two):
     in_a = svc.query("quadruped-3", collection="a", k=20).json()
     assert {m["mesh_id"] for m in in_a["matches"]} == set(ids["a"].values())
     assert in_a["gallery_size"] == 12 and in_a["matches"][0]["label"] == "quadruped"
+    assert in_a["collection"] == "a"
     in_b = svc.query("quadruped-3", collection="b", k=20).json()
     assert {m["mesh_id"] for m in in_b["matches"]} == set(ids["b"].values())
     # The old path is the default collection.
