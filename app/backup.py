@@ -6,9 +6,9 @@ A backup is a directory:
   consistent snapshot while the service keeps writing);
 * ``uploads/``: the uploaded files of the snapshot's meshes (none when uploads are
   kept in the database: they are in it);
-* ``index/``: the saved search index of the preset's version (a head start: the
-  service reconciles it with the database on start, or rebuilds it from the stored
-  descriptors);
+* ``index/``: the default collection's saved search index of the preset's version (a
+  head start: the service reconciles it with the database on start, or rebuilds it
+  from the stored descriptors, as it does the other collections' indexes);
 * ``manifest.json``: what it holds, with every file's size and sha256.
 
 A mesh deleted while the backup runs loses its file before the copy reaches it: it is
@@ -17,7 +17,7 @@ The backup is written to ``DEST.partial`` and renamed, so a ``DEST`` is always w
 
 ``restore`` checks every checksum, then copies the backup into an empty data
 directory; a service started on it answers as the one backed up did. PostgreSQL
-deployments are backed up with ``pg_dump`` instead (docs/operations.md).
+deployments are backed up with ``pg_dump`` instead (docs/deployment.md).
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ def _database_path(settings: Settings) -> Path:
     if not url.startswith("sqlite:///"):
         raise BackupError(
             "shapes backup copies the embedded SQLite deployment; this service's database "
-            "is a server: back it up with pg_dump (docs/operations.md)."
+            "is a server: back it up with pg_dump (docs/deployment.md)."
         )
     return Path(url.removeprefix("sqlite:///"))
 
