@@ -26,7 +26,7 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -299,6 +299,14 @@ def query_file(
     return body
 
 
+def aligned(rows: Sequence[Sequence[str]]) -> list[str]:
+    """Rows of cells as lines of left-aligned columns, two spaces apart."""
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    return [
+        "  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip() for row in rows
+    ]
+
+
 def format_matches(body: dict[str, Any]) -> str:
     """The ranked matches as an aligned text table."""
     # A partial query is ranked by the modalities it was weighed with (the parts among them).
@@ -316,9 +324,7 @@ def format_matches(body: dict[str, Any]) -> str:
         ]
         for m in matches
     ]
-    widths = [max(len(r[i]) for r in [header, *rows]) for i in range(len(header))]
-    lines = ["  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True))]
-    lines += ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
+    lines = aligned([header, *rows])
     title = (
         f"{body['preset']} v{body['preset_version']}, {body['fusion']} of "
         f"{'+'.join(modalities)}, {body['gallery_size']} enrolled in {body['collection']} "
@@ -498,10 +504,7 @@ def format_collections(items: list[dict[str, Any]]) -> str:
         )
         for c in items
     ]
-    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
-    return "\n".join(
-        "  ".join(v.ljust(w) for v, w in zip(row, widths, strict=True)).rstrip() for row in rows
-    )
+    return "\n".join(aligned(rows))
 
 
 def _call(args: argparse.Namespace, command: str, method: str, path: str, **kwargs: Any) -> Any:
@@ -542,9 +545,7 @@ def _keys_command(args: argparse.Namespace) -> int:
             rows = [("id", "collection", "scope", "created")] + [
                 (str(k["id"]), k["collection"], k["scope"], k["created_at"][:19]) for k in items
             ]
-            widths = [max(len(row[i]) for row in rows) for i in range(4)]
-            for row in rows:
-                print("  ".join(v.ljust(w) for v, w in zip(row, widths, strict=True)).rstrip())
+            print("\n".join(aligned(rows)))
         elif args.action == "create":
             body = {"collection": args.collection, "scope": args.scope}
             made = _call(args, "keys", "POST", "/keys", json=body)
