@@ -589,18 +589,27 @@ function drawRoc(roc, eer) {
 
 // --------------------------------------------------------------------------- collections
 // The picker lists the collections the key may read; each has its own meshes and calibration.
+// Called with the header's status: the options are relabelled in place (an open list
+// stays open) and rebuilt only when collections came or went.
 async function loadCollections() {
   const select = $("collection");
   try {
     const { items } = await api("/collections");
     if (!items.some((c) => c.name === collection) && items.length) collection = items[0].name;
-    select.replaceChildren(...items.map((c) => {
-      const option = document.createElement("option");
-      option.value = c.name;
-      option.textContent = `${c.name} (${c.ready}${c.units === "metric" ? ", metric" : ""})`;
-      option.selected = c.name === collection;
-      return option;
-    }));
+    const label = (c) => `${c.name} · ${c.ready} ready${c.units === "metric" ? " · metric" : ""}`;
+    const same = select.options.length === items.length
+      && items.every((c, i) => select.options[i].value === c.name);
+    if (same) {
+      items.forEach((c, i) => { select.options[i].textContent = label(c); });
+    } else {
+      select.replaceChildren(...items.map((c) => {
+        const option = document.createElement("option");
+        option.value = c.name;
+        option.textContent = label(c);
+        return option;
+      }));
+    }
+    select.value = collection;
     const chosen = items.find((c) => c.name === collection);
     $("collection-help").textContent = chosen ? `units ${chosen.units}, preset ${chosen.preset}` : "";
   } catch (err) {
@@ -616,8 +625,7 @@ $("collection").addEventListener("change", () => {
   detailMesh = null;
   galleryOffset = 0;
   const open = TABS.find((tab) => !$(`view-${tab}`).hidden);
-  selectTab(open || "search");
-  loadCollections();
+  selectTab(open || "search"); // which refreshes the status and the picker
 });
 
 // --------------------------------------------------------------------------- start
@@ -632,7 +640,7 @@ async function status() {
   } catch {
     $("service-status").textContent = "service unreachable";
   }
+  loadCollections();
 }
-loadCollections();
 status();
 setInterval(status, 15000);
