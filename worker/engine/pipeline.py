@@ -19,7 +19,14 @@ from .diffusion import (
 from .geodesic import farthest_point_samples, geodesic_distance_matrix, sample_distances
 from .holes import boundary_loops, close_small_holes, longest_open_loop
 from .intrinsic import surface_operators
-from .mesh_io import CANONICAL_AREA, DEFAULT_MAX_FACES, Mesh, canonical_frame, read_mesh
+from .mesh_io import (
+    CANONICAL_AREA,
+    DEFAULT_MAX_FACES,
+    Mesh,
+    canonical_frame,
+    face_areas,
+    read_mesh,
+)
 from .modal import (
     core_diagonal,
     ddt_core,
@@ -96,7 +103,7 @@ def ddt_descriptor(
 
 
 def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
-    """Compute all modalities of a cleaned mesh.
+    """Compute all modalities of a cleaned mesh, and record its area (the size).
 
     Stages (timed): ``resample``, ``gdm`` (intrinsic Delaunay, heat-method GDM),
     ``eigen_ddt`` (eq. 3 eigenpairs and the DDT's modal representation), ``modal``
@@ -111,6 +118,8 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
         timings[stage] = now - clock
         clock = now
 
+    # The size, in the file's units: everything below is in the canonical frame.
+    area = float(face_areas(mesh.vertices, mesh.faces).sum())
     surface = canonical_frame(mesh)
     open_loop = longest_open_loop(surface, CANONICAL_AREA)
     resampled = _resampled(surface, preset)
@@ -169,6 +178,7 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
         parts=parts,
         parts_reach=reach,
         longest_open_loop=open_loop,
+        area=area,
     )
 
 
