@@ -26,7 +26,7 @@ from worker.engine.compare import mean_normalized_manhattan
 from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas, load_mesh, read_mesh
 from worker.engine.pipeline import describe_file, describe_mesh
-from worker.engine.presets import SIZE, get_preset
+from worker.engine.presets import DEFAULT_PRESET, SIZE, get_preset
 
 pytestmark = pytest.mark.slow  # whole pipelines on the examples and generated meshes
 
@@ -136,6 +136,23 @@ def test_a_descriptor_stored_before_the_area_has_no_size(figure_descriptor):
         restored.vector(SIZE)
     with pytest.raises(KeyError, match="unknown modality"):
         restored.vector("colour")
+
+
+def test_the_sec_4_1_preset_keeps_the_scale_and_the_surface_presets_do_not(figure):
+    """Sec. 4.1 (``smeets2010-tosca``): the GDM's singular values are in the file's
+    length unit, so a copy scaled by 2 has twice them, while the DDT (the paper's ``A``
+    and time unit) is the same; the default's descriptors do not move. At few vertices
+    to stay fast: the scale handling does not depend on them."""
+    tosca = replace(get_preset("smeets2010-tosca"), n_vertices=400)
+    default = replace(get_preset(DEFAULT_PRESET), n_vertices=400, gdm_samples=100)
+    doubled = Mesh(2.0 * figure.vertices, figure.faces)
+    one, two = describe_mesh(figure, tosca), describe_mesh(doubled, tosca)
+    np.testing.assert_allclose(two.gdm, 2.0 * one.gdm, rtol=RIGID)
+    assert _difference(one, two, "gdm") > 0.5
+    assert _difference(one, two, "ddt") <= RIGID
+    one, two = describe_mesh(figure, default), describe_mesh(doubled, default)
+    for m in MODALITIES:
+        assert _difference(one, two, m) <= RIGID
 
 
 def test_descriptor_round_trips(figure_descriptor):

@@ -75,6 +75,8 @@ def test_the_paper_presets_keep_the_papers_parameters():
         )
     assert (shrec.n_vertices, shrec.dissimilarity, shrec.fusion) == (2500, "D2", "product")
     assert (tosca.n_vertices, tosca.dissimilarity, tosca.fusion) == (3000, "D1", "sum")
+    # Sec. 4.1: "the objects have already the same scale"; sec. 4.2 divides by the sums.
+    assert (tosca.normalize_scale, shrec.normalize_scale) == (False, True)
 
 
 def test_the_default_fuses_all_three_modalities_by_a_weighted_product():
@@ -128,3 +130,9 @@ def test_every_shipped_preset_can_serve_a_metric_collection(name):
     preset = get_preset(name)
     assert preset.units == "any" and preset.weight(SIZE) > 0.0
     assert with_units(preset, "metric").scored_modalities[-1] == SIZE
+
+
+def test_only_the_sec_4_1_preset_keeps_the_scale():
+    assert [p.name for p in PRESETS.values() if not p.normalize_scale] == ["smeets2010-tosca"]
+    with pytest.raises(ValueError, match="sec. 4.1's, on the vertices measure"):
+        Preset(name="x", version=1, measure="surface", normalize_scale=False)

@@ -87,8 +87,9 @@ def ddt_descriptor(
     preset's ``ddt_elements`` say: the HOSVD core (eqs. 5-7), its diagonal, or each
     slice's singular values."""
     times = preset.diffusion_times
+    normalize = preset.normalize_scale
     if preset.ddt_elements == "slice_values":
-        tensor = small_ddt(eigenvalues, eigenvectors, times, mass, coordinates)
+        tensor = small_ddt(eigenvalues, eigenvectors, times, mass, coordinates, normalize)
         return slice_singular_values(tensor, min(preset.ddt_core_shape[:2]))
     core = ddt_core(
         eigenvalues,
@@ -98,6 +99,7 @@ def ddt_descriptor(
         mass,
         mix_times=preset.ddt_mix_times,
         coordinates=coordinates,
+        normalize=normalize,
     )
     return core_diagonal(core) if preset.ddt_elements == "diagonal" else core
 
@@ -159,7 +161,12 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
     else:
         spectrum = normalized_spectrum(op, eigenvalues, preset.spectrum_size)
     lap("eigen_ddt")
-    singular_values = modal_gdm(gdm, preset.gdm_singular_values, mass, sample_areas)
+    singular_values = modal_gdm(
+        gdm, preset.gdm_singular_values, mass, sample_areas, preset.normalize_scale
+    )
+    if not preset.normalize_scale:
+        # Sec. 4.1: distances in the file's length unit, not the canonical frame's.
+        singular_values = singular_values * np.sqrt(area / CANONICAL_AREA)
     lap("modal")
     parts, reach = np.zeros((0, 0), dtype=np.float16), np.zeros(0)
     if preset.has_parts:

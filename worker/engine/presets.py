@@ -105,6 +105,12 @@ class Preset:
     partial_loop : the query's longest open boundary loop (in square roots of its area)
         from which it starts to look partial, and at which it looks wholly so
         (:func:`worker.engine.compare.partiality`).
+    normalize_scale : True, every descriptor is scale-free (the GDM's and the DDT's
+        slices divided by their sums, sec. 4.2, or the surface measure's area units);
+        False, sec. 4.1's TOSCA protocol ("because the objects have already the same
+        scale, no surface preprocessing is needed"): the GDM's singular values in the
+        file's length unit, the DDT as eq. (4) gives it (the paper's ``A`` and time unit
+        make it scale-free by themselves). The "vertices" measure only.
     dissimilarity : D1 (eq. 8) or D2 (eq. 9).
     fusion : sum or product rule over ``fused_modalities``.
     fused_modalities : modalities combined into the final score of a whole query.
@@ -148,6 +154,7 @@ class Preset:
     parts_scale_prior: float = 0.02
     parts_min_radii: int = 3
     partial_loop: tuple[float, float] = (0.1, 0.3)
+    normalize_scale: bool = True
     dissimilarity: Dissimilarity = "D2"
     fusion: Fusion = "product"
     fused_modalities: tuple[str, ...] = ("gdm", "ddt")
@@ -185,6 +192,8 @@ class Preset:
             raise ValueError(f"a metric preset weighs the size: fusion_weights[{SIZE!r}]")
         if not 0.0 <= self.size_tolerance < 2.0:
             raise ValueError("size_tolerance is a D1 value (eq. 8): from 0 up to 2")
+        if not self.normalize_scale and self.measure != "vertices":
+            raise ValueError("normalize_scale=False is sec. 4.1's, on the vertices measure")
         unknown = set(self.partial_weights) - {*MODALITIES, PARTS}
         if unknown:
             raise ValueError(f"unknown modalities {sorted(unknown)} in partial_weights")
@@ -253,11 +262,13 @@ class Preset:
 PRESETS: dict[str, Preset] = {
     p.name: p
     for p in (
-        # Sec. 4.1: TOSCA meshes of about 3,000 vertices, D1, sum rule.
+        # Sec. 4.1: TOSCA meshes of about 3,000 vertices, no scale normalization (the
+        # objects share one scale), D1, sum rule.
         Preset(
             name="smeets2010-tosca",
-            version=2,
+            version=3,
             n_vertices=3000,
+            normalize_scale=False,
             dissimilarity="D1",
             fusion="sum",
             # Every preset's size weight (metric units only): shapes tune --units metric
