@@ -15,7 +15,7 @@ from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.errors import MeshError
 from worker.engine.mesh_io import Mesh, load_mesh
 from worker.engine.pipeline import describe_mesh, load_and_describe, resampled_surface
-from worker.engine.presets import MODALITIES, Preset
+from worker.engine.presets import MODALITIES, SIZE, Preset
 
 from .cache import DescriptorCache, VariantMeshCache, file_sha256
 from .datasets import LabeledMesh
@@ -215,9 +215,11 @@ def compute_descriptors(
     )
 
 
-def descriptor_vectors(computed: ComputedSet) -> dict[str, np.ndarray]:
+def descriptor_vectors(computed: ComputedSet, *, size: bool = False) -> dict[str, np.ndarray]:
     """modality -> (n, M) float, and ``BASELINE`` -> (n, k): the flat vectors eqs. (8)
-    and (9) compare, one row per described mesh."""
-    vectors = {m: np.stack([d.vector(m) for d in computed.descriptors]) for m in MODALITIES}
+    and (9) compare, one row per described mesh; with ``size``, also ``SIZE`` -> (n, 1),
+    each mesh's ``sqrt(area)`` (a collection of metric units)."""
+    modalities = (*MODALITIES, SIZE) if size else MODALITIES
+    vectors = {m: np.stack([d.vector(m) for d in computed.descriptors]) for m in modalities}
     vectors[BASELINE] = np.stack([b.descriptor for b in computed.baselines])
     return vectors
