@@ -17,7 +17,7 @@ from typing import Any
 from .engine.errors import MeshError
 from .engine.pipeline import describe_file
 from .engine.presets import DEFAULT_PRESET, PRESETS, UNITS, Preset, get_preset, with_units
-from .evaluation.datasets import DEFAULT_CACHE
+from .evaluation.datasets import DEFAULT_CACHE, RESAMPLINGS
 from .recognition.fusion import FOLDS
 
 
@@ -88,6 +88,7 @@ def _evaluate(args: argparse.Namespace) -> int:
             command=shlex.join(["shapes", *args.argv]),
             environment={"git": _git_revision()},
             fusion=args.fusion,
+            resampling=args.resampling,
         )
     except (EvaluationError, OSError, ValueError) as exc:
         print(f"shapes evaluate: {exc}", file=sys.stderr)
@@ -343,6 +344,15 @@ def build_parser() -> argparse.ArgumentParser:
         "collection by 5-fold class-stratified cross-validation, every figure held out",
     )
     _add_units_argument(evaluate)
+    evaluate.add_argument(
+        "--resampling",
+        choices=RESAMPLINGS,
+        default="mesh",
+        help="mesh: every file resampled on its own (the default, as the service does); "
+        "figure: each class's first file resampled once and that resampling carried to the "
+        "class's other files through their shared vertex ids (poses of one figure numbered "
+        "alike, as TOSCA's; a file with another vertex count is resampled on its own)",
+    )
     evaluate.set_defaults(run=_evaluate)
 
     robustness = sub.add_parser(

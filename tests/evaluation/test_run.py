@@ -175,9 +175,9 @@ def test_only_missing_entries_are_computed(first_run, tmp_path, monkeypatch):
     calls = []
     real = compute._describe_job
 
-    def counting(path, sha256, preset, variant, need_descriptor, need_baseline, stored):
+    def counting(path, sha256, preset, variant, need_descriptor, need_baseline, stored, carried):
         calls.append((Path(path).name, variant, need_descriptor, need_baseline))
-        return real(path, sha256, preset, variant, need_descriptor, need_baseline, stored)
+        return real(path, sha256, preset, variant, need_descriptor, need_baseline, stored, carried)
 
     monkeypatch.setattr(compute, "_describe_job", counting)
     meshes = read_labels(first_run["tmp"] / "labels.csv", EXAMPLES)

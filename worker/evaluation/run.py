@@ -19,7 +19,8 @@ from worker.recognition import metrics
 from worker.recognition.fusion import FOLDS, tune_fusion
 
 from .compute import ComputedSet, compute_descriptors, descriptor_vectors
-from .datasets import EvaluationError, LabeledMesh, pose_set, read_labels
+from .datasets import RESAMPLINGS, EvaluationError, LabeledMesh, pose_set, read_labels
+from .figures import compute_by_figure
 from .learned import LEARNED, learn_fusion, learned_row
 from .partial import PARTIAL_VARIANTS
 from .partiality import partial_row_titles, partiality_scores, parts_matrix
@@ -58,6 +59,7 @@ def run_evaluation(
     progress: bool = True,
     plot: Callable[[Mapping[str, Any], Path], None] | None = None,
     fusion: str = "preset",
+    resampling: str = "mesh",
 ) -> dict[str, Any]:
     """Describe, compare and score a labelled collection; write the report to ``out_dir``.
 
@@ -65,14 +67,24 @@ def run_evaluation(
     ``"learned"`` the report also has the fusion learned on the collection, from
     held-out folds (:mod:`.learned`): a ``learned`` row before ShapeDNA's and a
     ``learned_fusion`` section. With the preset's units "metric" the size is compared
-    and fused too (:func:`.scoring.report_rows`).
+    and fused too (:func:`.scoring.report_rows`). With ``resampling`` "figure" every
+    class is resampled once and its poses share that resampling by vertex id
+    (:mod:`.figures`; the report's ``resampling`` section says how).
 
     Returns
     -------
     The report dict (as in report.json).
     """
+    if resampling not in RESAMPLINGS:
+        raise EvaluationError(f"unknown resampling {resampling!r}; use {', '.join(RESAMPLINGS)}")
     meshes = read_labels(labels_csv, dataset_dir, per_class_limit)
-    computed = compute_descriptors(meshes, preset, cache_root, jobs=jobs, progress=progress)
+    about_resampling = None
+    if resampling == "figure":
+        computed, about_resampling = compute_by_figure(
+            meshes, preset, cache_root, jobs=jobs, progress=progress
+        )
+    else:
+        computed = compute_descriptors(meshes, preset, cache_root, jobs=jobs, progress=progress)
     if len({m.label for m in computed.meshes}) < 2:
         raise EvaluationError(
             f"fewer than two classes left after {len(computed.failures)} meshes failed"
@@ -81,6 +93,8 @@ def run_evaluation(
     report, _ = build_report(
         computed, preset, command=command, environment=env, dataset=str(dataset_dir), jobs=jobs
     )
+    if about_resampling is not None:
+        report["resampling"] = {"per": "figure", **about_resampling}
     if fusion == LEARNED:
         _add_learned(report, computed, preset)
     out = Path(out_dir)
