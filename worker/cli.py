@@ -16,8 +16,8 @@ from typing import Any
 
 from .engine.errors import MeshError
 from .engine.pipeline import describe_file
-from .engine.presets import DEFAULT_PRESET, PRESETS, Preset, get_preset
-from .evaluation.datasets import DEFAULT_CACHE
+from .engine.presets import DEFAULT_PRESET, PRESETS, UNITS, Preset, get_preset, with_units
+from .evaluation.datasets import DEFAULT_CACHE, RESAMPLINGS
 from .recognition.fusion import FOLDS
 
 
@@ -74,6 +74,7 @@ def _evaluate(args: argparse.Namespace) -> int:
     labels = Path(args.labels) if args.labels else dataset / "labels.csv"
     out = Path(args.out) if args.out else Path("evaluation-out") / preset.name
     try:
+        preset = with_units(preset, args.units)
         if args.weights:
             preset = weighted_preset(preset, args.weights)
         report = run_evaluation(
@@ -87,8 +88,9 @@ def _evaluate(args: argparse.Namespace) -> int:
             command=shlex.join(["shapes", *args.argv]),
             environment={"git": _git_revision()},
             fusion=args.fusion,
+            resampling=args.resampling,
         )
-    except (EvaluationError, OSError) as exc:
+    except (EvaluationError, OSError, ValueError) as exc:
         print(f"shapes evaluate: {exc}", file=sys.stderr)
         return 2
     width = max(len(row["title"]) for row in report["rows"].values())
@@ -204,6 +206,7 @@ def _tune(args: argparse.Namespace) -> int:
     labels = Path(args.labels) if args.labels else dataset / "labels.csv"
     out = Path(args.out) if args.out else Path("evaluation-out") / preset.name / "weights.json"
     try:
+        preset = with_units(preset, args.units)
         tuned = run_tuning(
             dataset,
             labels,
@@ -214,7 +217,7 @@ def _tune(args: argparse.Namespace) -> int:
             jobs=args.jobs,
             per_class_limit=args.limit,
         )
-    except (EvaluationError, OSError) as exc:
+    except (EvaluationError, OSError, ValueError) as exc:
         print(f"shapes tune: {exc}", file=sys.stderr)
         return 2
     _print_tuning(tuned, preset, args.folds)
@@ -233,10 +236,13 @@ def _print_tuning(tuned: dict[str, Any], preset: Preset, folds: int) -> None:
     def figures(scores: dict[str, float]) -> str:
         return f"{scores['eer']:.2%} | {scores['nn']:.1%} | {scores['map']:.1%}"
 
+    fixed = [m for m in names if m not in tuned["chosen"]]
+    others = ", ".join(f"{m} {tuned['weights'][m]:g}" for m in fixed)
+    kept = f"the others the preset's ({others})" if preset.units == "metric" else f"{names[-1]} 1"
     print(
-        f"preset {preset.name} v{preset.version}, {preset.fusion} rule, {tuned['meshes']} "
-        f"meshes, {folds} class-stratified folds; weights of {', '.join(names[:-1])} from "
-        f"({', '.join(f'{w:g}' for w in grid)}), {names[-1]} 1\n"
+        f"preset {preset.name} v{preset.version}, {preset.fusion} rule, units "
+        f"{preset.units}, {tuned['meshes']} meshes, {folds} class-stratified folds; weights "
+        f"of {', '.join(tuned['chosen'])} from ({', '.join(f'{w:g}' for w in grid)}), {kept}\n"
     )
     print(f"| fold | held-out meshes | weights ({', '.join(names)}) | EER | NN | mAP |")
     print("|---|---:|---|---:|---:|---:|")
@@ -295,6 +301,18 @@ def _add_collection_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_units_argument(parser: argparse.ArgumentParser) -> None:
+    """What ``evaluate`` and ``tune`` take: the collection's units."""
+    parser.add_argument(
+        "--units",
+        choices=UNITS,
+        default="any",
+        help="the files' units: any (arbitrary; every score scale-free, the default) or "
+        "metric (calibrated: the size of each surface is compared and fused too, at the "
+        "preset's size weight)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="shapes", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -324,6 +342,16 @@ def build_parser() -> argparse.ArgumentParser:
         default="preset",
         help="learned: add a row with the fusion (weights and comparisons) learned on this "
         "collection by 5-fold class-stratified cross-validation, every figure held out",
+    )
+    _add_units_argument(evaluate)
+    evaluate.add_argument(
+        "--resampling",
+        choices=RESAMPLINGS,
+        default="mesh",
+        help="mesh: every file resampled on its own (the default, as the service does); "
+        "figure: each class's first file resampled once and that resampling carried to the "
+        "class's other files through their shared vertex ids (poses of one figure numbered "
+        "alike, as TOSCA's; a file with another vertex count is resampled on its own)",
     )
     evaluate.set_defaults(run=_evaluate)
 
@@ -389,6 +417,7 @@ def build_parser() -> argparse.ArgumentParser:
     tune.add_argument(
         "--out", help="weights file to write (default: evaluation-out/PRESET/weights.json)"
     )
+    _add_units_argument(tune)
     tune.set_defaults(run=_tune)
 
     samples = sub.add_parser(

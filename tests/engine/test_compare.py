@@ -8,13 +8,20 @@ import pytest
 from worker.engine.compare import (
     dissimilarity,
     fuse,
+    fused_dissimilarity,
     gallery_sigma,
     mean_normalized_manhattan,
     normalized_euclidean,
     paired_dissimilarity,
+    paired_preset_dissimilarity,
+    paired_size_dissimilarity,
+    preset_dissimilarity,
     product_fusion,
+    query_weights,
+    size_dissimilarity,
     sum_fusion,
 )
+from worker.engine.presets import DEFAULT_PRESET, PRESETS, SIZE, get_preset, with_units
 
 
 def test_d1_hand_computed():
@@ -64,3 +71,99 @@ def test_paired_dissimilarity_is_the_diagonal_of_the_matrix(kind):
     np.testing.assert_allclose(
         paired_dissimilarity(a, b, kind, sigma), np.diag(dissimilarity(a, b, kind, sigma))
     )
+
+
+# ------------------------------------------------------------------- the size, units
+
+
+def _flat_vectors(rng: np.random.Generator, n: int) -> dict[str, np.ndarray]:
+    """Flat vectors of ``n`` shapes: every modality of the default's sizes, and sizes."""
+    sizes = get_preset(DEFAULT_PRESET).modality_sizes()
+    vectors = {m: rng.random((n, k)) + 0.01 for m, k in sizes.items()}
+    vectors[SIZE] = np.sqrt(rng.uniform(100.0, 400.0, (n, 1)))
+    return vectors
+
+
+@pytest.mark.parametrize("name", sorted(PRESETS))
+def test_a_units_any_preset_scores_exactly_as_before_the_size(name):
+    """Units "any" (every shipped preset's): the fused score is the fused modalities'
+    at the preset's weights, bit for bit, whatever the sizes; the size is not weighed."""
+    preset = get_preset(name)
+    assert preset.units == "any" and preset.scored_modalities == preset.fused_modalities
+    rng = np.random.default_rng(3)
+    queries, gallery = _flat_vectors(rng, 4), _flat_vectors(rng, 7)
+    before = fuse(
+        {
+            m: dissimilarity(queries[m], gallery[m], preset.dissimilarity)
+            for m in preset.fused_modalities
+        },
+        preset.fusion,
+        {m: preset.weight(m) for m in preset.fused_modalities},
+    )
+    assert np.array_equal(fused_dissimilarity(queries, gallery, preset), before)
+    resized = {**queries, SIZE: 10.0 * queries[SIZE]}
+    assert np.array_equal(fused_dissimilarity(resized, gallery, preset), before)
+    whole = {m: preset.weight(m) for m in preset.fused_modalities if preset.weight(m) != 0.0}
+    assert query_weights(preset, 0.0) == whole
+
+
+def test_the_size_is_zero_for_equal_areas_symmetric_scale_sensitive_and_unit_free():
+    """Eq. (8) of ``[sqrt(A)]``: two files of one size are 0 apart, a copy scaled by 2
+    (four times the area) ``2 |2 - 1| / 3`` from its original, whatever the unit both
+    are in."""
+    sizes = np.sqrt(np.array([[150.0], [150.0], [600.0], [320.0]]))
+    d = size_dissimilarity(sizes, sizes)
+    assert d[0, 1] == 0.0 and np.all(np.diag(d) == 0.0)
+    np.testing.assert_array_equal(d, d.T)
+    assert d[0, 2] == pytest.approx(2.0 / 3.0, rel=1e-14)
+    assert np.all(d[0, 2:] > 0.0)
+    np.testing.assert_allclose(size_dissimilarity(1e3 * sizes, 1e3 * sizes), d, rtol=1e-12)
+    np.testing.assert_allclose(paired_size_dissimilarity(sizes[:2], sizes[2:]), [d[0, 2], d[1, 3]])
+
+
+def test_sizes_within_the_tolerance_are_told_apart_by_the_shape_alone():
+    """The preset's comparison raises eq. (8) to its tolerance: equal and nearly equal
+    sizes all score it (the shape's score decides between them), larger differences
+    score eq. (8) itself."""
+    preset = with_units(get_preset(DEFAULT_PRESET), "metric")
+    tolerance = preset.size_tolerance
+    assert 0.0 < tolerance < 0.1 and preset.comparison(SIZE) == f"D1 >= {tolerance:g}"
+    sizes = np.array([[100.0], [100.0], [100.0 * (1 + tolerance / 2)], [130.0]])
+    d = preset_dissimilarity(SIZE, sizes, sizes, preset)
+    np.testing.assert_array_equal(d[0, :3], tolerance)
+    assert d[0, 3] == pytest.approx(2 * 30 / 230, rel=1e-14)
+    np.testing.assert_array_equal(d, d.T)
+    paired = paired_preset_dissimilarity(SIZE, sizes[:2], sizes[2:], preset)
+    np.testing.assert_array_equal(paired, [d[0, 2], d[1, 3]])
+    ddt = np.random.default_rng(5).random((4, 3))
+    np.testing.assert_array_equal(
+        preset_dissimilarity("ddt", ddt, ddt, preset), mean_normalized_manhattan(ddt, ddt)
+    )
+
+
+@pytest.mark.parametrize("name", ["smeets2010-surface", "smeets2010-tosca"])
+def test_a_metric_preset_fuses_the_size_at_its_weight(name):
+    """The product rule multiplies the shape's score by ``D_size^w``, the sum adds
+    ``w D_size``; the same descriptors, only the comparison changes."""
+    any_units = get_preset(name)
+    metric = with_units(any_units, "metric")
+    assert metric.scored_modalities == (*any_units.fused_modalities, SIZE)
+    assert metric.descriptor_fields() == any_units.descriptor_fields()
+    rng = np.random.default_rng(4)
+    queries, gallery = _flat_vectors(rng, 3), _flat_vectors(rng, 5)
+    shape = fused_dissimilarity(queries, gallery, any_units)
+    size = np.maximum(
+        mean_normalized_manhattan(queries[SIZE], gallery[SIZE]), metric.size_tolerance
+    )
+    w = metric.weight(SIZE)
+    expected = shape * size**w if metric.fusion == "product" else shape + w * size
+    np.testing.assert_allclose(fused_dissimilarity(queries, gallery, metric), expected, rtol=1e-12)
+    assert query_weights(metric, 0.0)[SIZE] == w
+
+
+def test_the_size_fades_out_as_a_query_looks_partial():
+    """A part is smaller than its whole: the size's weight goes the way of the shape's."""
+    metric = with_units(get_preset(DEFAULT_PRESET), "metric")
+    w = metric.weight(SIZE)
+    assert query_weights(metric, 0.5)[SIZE] == pytest.approx(0.5 * w)
+    assert SIZE not in query_weights(metric, 1.0)

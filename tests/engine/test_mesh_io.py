@@ -21,6 +21,7 @@ from worker.engine.mesh_io import (
     load_mesh,
     mesh_format,
     read_mesh,
+    read_numbered_mesh,
 )
 
 
@@ -287,3 +288,19 @@ def test_fast_off_reader_agrees_with_trimesh(header, vertex_extra, note):
 def test_fast_off_reader_refuses_what_is_not_its_layout():
     for data in (b"OFF\n3 1 0\n0 0 0\n1 0 0\n", b"OFF\nx y z\n", "OFF\n1 0 0\n0 0 \xe9\n".encode()):
         assert mesh_io._parse_triangle_off(data) is None
+
+
+def test_a_file_read_as_numbered_keeps_its_vertex_order(sphere):
+    """Cleaning renumbers the vertices (by position); the numbered read keeps the
+    file's, which the poses of one figure share."""
+    rng = np.random.default_rng(2)
+    order = rng.permutation(len(sphere.vertices))
+    vertices, faces = sphere.vertices[order], np.argsort(order)[sphere.faces]
+    data = _off(vertices, faces)
+    numbered = read_numbered_mesh(data, "s.off")
+    np.testing.assert_array_equal(numbered.vertices, vertices)
+    np.testing.assert_array_equal(numbered.faces, faces)
+    cleaned = read_mesh(data, "s.off").mesh
+    assert not np.array_equal(cleaned.vertices, vertices)
+    with pytest.raises(errors.UnreadableMeshError):
+        read_numbered_mesh(_off(vertices, faces + len(vertices)), "s.off")

@@ -24,9 +24,9 @@ from conftest import (
 
 from worker.engine.compare import mean_normalized_manhattan
 from worker.engine.descriptor import ShapeDescriptor
-from worker.engine.mesh_io import Mesh, clean_mesh, load_mesh
+from worker.engine.mesh_io import Mesh, clean_mesh, face_areas, load_mesh, read_mesh
 from worker.engine.pipeline import describe_file, describe_mesh
-from worker.engine.presets import get_preset
+from worker.engine.presets import DEFAULT_PRESET, SIZE, get_preset
 
 pytestmark = pytest.mark.slow  # whole pipelines on the examples and generated meshes
 
@@ -34,6 +34,7 @@ MODALITIES = ("gdm", "ddt", "spectrum")
 EXACT = 1e-6  # vertex permutation
 RIGID = 1e-6  # rotation, translation and scale (the canonical frame removes them)
 SAME_SURFACE = 0.03  # twice the resolution
+AREA = 1e-12  # the recorded area against the mesh's, relative (one sum of the same terms)
 
 
 def _difference(a: ShapeDescriptor, b: ShapeDescriptor, modality: str) -> float:
@@ -103,6 +104,57 @@ def test_bent_cylinder_is_closer_than_a_different_shape(small_preset):
     assert _difference(straight, bent, "gdm") < 0.05
 
 
+def test_the_area_is_recorded_in_the_files_units(figure, figure_descriptor, small_preset):
+    """The size is the described mesh's own area, before the canonical frame rescales it:
+    the same surface in other units has another size (and the same shape)."""
+    area = float(face_areas(figure.vertices, figure.faces).sum())
+    assert figure_descriptor.area == pytest.approx(area, rel=AREA)
+    np.testing.assert_allclose(figure_descriptor.vector(SIZE), [np.sqrt(area)], rtol=AREA)
+    doubled = describe_mesh(Mesh(2.0 * figure.vertices, figure.faces), small_preset)
+    assert doubled.area == pytest.approx(4.0 * area, rel=AREA)
+    for m in MODALITIES:
+        assert _difference(figure_descriptor, doubled, m) <= RIGID
+
+
+def test_describe_file_records_the_area_of_the_part_it_describes(small_preset):
+    """A file of two separate parts: the size is the kept part's (the cleaned mesh's),
+    not the file's."""
+    mesh, both = with_a_far_half_copy(example("quadruped-0"))
+    d = describe_file(both, small_preset, "two.off")
+    kept = read_mesh(both, "two.off").mesh
+    assert d.area == pytest.approx(float(face_areas(kept.vertices, kept.faces).sum()), rel=AREA)
+    assert d.area == pytest.approx(mesh.area, rel=1e-9)
+    assert d.area == pytest.approx(0.8 * (mesh.area * 1.25), rel=1e-9)  # 4/5 of the file's
+
+
+def test_a_descriptor_stored_before_the_area_has_no_size(figure_descriptor):
+    old = figure_descriptor.to_json()
+    del old["area"]
+    restored = ShapeDescriptor.from_json(old)
+    assert restored.area is None
+    with pytest.raises(ValueError, match="describe the mesh again"):
+        restored.vector(SIZE)
+    with pytest.raises(KeyError, match="unknown modality"):
+        restored.vector("colour")
+
+
+def test_the_sec_4_1_preset_keeps_the_scale_and_the_surface_presets_do_not(figure):
+    """Sec. 4.1 (``smeets2010-tosca``): the GDM's singular values are in the file's
+    length unit, so a copy scaled by 2 has twice them, while the DDT (the paper's ``A``
+    and time unit) is the same; the default's descriptors do not move. At few vertices
+    to stay fast: the scale handling does not depend on them."""
+    tosca = replace(get_preset("smeets2010-tosca"), n_vertices=400)
+    default = replace(get_preset(DEFAULT_PRESET), n_vertices=400, gdm_samples=100)
+    doubled = Mesh(2.0 * figure.vertices, figure.faces)
+    one, two = describe_mesh(figure, tosca), describe_mesh(doubled, tosca)
+    np.testing.assert_allclose(two.gdm, 2.0 * one.gdm, rtol=RIGID)
+    assert _difference(one, two, "gdm") > 0.5
+    assert _difference(one, two, "ddt") <= RIGID
+    one, two = describe_mesh(figure, default), describe_mesh(doubled, default)
+    for m in MODALITIES:
+        assert _difference(one, two, m) <= RIGID
+
+
 def test_descriptor_round_trips(figure_descriptor):
     partial = replace(figure_descriptor, kept_area_fraction=0.625)
     for original in (figure_descriptor, partial):
@@ -115,6 +167,8 @@ def test_descriptor_round_trips(figure_descriptor):
             assert restored.preset == original.preset
             assert restored.timings == original.timings
             assert restored.kept_area_fraction == original.kept_area_fraction
+            assert restored.area == original.area
+            np.testing.assert_array_equal(restored.vector(SIZE), original.vector(SIZE))
     # A descriptor stored before the kept share was recorded reads as not known.
     old = figure_descriptor.to_json()
     del old["kept_area_fraction"]

@@ -6,7 +6,16 @@ import dataclasses
 
 import pytest
 
-from worker.engine.presets import DEFAULT_PRESET, MODALITIES, PRESETS, Preset, get_preset
+from worker.engine.presets import (
+    COMPARISON_FIELDS,
+    DEFAULT_PRESET,
+    MODALITIES,
+    PRESETS,
+    SIZE,
+    Preset,
+    get_preset,
+    with_units,
+)
 
 
 def test_inconsistent_presets_are_refused():
@@ -66,13 +75,15 @@ def test_the_paper_presets_keep_the_papers_parameters():
         )
     assert (shrec.n_vertices, shrec.dissimilarity, shrec.fusion) == (2500, "D2", "product")
     assert (tosca.n_vertices, tosca.dissimilarity, tosca.fusion) == (3000, "D1", "sum")
+    # Sec. 4.1: "the objects have already the same scale"; sec. 4.2 divides by the sums.
+    assert (tosca.normalize_scale, shrec.normalize_scale) == (False, True)
 
 
 def test_the_default_fuses_all_three_modalities_by_a_weighted_product():
     preset = get_preset(DEFAULT_PRESET)
     assert preset.measure == "surface" and preset.fusion == "product"
     assert preset.fused_modalities == ("gdm", "ddt", "spectrum")
-    assert set(preset.fusion_weights) == set(MODALITIES)
+    assert set(preset.fusion_weights) == {*MODALITIES, SIZE}  # the size: metric units only
 
 
 def test_modality_sizes_follow_the_ddt_elements():
@@ -92,3 +103,36 @@ def test_descriptor_fields_leave_out_how_descriptors_are_compared():
     assert reweighted.descriptor_fields() == preset.descriptor_fields()
     assert "heat_time_factor" in preset.descriptor_fields()
     assert "fusion_weights" not in preset.descriptor_fields()
+
+
+def test_units_say_how_a_collection_is_compared_not_how_shapes_are_described():
+    preset = get_preset(DEFAULT_PRESET)
+    metric = with_units(preset, "metric")
+    assert metric.units == "metric" and with_units(metric, "any") == preset
+    assert metric.scored_modalities == (*preset.fused_modalities, SIZE)
+    assert metric.modality_sizes() == {**preset.modality_sizes(), SIZE: 1}
+    assert metric.comparison(SIZE) == "D1 >= 0.02" and metric.comparison("ddt") == "D1"
+    assert "size_tolerance" in COMPARISON_FIELDS
+    with pytest.raises(ValueError, match="size_tolerance is a D1 value"):
+        Preset(name="x", version=1, size_tolerance=-0.1)
+    assert "units" in COMPARISON_FIELDS and metric.descriptor_fields() == preset.descriptor_fields()
+    assert Preset(**metric.to_dict()) == metric
+    with pytest.raises(ValueError, match="unknown units 'imperial'"):
+        with_units(preset, "imperial")
+    with pytest.raises(ValueError, match="weighs the size"):
+        with_units(Preset(name="x", version=1), "metric")
+    with pytest.raises(ValueError, match=r"unknown modalities \['colour'\] in fusion_weights"):
+        Preset(name="x", version=1, fusion_weights={"colour": 1.0})
+
+
+@pytest.mark.parametrize("name", sorted(PRESETS))
+def test_every_shipped_preset_can_serve_a_metric_collection(name):
+    preset = get_preset(name)
+    assert preset.units == "any" and preset.weight(SIZE) > 0.0
+    assert with_units(preset, "metric").scored_modalities[-1] == SIZE
+
+
+def test_only_the_sec_4_1_preset_keeps_the_scale():
+    assert [p.name for p in PRESETS.values() if not p.normalize_scale] == ["smeets2010-tosca"]
+    with pytest.raises(ValueError, match="sec. 4.1's, on the vertices measure"):
+        Preset(name="x", version=1, measure="surface", normalize_scale=False)

@@ -5,11 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from conftest import bent_cylinder, random_rotation
 
 from worker.engine.mesh_io import Mesh, clean_mesh, load_mesh, tiling_edge
 from worker.engine.resample import (
     MAX_REFINED_VERTICES,
+    carry_resampling,
     resample_mesh,
+    shared_resampling,
     split_edges,
     split_long_edges,
 )
@@ -143,3 +146,49 @@ def test_the_edge_bound_stops_at_its_vertex_budget_longest_edges_first():
     # through resample_mesh the budget is MAX_REFINED_VERTICES times the target
     bounded = resample_mesh(mesh, 500, max_edge=0.5)
     assert bounded.n_vertices <= MAX_REFINED_VERTICES * 500
+
+
+def _poses(bends: tuple[float, ...]) -> list[Mesh]:
+    """Poses of one figure numbered alike: a bent cylinder at each bend (trimesh keeps
+    the vertex order; the file numbering of :func:`read_numbered_mesh`)."""
+    return [Mesh(t.vertices, t.faces) for t in (bent_cylinder(b) for b in bends)]
+
+
+def test_one_resampling_of_a_figure_is_carried_to_its_poses_by_vertex_id():
+    """Every pose takes the same triangles, and each vertex the same barycentric point
+    of the triangle of the same ids in each pose: one triangulation of the figure, on
+    each pose's surface."""
+    poses = _poses((0.0, 1.0, 2.0))
+    shared = shared_resampling(poses[1], 500)
+    assert shared.source_vertices == poses[1].n_vertices
+    assert abs(len(shared.corners) - 500) <= 0.03 * 500
+    assert np.all(shared.weights >= 0.0)
+    np.testing.assert_allclose(shared.weights.sum(axis=1), 1.0, rtol=1e-12)
+    carried = [carry_resampling(p, shared) for p in poses]
+    for pose, mesh in zip(poses, carried, strict=True):
+        assert_clean(mesh)
+        assert mesh.faces is shared.faces
+        corners = pose.vertices[shared.corners]
+        np.testing.assert_allclose(
+            mesh.vertices, np.einsum("kc,kcx->kx", shared.weights, corners), rtol=1e-12
+        )
+        assert area(mesh) == pytest.approx(area(pose), rel=0.03)
+    # The same points of the figure: a pose moved rigidly takes the moved resampling.
+    rotation = random_rotation(np.random.default_rng(5))
+    moved = Mesh(poses[2].vertices @ rotation.T + [1.0, -2.0, 3.0], poses[2].faces)
+    np.testing.assert_allclose(
+        carry_resampling(moved, shared).vertices,
+        carried[2].vertices @ rotation.T + [1.0, -2.0, 3.0],
+        atol=1e-12,
+    )
+    fewer = Mesh(poses[0].vertices[:-1], poses[0].faces[:10])
+    with pytest.raises(ValueError, match="cannot take a resampling made on"):
+        carry_resampling(fewer, shared)
+
+
+def test_a_figure_below_the_target_keeps_every_vertex():
+    pose = _poses((0.5,))[0]
+    shared = shared_resampling(pose, 10 * pose.n_vertices)
+    carried = carry_resampling(pose, shared)
+    np.testing.assert_array_equal(carried.vertices, pose.vertices)
+    np.testing.assert_array_equal(carried.faces, pose.faces)

@@ -4,6 +4,7 @@ files, the descriptor cache in use, meshes left out."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -12,13 +13,16 @@ import trimesh
 from conftest import EXAMPLES, example
 
 from worker.cli import main
-from worker.engine.presets import PRESETS, Preset
+from worker.engine.mesh_io import face_areas, load_mesh
+from worker.engine.presets import PRESETS, SIZE, Preset
 from worker.evaluation import compute
 from worker.evaluation.cache import file_sha256
 from worker.evaluation.datasets import LabeledMesh, read_labels
 from worker.evaluation.run import run_evaluation
-from worker.evaluation.scoring import BASELINE, COLUMNS, ROWS
-from worker.recognition.fusion import feasible_folds
+from worker.evaluation.scoring import BASELINE, COLUMNS, ROWS, score_dissimilarity
+from worker.evaluation.size import SIZE_GRID
+from worker.recognition.fusion import all_to_all, feasible_folds
+from worker.recognition.metrics import first_instance_split
 
 pytestmark = pytest.mark.slow  # shapes evaluate end to end
 
@@ -40,6 +44,12 @@ EVAL_PRESET = Preset(name="test-eval-small", version=0, n_vertices=500, n_eigenp
 # nearer than any pair of two (measured: NN 100%, EER 0).
 MIN_EASY_NN = 1.0
 MAX_EASY_EER = 0.0
+
+
+def describe_area(path: Path) -> float:
+    """The area of a file's cleaned surface: what its descriptor records."""
+    mesh = load_mesh(path)
+    return float(face_areas(mesh.vertices, mesh.faces).sum())
 
 
 def write_labels(path: Path, rows: dict[str, str]) -> Path:
@@ -165,9 +175,9 @@ def test_only_missing_entries_are_computed(first_run, tmp_path, monkeypatch):
     calls = []
     real = compute._describe_job
 
-    def counting(path, sha256, preset, variant, need_descriptor, need_baseline, stored):
+    def counting(path, sha256, preset, variant, need_descriptor, need_baseline, stored, carried):
         calls.append((Path(path).name, variant, need_descriptor, need_baseline))
-        return real(path, sha256, preset, variant, need_descriptor, need_baseline, stored)
+        return real(path, sha256, preset, variant, need_descriptor, need_baseline, stored, carried)
 
     monkeypatch.setattr(compute, "_describe_job", counting)
     meshes = read_labels(first_run["tmp"] / "labels.csv", EXAMPLES)
@@ -276,3 +286,103 @@ def test_the_learned_fusion_row_holds_held_out_figures_only(first_run):
     frr = np.asarray(row["roc"]["frr"])
     assert np.all(np.diff(frr) <= 1e-12) and 0.0 <= frr.min() <= frr.max() <= 1.0
     assert "Learned fusion (held-out folds)" in (out / "report.md").read_text()
+
+
+# --------------------------------------------------------------------------- units
+
+
+#: The evaluation preset with a size weight (only how it compares: the same descriptors,
+#: the same cache entries).
+SIZED_PRESET = replace(EVAL_PRESET, fusion_weights={SIZE: 0.5})
+NINE = {**SUBSET, "hand-3.off.gz": "hand"}  # three of each class: three folds
+
+
+def _evaluate(first_run, labels: Path, out: Path, *extra: str) -> dict:
+    argv = ["evaluate", str(EXAMPLES), "--labels", str(labels), "--preset", SIZED_PRESET.name]
+    argv += ["--jobs", "2", "--cache", str(first_run["cache"]), *extra, "--out", str(out)]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setitem(PRESETS, SIZED_PRESET.name, SIZED_PRESET)
+        assert main(argv) == 0
+    return load_report(out)
+
+
+def test_units_metric_adds_the_size_and_leaves_every_other_row_as_it_was(first_run):
+    """``--units metric``: the size alone and the preset's score with it, from the same
+    descriptors (all from the cache); every row of the scale-free report unchanged, byte
+    for byte."""
+    plain = load_report(first_run["out"])
+    metric = _evaluate(
+        first_run, first_run["tmp"] / "labels.csv", first_run["tmp"] / "metric", "--units", "metric"
+    )
+    key = "gdm+ddt+size product"
+    assert list(metric["rows"]) == [*list(ROWS)[:-1], SIZE, key, BASELINE]
+    for row in ROWS:
+        assert json.dumps(metric["rows"][row]) == json.dumps(plain["rows"][row]), row
+    assert metric["timings"]["computed"] == 0
+    assert metric["rows"][SIZE]["dissimilarity"] == f"D1 >= {SIZED_PRESET.size_tolerance:g}"
+    assert metric["rows"][key]["members"] == ["gdm", "ddt", SIZE]
+    assert metric["rows"][key]["weights"] == {"gdm": 1.0, "ddt": 1.0, SIZE: 0.5}
+    assert metric["protocol"]["preset_score"] == key and "units" not in plain["protocol"]
+    assert (metric["preset"]["units"], plain["preset"]["units"]) == ("metric", "any")
+    # The size row is eq. (8) of every file's sqrt(area) (of its cleaned surface), at
+    # least the tolerance.
+    meshes = read_labels(first_run["tmp"] / "labels.csv", EXAMPLES)
+    sizes = np.sqrt([[describe_area(m.path)] for m in meshes])
+    names, labels = [m.name for m in meshes], [m.label for m in meshes]
+    matrix = np.maximum(all_to_all(sizes, "D1"), SIZED_PRESET.size_tolerance)
+    np.fill_diagonal(matrix, 0.0)
+    expected = score_dissimilarity(matrix, labels, names, *first_instance_split(names, labels))
+    for column in COLUMNS:
+        assert metric["rows"][SIZE][column] == pytest.approx(expected[column], abs=1e-12)
+
+
+def test_units_metric_learns_the_size_with_the_shape(first_run):
+    labels = write_labels(first_run["tmp"] / "nine-metric.csv", NINE)
+    report = _evaluate(
+        first_run,
+        labels,
+        first_run["tmp"] / "learned-metric",
+        "--units",
+        "metric",
+        "--fusion",
+        "learned",
+    )
+    row = report["rows"]["learned"]
+    assert row["members"] == ["gdm", "ddt", SIZE]
+    assert list(row["weights"]) == [SIZE, "gdm", "ddt"] and row["weights"]["ddt"] == 1.0
+    assert row["comparisons"][SIZE] == SIZED_PRESET.comparison(SIZE)
+
+
+def test_tune_chooses_the_size_weight_that_evaluate_takes(first_run, capsys):
+    """``shapes tune --units metric`` chooses only the size's weight (the shape's are the
+    preset's) and ``shapes evaluate --units metric --weights`` fuses with it."""
+    labels = write_labels(first_run["tmp"] / "nine-tune.csv", NINE)
+    weights = first_run["tmp"] / "size-weights.json"
+    argv = ["tune", str(EXAMPLES), "--labels", str(labels), "--preset", SIZED_PRESET.name]
+    argv += ["--jobs", "2", "--cache", str(first_run["cache"]), "--folds", "3", "--units", "metric"]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setitem(PRESETS, SIZED_PRESET.name, SIZED_PRESET)
+        assert main([*argv, "--out", str(weights)]) == 0
+    document = json.loads(weights.read_text())
+    assert (document["units"], document["chosen"]) == ("metric", [SIZE])
+    assert document["weights"]["gdm"] == document["weights"]["ddt"] == 1.0
+    assert document["weights"][SIZE] in SIZE_GRID and list(document["sensitivity"]) == [SIZE]
+    assert document["held_out"]["preset"]["weights"] == {"gdm": 1.0, "ddt": 1.0, SIZE: 0.5}
+    assert "weights of size from (0, 0.0625" in capsys.readouterr().out
+    report = _evaluate(
+        first_run,
+        labels,
+        first_run["tmp"] / "tuned-metric",
+        "--units",
+        "metric",
+        "--weights",
+        str(weights),
+    )
+    assert report["preset"]["fusion_weights"] == document["weights"]
+    assert report["rows"]["gdm+ddt+size product"]["weights"][SIZE] == document["weights"][SIZE]
+
+
+def test_unknown_units_are_refused(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["evaluate", str(EXAMPLES), "--units", "imperial"])
+    assert "invalid choice: 'imperial'" in capsys.readouterr().err

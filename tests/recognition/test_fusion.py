@@ -150,6 +150,26 @@ def test_a_better_comparison_of_a_modality_is_chosen_with_its_weight():
     assert tuning.beats_preset(0.05) and not tuning.beats_preset(1.0)
 
 
+def test_each_modality_names_the_comparison_it_was_made_with():
+    """A size compared by D1 beside a shape compared by D2: each keeps its own name,
+    and an alternative of one is chosen under its own."""
+    rng = np.random.default_rng(4)
+    mats = {"size": noise(len(LABELS), "product", rng), "shape": clustered(LABELS, 5.0, rng)}
+    named = {"size": "D1", "shape": "D2"}
+    alternatives = {"size": {"log-ratio": clustered(LABELS, 0.1, rng)}}
+    tuning = tune_fusion(
+        mats,
+        LABELS,
+        "product",
+        {"size": 1.0, "shape": 1.0},
+        comparison=named,
+        alternatives=alternatives,
+    )
+    assert tuning.comparisons == {"size": "log-ratio", "shape": "D2"}
+    plain = tune_fusion(mats, LABELS, "product", {"size": 1.0, "shape": 1.0}, comparison=named)
+    assert plain.comparisons == named
+
+
 def test_the_held_out_matrix_is_each_object_under_its_folds_choice():
     rng = np.random.default_rng(0)
     mats = {"a": clustered(LABELS, 5.0, rng), "b": clustered(LABELS, 5.0, rng)}

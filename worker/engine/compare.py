@@ -2,7 +2,9 @@
 
 Descriptors are compared as flat vectors of ``M`` elements. All functions take
 stacks of descriptors and return matrices, so one call compares a set of queries
-against a whole gallery.
+against a whole gallery. The preset's score of whole queries is
+:func:`fused_dissimilarity`: its fused modalities, and in a collection of metric units
+the size (:data:`~worker.engine.presets.SIZE`, compared by eq. 8).
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from typing import cast
 
 import numpy as np
 
-from .presets import Dissimilarity, Preset
+from .presets import SIZE, Dissimilarity, Preset
 
 _TINY = np.finfo(float).tiny
 
@@ -146,6 +148,78 @@ def paired_dissimilarity(
     raise ValueError(f"unknown dissimilarity {kind!r}; use 'D1' or 'D2'")
 
 
+def size_dissimilarity(
+    queries: np.ndarray, gallery: np.ndarray, tolerance: float = 0.0
+) -> np.ndarray:
+    """The size modality's comparison: eq. (8), D1, of the sizes ``[sqrt(A)]``, at least
+    ``tolerance``.
+
+    For one element D1 is ``2 |s_k - s_l| / (s_k + s_l) = 2 tanh(|log(s_k / s_l)| / 2)``: a
+    function of the sizes' ratio alone (no unit: a collection in millimetres compares as
+    in metres), zero for equal sizes, symmetric, and about the relative difference of the
+    two. Below ``tolerance`` it is raised to it: sizes closer than that are told apart by
+    the shape alone (pose and scanning move one body's size by a few percent), and a
+    product rule never multiplies the shape's score by 0. Eq. (8) on the size and the
+    tolerance were chosen over eq. (9), the log-ratio and other tolerances by
+    cross-validation (docs/decisions.md, "The size cue").
+
+    Parameters
+    ----------
+    queries : (p, 1) float, positive sizes.
+    gallery : (q, 1) float, positive sizes.
+    tolerance : the floor (the preset's ``size_tolerance``); 0: eq. (8) itself.
+
+    Returns
+    -------
+    (p, q) float in [tolerance, 2].
+    """
+    d: np.ndarray = np.maximum(mean_normalized_manhattan(queries, gallery), tolerance)
+    return d
+
+
+def paired_size_dissimilarity(
+    first: np.ndarray, second: np.ndarray, tolerance: float = 0.0
+) -> np.ndarray:
+    """:func:`size_dissimilarity` of each row of ``first`` to the same row of ``second``
+    ((p, 1) each): (p,) float."""
+    d: np.ndarray = np.maximum(paired_dissimilarity(first, second, "D1"), tolerance)
+    return d
+
+
+def preset_dissimilarity(
+    modality: str,
+    queries: np.ndarray,
+    gallery: np.ndarray,
+    preset: Preset,
+    sigma: np.ndarray | None = None,
+) -> np.ndarray:
+    """One modality's dissimilarity under a preset: the size's
+    (:func:`size_dissimilarity` at the preset's ``size_tolerance``), or the preset's
+    eq. (8) or (9) (:func:`dissimilarity`, ``sigma`` for D2).
+
+    Returns
+    -------
+    (p, q) float
+    """
+    if modality == SIZE:
+        return size_dissimilarity(queries, gallery, preset.size_tolerance)
+    return dissimilarity(queries, gallery, preset.dissimilarity, sigma)
+
+
+def paired_preset_dissimilarity(
+    modality: str,
+    first: np.ndarray,
+    second: np.ndarray,
+    preset: Preset,
+    sigma: np.ndarray | None = None,
+) -> np.ndarray:
+    """:func:`preset_dissimilarity` of each row of ``first`` to the same row of
+    ``second`` (:func:`paired_dissimilarity`; D2 needs ``sigma``): (p,) float."""
+    if modality == SIZE:
+        return paired_size_dissimilarity(first, second, preset.size_tolerance)
+    return paired_dissimilarity(first, second, preset.dissimilarity, sigma)
+
+
 def sum_fusion(
     dissimilarities: Mapping[str, np.ndarray], weights: Mapping[str, float] | None = None
 ) -> np.ndarray:
@@ -182,6 +256,43 @@ def fuse(
     raise ValueError(f"unknown fusion rule {rule!r}; use 'sum' or 'product'")
 
 
+def fused_dissimilarity(
+    queries: Mapping[str, np.ndarray],
+    gallery: Mapping[str, np.ndarray],
+    preset: Preset,
+    sigma: Mapping[str, np.ndarray] | None = None,
+) -> np.ndarray:
+    """The preset's score of whole queries against a gallery.
+
+    Each of the preset's scored modalities (``preset.scored_modalities``: the fused ones,
+    and the size when the units are metric) is compared by its dissimilarity
+    (:func:`preset_dissimilarity`: the preset's eq. (8) or (9); the size's
+    :func:`size_dissimilarity`) and the matrices are fused by the preset's rule and
+    weights. With units "any" this is the fused modalities' score exactly as before the
+    size existed.
+
+    Parameters
+    ----------
+    queries : modality -> (p, M_m) float, the queries' flat vectors
+        (:meth:`~worker.engine.descriptor.ShapeDescriptor.vector`), at least of every
+        scored modality.
+    gallery : modality -> (q, M_m) float, the same for the gallery.
+    sigma : modality -> (M_m,) float, eq. (9)'s sigma_i of the modalities compared by
+        D2; by default over ``gallery``.
+
+    Returns
+    -------
+    (p, q) float
+    """
+    per = {
+        m: preset_dissimilarity(
+            m, queries[m], gallery[m], preset, None if sigma is None else sigma.get(m)
+        )
+        for m in preset.scored_modalities
+    }
+    return fuse(per, preset.fusion, {m: preset.weight(m) for m in preset.scored_modalities})
+
+
 #: Below this share of a file's surface left out, the file is still a whole (rounding,
 #: specks of debris).
 PARTIAL_FILE_START = 0.01
@@ -214,9 +325,10 @@ def query_weights(preset: Preset, partiality: float) -> dict[str, float]:
     is scored by the preset's fusion, a wholly partial one by its ``partial_weights``
     (the parts modality), so full queries are ranked exactly as without it. Modalities
     at exponent 0 are left out. A preset without ``partial_weights`` weighs every query
-    as a whole.
+    as a whole. In a metric collection the size is one of the whole's modalities, so it
+    fades out as a query looks partial (a part is smaller than its whole).
     """
-    whole = {m: preset.weight(m) for m in preset.fused_modalities}
+    whole = {m: preset.weight(m) for m in preset.scored_modalities}
     if not preset.partial_weights or partiality <= 0.0:
         return {m: w for m, w in whole.items() if w != 0.0}
     blended = {

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from .presets import MODALITIES, PARTS
+from .presets import MODALITIES, PARTS, SIZE
 
 #: Every array a descriptor stores: the vector modalities, the parts and their reach.
 ARRAYS = (*MODALITIES, PARTS, "parts_reach")
@@ -46,6 +46,10 @@ class ShapeDescriptor:
         small holes were closed, in square roots of its area (0 when closed;
         :func:`~worker.engine.holes.longest_open_loop`): how partial it looks. None for
         a descriptor stored before this was recorded.
+    area : the described surface's area in the file's own units (squared), measured on
+        the cleaned mesh that is described (the kept part) before it is resampled or
+        normalized: the size modality (:data:`~worker.engine.presets.SIZE`). None for a
+        descriptor stored before this was recorded.
     """
 
     preset: str
@@ -61,9 +65,27 @@ class ShapeDescriptor:
     parts: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=np.float16))
     parts_reach: np.ndarray = field(default_factory=lambda: np.zeros(0))
     longest_open_loop: float | None = None
+    area: float | None = None
 
     def vector(self, modality: str) -> np.ndarray:
-        """The modality as the flat vector that eqs. (8) and (9) compare."""
+        """The modality as the flat vector that eqs. (8) and (9) compare: one of
+        :data:`~worker.engine.presets.MODALITIES`, or the size, ``[sqrt(area)]`` (1,),
+        a length in the file's unit.
+
+        Raises
+        ------
+        KeyError
+            An unknown modality.
+        ValueError
+            The size of a descriptor stored before its area was recorded.
+        """
+        if modality == SIZE:
+            if self.area is None:
+                raise ValueError(
+                    "this descriptor was stored before its surface's area was recorded: "
+                    "describe the mesh again to compare its size"
+                )
+            return np.array([np.sqrt(self.area)])
         if modality not in MODALITIES:
             raise KeyError(f"unknown modality {modality!r}")
         return np.ravel(getattr(self, modality))
@@ -87,6 +109,7 @@ class ShapeDescriptor:
             "timings": self.timings,
             "kept_area_fraction": self.kept_area_fraction,
             "longest_open_loop": self.longest_open_loop,
+            "area": self.area,
         }
 
     @classmethod
@@ -120,6 +143,7 @@ class ShapeDescriptor:
             parts=np.asarray(arrays.get("parts", np.zeros((0, 0))), dtype=np.float16),
             parts_reach=np.asarray(arrays.get("parts_reach", np.zeros(0)), dtype=np.float64),
             longest_open_loop=meta.get("longest_open_loop"),
+            area=meta.get("area"),
         )
 
     def to_npz_bytes(self) -> bytes:

@@ -370,6 +370,53 @@ def read_mesh(
     MeshError
         A subclass naming what is wrong, with a sentence for the user.
     """
+    vertices, faces = _read_arrays(source, filename, max_faces, max_decompressed_bytes)
+    cleaned = clean_surface(vertices, faces)
+    mesh = cleaned.mesh
+    if mesh.n_vertices < min_vertices:
+        raise TooFewVerticesError(
+            f"After cleaning, the largest connected surface has only {mesh.n_vertices} "
+            f"vertices; at least {min_vertices} are needed."
+        )
+    # Geodesics and the Laplace-Beltrami operator are defined on a 2-manifold; a
+    # fan of triangles hinged on one edge has no surface to walk on.
+    if non_manifold_face_fraction(mesh.faces, mesh.n_vertices) > TOL.max_non_manifold_face_fraction:
+        raise NonManifoldError(
+            "The mesh is not a surface: many triangles meet at edges shared by three or more "
+            "triangles (non-manifold); upload a manifold triangle mesh."
+        )
+    return cleaned
+
+
+def read_numbered_mesh(
+    source: str | Path | bytes,
+    filename: str | None = None,
+    *,
+    max_faces: int = DEFAULT_MAX_FACES,
+    max_decompressed_bytes: int = DEFAULT_MAX_DECOMPRESSED_BYTES,
+) -> Mesh:
+    """Read a mesh file's vertices and triangles as the file numbers them, checked as
+    :func:`read_mesh` checks a file but not cleaned (cleaning renumbers the vertices):
+    what a resampling carried between the poses of one figure by vertex id needs
+    (:func:`~worker.engine.resample.shared_resampling`).
+
+    Raises
+    ------
+    MeshError
+        As :func:`read_mesh`, for what is wrong with the file itself.
+    """
+    vertices, faces = _read_arrays(source, filename, max_faces, max_decompressed_bytes)
+    return Mesh(vertices=vertices, faces=faces)
+
+
+def _read_arrays(
+    source: str | Path | bytes,
+    filename: str | None,
+    max_faces: int,
+    max_decompressed_bytes: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A file's vertices (n, 3) float and triangles (m, 3) int as it numbers them, after
+    the checks of the file itself (format, size, triangles, indices, coordinates)."""
     if isinstance(source, bytes | bytearray | memoryview):
         if filename is None:
             raise ValueError("filename is required when the mesh is given as bytes")
@@ -403,22 +450,7 @@ def read_mesh(
         raise NonFiniteCoordinatesError(
             "Some vertex coordinates are not finite numbers (NaN, infinity or too large)."
         )
-
-    cleaned = clean_surface(vertices, faces)
-    mesh = cleaned.mesh
-    if mesh.n_vertices < min_vertices:
-        raise TooFewVerticesError(
-            f"After cleaning, the largest connected surface has only {mesh.n_vertices} "
-            f"vertices; at least {min_vertices} are needed."
-        )
-    # Geodesics and the Laplace-Beltrami operator are defined on a 2-manifold; a
-    # fan of triangles hinged on one edge has no surface to walk on.
-    if non_manifold_face_fraction(mesh.faces, mesh.n_vertices) > TOL.max_non_manifold_face_fraction:
-        raise NonManifoldError(
-            "The mesh is not a surface: many triangles meet at edges shared by three or more "
-            "triangles (non-manifold); upload a manifold triangle mesh."
-        )
-    return cleaned
+    return np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
 
 
 __all__ = [
@@ -432,4 +464,5 @@ __all__ = [
     "load_mesh",
     "mesh_format",
     "read_mesh",
+    "read_numbered_mesh",
 ]

@@ -4,7 +4,8 @@ A simultaneous permutation of the first two modes (eq. 5) leaves the singular
 values of the GDM and the HOSVD core of the DDT unchanged (eqs. 6-7), so these are
 the descriptors; so are the singular values of each slice of the DDT, which the
 default preset takes instead of the core (:func:`slice_singular_values`). Both tensors
-are first normalized per slice (sec. 4.2).
+are first normalized per slice (sec. 4.2), but in sec. 4.1's TOSCA protocol
+(``normalize=False``), where the objects share one scale and keep it.
 
 Two discretizations of the same idea:
 
@@ -64,6 +65,7 @@ def modal_gdm(
     k: int,
     mass: np.ndarray | None = None,
     sample_areas: np.ndarray | None = None,
+    normalize: bool = True,
 ) -> np.ndarray:
     """The ``k`` largest singular values of the normalized GDM, descending.
 
@@ -86,12 +88,14 @@ def modal_gdm(
     sample_areas : (m,) float, the samples' Voronoi areas (:func:`voronoi_areas`):
         the singular values of ``M^1/2 G W^1/2 / A^(3/2)``, the same operator
         integrated over the samples instead of every vertex.
+    normalize : False, no scale normalization (sec. 4.1): the singular values of the
+        GDM itself (weighted without the ``A^(3/2)``), in the distances' unit.
 
     Returns
     -------
     (k,) float
     """
-    weighted = _normalized_gdm(gdm, mass, sample_areas)
+    weighted = _normalized_gdm(gdm, mass, sample_areas, normalize)
     if sample_areas is not None:
         # sigma^2 are the Gram matrix's eigenvalues; the k kept ones span about
         # three decades, far from float64's rounding of the largest. For a few of
@@ -132,11 +136,14 @@ def voronoi_areas(distances: np.ndarray, mass: np.ndarray) -> np.ndarray:
 
 
 def _normalized_gdm(
-    gdm: np.ndarray, mass: np.ndarray | None, sample_areas: np.ndarray | None = None
+    gdm: np.ndarray,
+    mass: np.ndarray | None,
+    sample_areas: np.ndarray | None = None,
+    normalize: bool = True,
 ) -> np.ndarray:
     if mass is None:
-        return normalize_slices(gdm)
-    scale = float(mass.sum()) ** 0.75
+        return normalize_slices(gdm) if normalize else gdm
+    scale = float(mass.sum()) ** 0.75 if normalize else 1.0
     rows = np.sqrt(mass) / scale
     columns = rows if sample_areas is None else np.sqrt(sample_areas) / scale
     if sample_areas is not None:  # the small Gram matrix wants double precision
@@ -151,10 +158,11 @@ def modal_gdm_reference(
     k: int,
     mass: np.ndarray | None = None,
     sample_areas: np.ndarray | None = None,
+    normalize: bool = True,
 ) -> np.ndarray:
     """The same descriptor by a full SVD."""
     singular_values: np.ndarray = np.linalg.svd(
-        _normalized_gdm(gdm, mass, sample_areas), compute_uv=False
+        _normalized_gdm(gdm, mass, sample_areas, normalize), compute_uv=False
     )
     return singular_values[:k]
 
@@ -280,6 +288,7 @@ def small_ddt(
     times: tuple[float, ...],
     mass: np.ndarray | None = None,
     coordinates: np.ndarray | None = None,
+    normalize: bool = True,
 ) -> np.ndarray:
     """The normalized DDT in a small orthonormal basis of its slices' span, without
     forming the ``n x n x s`` tensor.
@@ -316,6 +325,8 @@ def small_ddt(
     coordinates : (k, k) float, optional: eq. (4)'s eigenfunctions are
         ``eigenvectors @ coordinates`` (with ``eigenvalues`` theirs); by default the
         eigenvectors themselves.
+    normalize : False, every slice as eq. (4) gives it (sec. 4.1: no scale
+        normalization).
 
     Returns
     -------
@@ -351,7 +362,7 @@ def small_ddt(
             (mass_phi * decays[:, j]) ** 2
         )
         small = np.outer(q_r, q_one) + np.outer(q_one, q_r) - 2.0 * q_psi @ q_psi.T
-        slices.append(small * (total / integral))
+        slices.append(small * (total / integral) if normalize else small)
     return np.stack(slices, axis=2)
 
 
@@ -363,12 +374,13 @@ def ddt_core(
     mass: np.ndarray | None = None,
     mix_times: bool = True,
     coordinates: np.ndarray | None = None,
+    normalize: bool = True,
 ) -> np.ndarray:
     """HOSVD core of the normalized DDT: that of its small form (:func:`small_ddt`).
 
     Parameters
     ----------
-    eigenvalues, eigenvectors, times, mass, coordinates : as :func:`small_ddt`.
+    eigenvalues, eigenvectors, times, mass, coordinates, normalize : as :func:`small_ddt`.
     core_shape : (r1, r2, r3)
     mix_times : True, the whole HOSVD (the paper); False, the vertex modes only
         (:func:`vertex_modes_core`), so the core's third size is ``len(times)``.
@@ -378,7 +390,7 @@ def ddt_core(
     core_shape float, as :func:`hosvd_core` (or :func:`vertex_modes_core`) of the
     normalized dense (weighted) DDT.
     """
-    tensor = small_ddt(eigenvalues, eigenvectors, times, mass, coordinates)
+    tensor = small_ddt(eigenvalues, eigenvectors, times, mass, coordinates, normalize)
     if mix_times:
         return hosvd_core(tensor, core_shape)
     return vertex_modes_core(tensor, core_shape[:2])

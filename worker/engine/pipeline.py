@@ -19,7 +19,14 @@ from .diffusion import (
 from .geodesic import farthest_point_samples, geodesic_distance_matrix, sample_distances
 from .holes import boundary_loops, close_small_holes, longest_open_loop
 from .intrinsic import surface_operators
-from .mesh_io import CANONICAL_AREA, DEFAULT_MAX_FACES, Mesh, canonical_frame, read_mesh
+from .mesh_io import (
+    CANONICAL_AREA,
+    DEFAULT_MAX_FACES,
+    Mesh,
+    canonical_frame,
+    face_areas,
+    read_mesh,
+)
 from .modal import (
     core_diagonal,
     ddt_core,
@@ -33,12 +40,14 @@ from .presets import Preset
 from .resample import resample_mesh
 
 
-def resampled_surface(mesh: Mesh, preset: Preset) -> Mesh:
+def resampled_surface(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Mesh:
     """The mesh every descriptor of ``mesh`` is computed on: in its canonical frame
     (:func:`~worker.engine.mesh_io.canonical_frame`), its small holes closed if the
     preset says so (:func:`~worker.engine.holes.close_small_holes`), resampled to the
-    preset's vertex count, its edges bounded if the preset says so."""
-    return _resampled(canonical_frame(mesh), preset)
+    preset's vertex count, its edges bounded if the preset says so; only moved to its
+    canonical frame when it is ``resampled`` already (:func:`describe_mesh`)."""
+    surface = canonical_frame(mesh)
+    return surface if resampled else _resampled(surface, preset)
 
 
 def _resampled(surface: Mesh, preset: Preset) -> Mesh:
@@ -80,8 +89,9 @@ def ddt_descriptor(
     preset's ``ddt_elements`` say: the HOSVD core (eqs. 5-7), its diagonal, or each
     slice's singular values."""
     times = preset.diffusion_times
+    normalize = preset.normalize_scale
     if preset.ddt_elements == "slice_values":
-        tensor = small_ddt(eigenvalues, eigenvectors, times, mass, coordinates)
+        tensor = small_ddt(eigenvalues, eigenvectors, times, mass, coordinates, normalize)
         return slice_singular_values(tensor, min(preset.ddt_core_shape[:2]))
     core = ddt_core(
         eigenvalues,
@@ -91,16 +101,25 @@ def ddt_descriptor(
         mass,
         mix_times=preset.ddt_mix_times,
         coordinates=coordinates,
+        normalize=normalize,
     )
     return core_diagonal(core) if preset.ddt_elements == "diagonal" else core
 
 
-def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
-    """Compute all modalities of a cleaned mesh.
+def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> ShapeDescriptor:
+    """Compute all modalities of a cleaned mesh, and record its area (the size).
 
     Stages (timed): ``resample``, ``gdm`` (intrinsic Delaunay, heat-method GDM),
     ``eigen_ddt`` (eq. 3 eigenpairs and the DDT's modal representation), ``modal``
     (GDM singular values), ``parts`` (the parts modality, when the preset has it).
+
+    Parameters
+    ----------
+    mesh : a cleaned mesh, in the file's units.
+    preset : the parameters.
+    resampled : the mesh is already the preset's resampling (one resampling of a figure
+        carried to its poses, :func:`~worker.engine.resample.carry_resampling`): it is
+        described as it is, only moved to its canonical frame.
     """
     timings: dict[str, float] = {}
     clock = time.perf_counter()
@@ -111,11 +130,13 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
         timings[stage] = now - clock
         clock = now
 
+    # The size, in the file's units: everything below is in the canonical frame.
+    area = float(face_areas(mesh.vertices, mesh.faces).sum())
     surface = canonical_frame(mesh)
     open_loop = longest_open_loop(surface, CANONICAL_AREA)
-    resampled = _resampled(surface, preset)
+    described = surface if resampled else _resampled(surface, preset)
     lap("resample")
-    intrinsic, ops = surface_operators(resampled.vertices, resampled.faces)
+    intrinsic, ops = surface_operators(described.vertices, described.faces)
     on_surface = preset.measure == "surface"
     mass = ops.vertex_areas if on_surface else None
     heat_reference = preset.n_vertices if on_surface else None
@@ -123,7 +144,7 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
     if preset.gdm_samples is None:
         gdm = geodesic_distance_matrix(intrinsic, ops, preset.heat_time_factor, heat_reference)
     else:
-        samples = farthest_point_samples(resampled.vertices, preset.gdm_samples, ops.vertex_areas)
+        samples = farthest_point_samples(described.vertices, preset.gdm_samples, ops.vertex_areas)
         gdm = sample_distances(intrinsic, ops, samples, preset.heat_time_factor, heat_reference)
         sample_areas = voronoi_areas(gdm, ops.vertex_areas)
     lap("gdm")
@@ -150,11 +171,16 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
     else:
         spectrum = normalized_spectrum(op, eigenvalues, preset.spectrum_size)
     lap("eigen_ddt")
-    singular_values = modal_gdm(gdm, preset.gdm_singular_values, mass, sample_areas)
+    singular_values = modal_gdm(
+        gdm, preset.gdm_singular_values, mass, sample_areas, preset.normalize_scale
+    )
+    if not preset.normalize_scale:
+        # Sec. 4.1: distances in the file's length unit, not the canonical frame's.
+        singular_values = singular_values * np.sqrt(area / CANONICAL_AREA)
     lap("modal")
     parts, reach = np.zeros((0, 0), dtype=np.float16), np.zeros(0)
     if preset.has_parts:
-        parts, reach = parts_descriptor(resampled, gdm, ops.vertex_areas, preset)
+        parts, reach = parts_descriptor(described, gdm, ops.vertex_areas, preset)
         lap("parts")
     return ShapeDescriptor(
         preset=preset.name,
@@ -164,11 +190,12 @@ def describe_mesh(mesh: Mesh, preset: Preset) -> ShapeDescriptor:
         spectrum=spectrum,
         input_vertices=mesh.n_vertices,
         input_faces=mesh.n_faces,
-        vertices=resampled.n_vertices,
+        vertices=described.n_vertices,
         timings=timings,
         parts=parts,
         parts_reach=reach,
         longest_open_loop=open_loop,
+        area=area,
     )
 
 

@@ -7,7 +7,7 @@ descriptors must bump ``version``.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Literal
 
 Dissimilarity = Literal["D1", "D2"]
@@ -15,10 +15,21 @@ Fusion = Literal["sum", "product"]
 Measure = Literal["vertices", "surface"]
 DdtElements = Literal["core", "diagonal", "slice_values"]
 MassMatrix = Literal["lumped", "averaged"]
-#: The modalities that are one flat vector per shape (eqs. 8 and 9 compare them).
+Units = Literal["any", "metric"]
+#: What a collection's files' units are: "any", arbitrary (a file and the same file
+#: rescaled are the same shape); "metric", calibrated (millimetres, metres: a scanner's),
+#: so that a shape's size tells shapes apart.
+UNITS: tuple[Units, ...] = ("any", "metric")
+#: The modalities that are one flat vector per shape (eqs. 8 and 9 compare them): the
+#: shape's, every one of them blind to scale.
 MODALITIES = ("gdm", "ddt", "spectrum")
 #: The modality of local profiles that compares a part with a whole (:mod:`.parts`).
 PARTS = "parts"
+#: The size modality: the flat vector ``[sqrt(A)]`` of the described surface's area ``A``
+#: in the file's own units (:meth:`~worker.engine.descriptor.ShapeDescriptor.vector`),
+#: scored only in a collection of metric units (:attr:`Preset.scored_modalities`) and
+#: compared by :func:`worker.engine.compare.size_dissimilarity`.
+SIZE = "size"
 
 
 @dataclass(frozen=True)
@@ -94,10 +105,27 @@ class Preset:
     partial_loop : the query's longest open boundary loop (in square roots of its area)
         from which it starts to look partial, and at which it looks wholly so
         (:func:`worker.engine.compare.partiality`).
+    normalize_scale : True, every descriptor is scale-free (the GDM's and the DDT's
+        slices divided by their sums, sec. 4.2, or the surface measure's area units);
+        False, sec. 4.1's TOSCA protocol ("because the objects have already the same
+        scale, no surface preprocessing is needed"): the GDM's singular values in the
+        file's length unit, the DDT as eq. (4) gives it (the paper's ``A`` and time unit
+        make it scale-free by themselves). The "vertices" measure only.
     dissimilarity : D1 (eq. 8) or D2 (eq. 9).
     fusion : sum or product rule over ``fused_modalities``.
     fused_modalities : modalities combined into the final score of a whole query.
-    fusion_weights : exponent (product) or factor (sum) per fused modality.
+    units : the collection's units (:data:`UNITS`): "any", the score is the fused
+        modalities' (every descriptor scale-free); "metric", the size modality
+        (:data:`SIZE`) is fused with them, at ``fusion_weights["size"]``. Only how
+        descriptors are compared: the same descriptors serve both.
+    fusion_weights : exponent (product) or factor (sum) per fused modality, and the
+        size's (key :data:`SIZE`), used when ``units`` is "metric".
+    size_tolerance : the floor of the size's comparison
+        (:func:`~worker.engine.compare.size_dissimilarity`): eq. (8)'s D1 of two sizes,
+        about their relative difference, is raised to it, so that sizes closer than this
+        are told apart by the shape alone (a body's size moves by a few percent with its
+        pose and its scan). Chosen with the size's weight by cross-validation
+        (docs/decisions.md).
     partial_weights : the exponents (product rule) of a query that looks wholly partial;
         a query part way is weighed in between (:func:`worker.engine.compare.query_weights`).
         Empty: every query is weighed as a whole.
@@ -126,10 +154,13 @@ class Preset:
     parts_scale_prior: float = 0.02
     parts_min_radii: int = 3
     partial_loop: tuple[float, float] = (0.1, 0.3)
+    normalize_scale: bool = True
     dissimilarity: Dissimilarity = "D2"
     fusion: Fusion = "product"
     fused_modalities: tuple[str, ...] = ("gdm", "ddt")
+    units: Units = "any"
     fusion_weights: dict[str, float] = field(default_factory=dict)
+    size_tolerance: float = 0.02
     partial_weights: dict[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -152,6 +183,17 @@ class Preset:
         unknown = set(self.fused_modalities) - set(MODALITIES)
         if unknown:
             raise ValueError(f"unknown modalities {sorted(unknown)}")
+        unknown = set(self.fusion_weights) - {*MODALITIES, SIZE}
+        if unknown:
+            raise ValueError(f"unknown modalities {sorted(unknown)} in fusion_weights")
+        if self.units not in UNITS:
+            raise ValueError(f"unknown units {self.units!r}; use one of {', '.join(UNITS)}")
+        if self.units == "metric" and SIZE not in self.fusion_weights:
+            raise ValueError(f"a metric preset weighs the size: fusion_weights[{SIZE!r}]")
+        if not 0.0 <= self.size_tolerance < 2.0:
+            raise ValueError("size_tolerance is a D1 value (eq. 8): from 0 up to 2")
+        if not self.normalize_scale and self.measure != "vertices":
+            raise ValueError("normalize_scale=False is sec. 4.1's, on the vertices measure")
         unknown = set(self.partial_weights) - {*MODALITIES, PARTS}
         if unknown:
             raise ValueError(f"unknown modalities {sorted(unknown)} in partial_weights")
@@ -178,14 +220,33 @@ class Preset:
     def weight(self, modality: str) -> float:
         return self.fusion_weights.get(modality, 1.0)
 
+    @property
+    def scored_modalities(self) -> tuple[str, ...]:
+        """The modalities of the preset's score of a whole query: ``fused_modalities``,
+        and the size (:data:`SIZE`, last) when the collection's units are metric."""
+        if self.units == "metric":
+            return (*self.fused_modalities, SIZE)
+        return self.fused_modalities
+
+    def comparison(self, modality: str) -> str:
+        """The name of a modality's comparison: the preset's eq. (8) or (9), or for the
+        size eq. (8) at least ``size_tolerance``."""
+        if modality == SIZE:
+            return f"D1 >= {self.size_tolerance:g}"
+        return self.dissimilarity
+
     def modality_sizes(self) -> dict[str, int]:
-        """Length of each modality's flat vector (what eqs. 8 and 9 compare)."""
+        """Length of each modality's flat vector (what eqs. 8 and 9 compare): the shape's
+        (:data:`MODALITIES`), and the size's (one) when the units are metric."""
         r1, r2, r3 = self.ddt_core_shape
-        return {
+        sizes = {
             "gdm": self.gdm_singular_values,
             "ddt": r1 * r2 * r3 if self.ddt_elements == "core" else min(r1, r2) * r3,
             "spectrum": self.spectrum_size,
         }
+        if self.units == "metric":
+            sizes[SIZE] = 1
+        return sizes
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -201,17 +262,22 @@ class Preset:
 PRESETS: dict[str, Preset] = {
     p.name: p
     for p in (
-        # Sec. 4.1: TOSCA meshes of about 3,000 vertices, D1, sum rule.
+        # Sec. 4.1: TOSCA meshes of about 3,000 vertices, no scale normalization (the
+        # objects share one scale), D1, sum rule.
         Preset(
             name="smeets2010-tosca",
-            version=2,
+            version=3,
             n_vertices=3000,
+            normalize_scale=False,
             dissimilarity="D1",
             fusion="sum",
+            # Every preset's size weight (metric units only): shapes tune --units metric
+            # on TOSCA (docs/evaluation.md).
+            fusion_weights={SIZE: 8.0},
         ),
         # Sec. 4.2: SHREC 2010, 2,500 vertices, 19 singular values, 20x20x5 core,
         # D2 and the product rule.
-        Preset(name="smeets2010-shrec", version=2),
+        Preset(name="smeets2010-shrec", version=2, fusion_weights={SIZE: 2.0}),
         # Beyond the paper: the Laplace-Beltrami spectrum alone (the third modality), D1.
         Preset(
             name="lb-spectrum",
@@ -219,6 +285,7 @@ PRESETS: dict[str, Preset] = {
             dissimilarity="D1",
             fusion="sum",
             fused_modalities=("spectrum",),
+            fusion_weights={SIZE: 1.0},
         ),
         # The paper's GDM and DDT as operators of the surface, fused with the spectrum;
         # a query that looks partial is ranked by the parts modality.
@@ -239,8 +306,9 @@ PRESETS: dict[str, Preset] = {
             dissimilarity="D1",
             fusion="product",
             fused_modalities=("gdm", "ddt", "spectrum"),
-            # Chosen by cross-validation on TOSCA (shapes tune; docs/evaluation.md).
-            fusion_weights={"gdm": 0.0, "ddt": 0.5, "spectrum": 1.0},
+            # Chosen by cross-validation on TOSCA (shapes tune; docs/evaluation.md); the
+            # size's (metric units only) on TOSCA and on TOSCA with SCAPE.
+            fusion_weights={"gdm": 0.0, "ddt": 0.5, "spectrum": 1.0, SIZE: 1.0},
             parts_first_radius=0.07,
             partial_weights={PARTS: 1.0},
         ),
@@ -254,12 +322,29 @@ COMPARISON_FIELDS = (
     "dissimilarity",
     "fusion",
     "fused_modalities",
+    "units",
     "fusion_weights",
+    "size_tolerance",
     "parts_scale_prior",
     "parts_min_radii",
     "partial_loop",
     "partial_weights",
 )
+
+
+def with_units(preset: Preset, units: str) -> Preset:
+    """``preset`` for a collection of these units (:data:`UNITS`): "metric" scores the size
+    with the shape at the preset's ``fusion_weights["size"]``; "any" is the scale-free
+    score. The descriptors are the same either way.
+
+    Raises
+    ------
+    ValueError
+        Unknown units, or metric units for a preset that has no size weight.
+    """
+    if units not in UNITS:
+        raise ValueError(f"unknown units {units!r}; use one of {', '.join(UNITS)}")
+    return replace(preset, units=units)
 
 
 def get_preset(name: str) -> Preset:

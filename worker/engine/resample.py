@@ -23,10 +23,12 @@ operators' cost stays the target's.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .intrinsic import IntrinsicMesh
-from .mesh_io import Mesh, clean_mesh, face_areas, tiling_edge
+from .mesh_io import Mesh, canonical_frame, clean_mesh, face_areas, tiling_edge
 from .topology import edge_keys, euler_and_boundary
 
 #: The edge-length bound stops refining before a mesh would pass this many times the
@@ -165,3 +167,157 @@ def resample_mesh(mesh: Mesh, n_vertices: int, max_edge: float | None = None) ->
         return bounded
     coarser = _decimate(out, max(out.n_vertices - added, n_vertices // 2))
     return split_long_edges(coarser, limit, budget)
+
+
+@dataclass(frozen=True)
+class SharedResampling:
+    """One resampling of a figure, made on one of its poses and carried to the others
+    through their shared vertex ids (:func:`shared_resampling`).
+
+    Attributes
+    ----------
+    corners : (k, 3) int, for each vertex of the resampling the file's ids of the
+        corners of the triangle of the pose it lies on.
+    weights : (k, 3) float, its barycentric coordinates in that triangle.
+    faces : (m, 3) int, the resampling's triangles, indices into its ``k`` vertices.
+    source_vertices : how many vertices the file it was made on has (a pose it is
+        carried to has as many, numbered alike).
+    """
+
+    corners: np.ndarray
+    weights: np.ndarray
+    faces: np.ndarray
+    source_vertices: int
+
+
+#: Nearest vertices whose triangles are searched for the one a point lies on: the
+#: decimation's vertices are within an edge or so of the surface they came from.
+NEAREST_VERTICES = 16
+
+
+def shared_resampling(reference: Mesh, n_vertices: int) -> SharedResampling:
+    """The resampling of a figure by one of its poses: quadric decimation of the pose to
+    about ``n_vertices`` (as :func:`resample_mesh` decimates, in the canonical frame),
+    each of its vertices put as a point of the pose's surface (the barycentric
+    coordinates of the nearest point of the pose's triangles).
+
+    Those coordinates on the same vertex ids place the resampling on every pose of the
+    figure whose file numbers its vertices alike (TOSCA's poses of one figure, SCAPE's):
+    one triangulation for all of them, as the paper's TOSCA subset had (sec. 4.1).
+
+    Parameters
+    ----------
+    reference : the pose, its vertices and faces numbered as in its file (not cleaned,
+        which renumbers them: :func:`~worker.engine.mesh_io.read_numbered_mesh`).
+    n_vertices : target vertex count; a pose with no more vertices keeps them all.
+    """
+    import fast_simplification
+
+    vertices, faces = reference.vertices, np.asarray(reference.faces, dtype=np.int64)
+    n = len(vertices)
+    if n <= n_vertices:
+        corners = np.repeat(np.arange(n)[:, None], 3, axis=1)
+        weights = np.tile([1.0, 0.0, 0.0], (n, 1))
+        return SharedResampling(corners, weights, faces, n)
+    surface = canonical_frame(reference)  # the decimation's thresholds are absolute
+    euler, boundary = euler_and_boundary(faces, n)
+    target_faces = max(2 * n_vertices - 2 * euler - boundary, 4)
+    points, reduced_faces = fast_simplification.simplify(
+        surface.vertices, faces.astype(np.int32), target_count=int(target_faces)
+    )
+    reduced = clean_mesh(points, reduced_faces)
+    face, weights = _nearest_surface_points(reduced.vertices, surface.vertices, faces)
+    return SharedResampling(faces[face], weights, reduced.faces, n)
+
+
+def carry_resampling(pose: Mesh, resampling: SharedResampling) -> Mesh:
+    """The resampling of a figure (:func:`shared_resampling`) on one of its poses: each
+    vertex at its barycentric coordinates in the pose's triangle of the same corner ids,
+    joined by the shared triangles (the same ``faces`` for every pose: one triangulation,
+    vertex ``i`` the same point of the figure in each).
+
+    Parameters
+    ----------
+    pose : numbered as in its file, as the pose the resampling was made on.
+
+    Raises
+    ------
+    ValueError
+        The pose has another number of vertices than the one it was made on.
+    """
+    if pose.n_vertices != resampling.source_vertices:
+        raise ValueError(
+            f"a pose of {pose.n_vertices} vertices cannot take a resampling made on "
+            f"{resampling.source_vertices}"
+        )
+    corners = np.asarray(pose.vertices, dtype=np.float64)[resampling.corners]  # (k, 3, 3)
+    vertices = np.einsum("kc,kcx->kx", resampling.weights, corners)
+    return Mesh(vertices=vertices, faces=resampling.faces)
+
+
+def _nearest_surface_points(
+    points: np.ndarray, vertices: np.ndarray, faces: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """For each point, the triangle of the surface nearest to it and the barycentric
+    coordinates of its nearest point there, among the triangles at the point's
+    :data:`NEAREST_VERTICES` nearest vertices.
+
+    Returns
+    -------
+    face : (p,) int, indices into ``faces``.
+    weights : (p, 3) float, non-negative, summing to 1.
+    """
+    from scipy.spatial import cKDTree
+
+    nearest = cKDTree(vertices).query(points, k=min(NEAREST_VERTICES, len(vertices)))[1]
+    # The triangles at each vertex, as a CSR of the faces sorted by corner.
+    by_vertex = np.argsort(faces.ravel(), kind="stable") // 3
+    starts = np.searchsorted(np.sort(faces.ravel()), np.arange(len(vertices) + 1))
+    counts = (starts[1:] - starts[:-1])[nearest]  # (p, k)
+    point = np.repeat(np.arange(len(points)), counts.sum(axis=1))
+    first = np.repeat(starts[:-1][nearest].ravel(), counts.ravel())
+    offset = np.arange(len(first)) - np.repeat(
+        np.cumsum(counts.ravel()) - counts.ravel(), counts.ravel()
+    )
+    face = by_vertex[first + offset]
+    weights = _closest_on_triangles(points[point], *(vertices[faces[face, c]] for c in range(3)))
+    corners = vertices[faces[face]]
+    gap = np.linalg.norm(points[point] - np.einsum("pc,pcx->px", weights, corners), axis=1)
+    order = np.lexsort((gap, point))
+    best = order[np.searchsorted(point[order], np.arange(len(points)))]
+    return face[best], weights[best]
+
+
+def _closest_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """(m, 3) barycentric coordinates of the point of each triangle ``abc`` nearest to
+    ``p`` (all (m, 3) float): Ericson's regions (Real-Time Collision Detection, 5.1.5),
+    a vertex's before an edge's before the face's, as there."""
+    ab, ac = b - a, c - a
+    d1, d2 = np.einsum("ij,ij->i", ab, p - a), np.einsum("ij,ij->i", ac, p - a)
+    d3, d4 = np.einsum("ij,ij->i", ab, p - b), np.einsum("ij,ij->i", ac, p - b)
+    d5, d6 = np.einsum("ij,ij->i", ab, p - c), np.einsum("ij,ij->i", ac, p - c)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+
+    def ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
+        safe = np.where(den != 0.0, den, 1.0)
+        return np.clip(np.where(den != 0.0, num / safe, 0.0), 0.0, 1.0)
+
+    zero = np.zeros_like(d1)
+    v, w = ratio(vb, va + vb + vc), ratio(vc, va + vb + vc)
+    out = np.stack([1.0 - v - w, v, w], axis=1)  # inside the face
+    # Each region overwrites the ones of lower precedence before it.
+    t = ratio(d4 - d3, (d4 - d3) + (d5 - d6))
+    on_bc = (va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0)
+    out = np.where(on_bc[:, None], np.stack([zero, 1.0 - t, t], axis=1), out)
+    t = ratio(d2, d2 - d6)
+    on_ac = (vb <= 0) & (d2 >= 0) & (d6 <= 0)
+    out = np.where(on_ac[:, None], np.stack([1.0 - t, zero, t], axis=1), out)
+    out = np.where(((d6 >= 0) & (d5 <= d6))[:, None], [0.0, 0.0, 1.0], out)
+    t = ratio(d1, d1 - d3)
+    on_ab = (vc <= 0) & (d1 >= 0) & (d3 <= 0)
+    out = np.where(on_ab[:, None], np.stack([1.0 - t, t, zero], axis=1), out)
+    out = np.where(((d3 >= 0) & (d4 <= d3))[:, None], [0.0, 1.0, 0.0], out)
+    out = np.where(((d1 <= 0) & (d2 <= 0))[:, None], [1.0, 0.0, 0.0], out)
+    weights: np.ndarray = np.clip(out, 0.0, 1.0)
+    normalized: np.ndarray = weights / weights.sum(axis=1, keepdims=True)
+    return normalized

@@ -13,9 +13,10 @@ import numpy as np
 
 from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.errors import MeshError
-from worker.engine.mesh_io import Mesh, load_mesh
+from worker.engine.mesh_io import Mesh, load_mesh, read_numbered_mesh
 from worker.engine.pipeline import describe_mesh, load_and_describe, resampled_surface
-from worker.engine.presets import MODALITIES, Preset
+from worker.engine.presets import MODALITIES, SIZE, Preset
+from worker.engine.resample import SharedResampling, carry_resampling
 
 from .cache import DescriptorCache, VariantMeshCache, file_sha256
 from .datasets import LabeledMesh
@@ -65,15 +66,21 @@ def _describe_job(
     need_descriptor: bool,
     need_baseline: bool,
     stored: VariantMeshCache | None,
+    carried: SharedResampling | None = None,
 ) -> _Job:
     """Describe one mesh file (``sha256`` its bytes' digest), or its ``variant`` (its
-    mesh kept in ``stored`` when given); runs in a worker process, so it only takes
-    picklable data."""
+    mesh kept in ``stored`` when given), or the resampling of its figure ``carried`` to
+    it; runs in a worker process, so it only takes picklable data."""
     data = Path(path).read_bytes()
     name = Path(path).name
     job = _Job()
+    resampled = carried is not None
     try:
-        if variant is None:  # the file as the service describes an upload
+        if carried is not None:  # its figure's resampling, by vertex id
+            mesh = carry_resampling(read_numbered_mesh(data, name), carried)
+            if need_descriptor:
+                job.descriptor = describe_mesh(mesh, preset, resampled=True).to_npz_bytes()
+        elif variant is None:  # the file as the service describes an upload
             if need_descriptor:
                 mesh, descriptor = load_and_describe(data, preset, filename=name)
                 job.descriptor = descriptor.to_npz_bytes()
@@ -85,7 +92,7 @@ def _describe_job(
                 job.descriptor = describe_mesh(mesh, preset).to_npz_bytes()
         if need_baseline:
             # The mesh the descriptors were made from (the same deterministic steps).
-            surface = resampled_surface(mesh, preset)
+            surface = resampled_surface(mesh, preset, resampled=resampled)
             job.baseline = shapedna(surface.vertices, surface.faces).to_npz_bytes()
     except MeshError as exc:
         job.error = exc.message
@@ -112,6 +119,7 @@ def compute_descriptors(
     jobs: int = 1,
     progress: bool = True,
     variant: str | None = None,
+    carried: tuple[str, SharedResampling] | None = None,
 ) -> ComputedSet:
     """Descriptors and ShapeDNA of every mesh, from the cache or computed in parallel.
 
@@ -124,6 +132,10 @@ def compute_descriptors(
     progress : show a tqdm progress bar (on a terminal).
     variant : describe this variant of every mesh (:mod:`.variants`) instead of the
         file itself.
+    carried : (key, resampling): describe every mesh as this resampling of its figure
+        (:func:`~worker.engine.resample.carry_resampling`; the meshes are poses of one
+        figure numbered as the one it was made on), cached under ``key`` (which names the
+        pose it was made on) as a variant is.
 
     Returns
     -------
@@ -131,7 +143,9 @@ def compute_descriptors(
     """
     from tqdm import tqdm
 
-    cache = DescriptorCache(Path(cache_root), preset, variant)
+    if variant is not None and carried is not None:
+        raise ValueError("a variant of the files or their figure's resampling, not both")
+    cache = DescriptorCache(Path(cache_root), preset, variant if carried is None else carried[0])
     stored = VariantMeshCache.under(cache_root) if variant in STORED_VARIANTS else None
     start = time.perf_counter()
     hashes = [file_sha256(m.path) for m in meshes]
@@ -154,6 +168,8 @@ def compute_descriptors(
 
     start = time.perf_counter()
     what = preset.name if variant is None else f"{preset.name}, {variant}"
+    if carried is not None:
+        what = f"{preset.name}, {carried[0]}"
     bar = tqdm(total=len(todo), desc=f"describe ({what})", unit="mesh", disable=not progress)
     args = [
         (
@@ -164,6 +180,7 @@ def compute_descriptors(
             descriptors[i] is None,
             baselines[i] is None,
             stored,
+            None if carried is None else carried[1],
         )
         for i in todo
     ]
@@ -215,9 +232,11 @@ def compute_descriptors(
     )
 
 
-def descriptor_vectors(computed: ComputedSet) -> dict[str, np.ndarray]:
+def descriptor_vectors(computed: ComputedSet, *, size: bool = False) -> dict[str, np.ndarray]:
     """modality -> (n, M) float, and ``BASELINE`` -> (n, k): the flat vectors eqs. (8)
-    and (9) compare, one row per described mesh."""
-    vectors = {m: np.stack([d.vector(m) for d in computed.descriptors]) for m in MODALITIES}
+    and (9) compare, one row per described mesh; with ``size``, also ``SIZE`` -> (n, 1),
+    each mesh's ``sqrt(area)`` (a collection of metric units)."""
+    modalities = (*MODALITIES, SIZE) if size else MODALITIES
+    vectors = {m: np.stack([d.vector(m) for d in computed.descriptors]) for m in modalities}
     vectors[BASELINE] = np.stack([b.descriptor for b in computed.baselines])
     return vectors

@@ -18,6 +18,9 @@ DATASETS_ENV = "SHAPES_DATASETS_DIR"
 DEFAULT_DATASETS_DIR = Path(__file__).resolve().parents[2].parent / "shared" / "datasets"
 #: Default descriptor cache of ``shapes evaluate`` and the benchmarks, outside any checkout.
 DEFAULT_CACHE = Path.home() / ".cache" / "modalshape" / "evaluate"
+#: How an evaluation resamples its meshes: every one on its own (as the service does), or
+#: once per figure, carried to its poses by vertex id (:mod:`.figures`).
+RESAMPLINGS = ("mesh", "figure")
 
 
 def shared_dataset(name: str) -> Path:

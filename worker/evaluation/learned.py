@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.distance import cdist
 
-from worker.engine.presets import Preset
+from worker.engine.presets import SIZE, Preset
 from worker.recognition.calibration import calibrate
 from worker.recognition.fusion import (
     ADOPTION_MARGIN,
@@ -38,6 +38,7 @@ from .scoring import (
     FAR_OPERATING_POINTS,
     ROC_POINTS_STORED,
     modality_dissimilarity,
+    preset_matrix,
     score_dissimilarity,
 )
 
@@ -62,6 +63,10 @@ def learn_fusion(
     ``FOLDS`` folds or the most that can (:func:`feasible_folds`: each holds a mesh and
     leaves two of every class to choose on).
 
+    With metric units the size is weighed too (``vectors`` has it), first, so that the
+    preset's last modality keeps weight 1 and the size's is on the grid, always with its
+    own comparison (:meth:`Preset.comparison`).
+
     Raises
     ------
     ValueError
@@ -70,22 +75,22 @@ def learn_fusion(
     folds = feasible_folds(labels)
     own = preset.dissimilarity
     other = "D2" if own == "D1" else "D1"
-    dissimilarities = {
-        m: modality_dissimilarity(vectors[m], own)[0] for m in preset.fused_modalities
-    }
+    metric = preset.units == "metric"
+    order = (SIZE, *preset.fused_modalities) if metric else preset.fused_modalities
+    dissimilarities = {m: preset_matrix(m, vectors[m], preset)[0] for m in order}
     alternatives: dict[str, dict[str, np.ndarray]] = {
         m: {other: modality_dissimilarity(vectors[m], other)[0]} for m in preset.fused_modalities
     }
     if "spectrum" in alternatives:
         alternatives["spectrum"][REWEIGHTED] = reweighted_euclidean(vectors["spectrum"])
-    weights = {m: preset.weight(m) for m in preset.fused_modalities}
+    weights = {m: preset.weight(m) for m in order}
     return tune_fusion(
         dissimilarities,
         np.asarray(labels),
         preset.fusion,
         weights,
         folds=folds,
-        comparison=own,
+        comparison={m: preset.comparison(m) for m in order},
         alternatives=alternatives,
     )
 
@@ -124,7 +129,7 @@ def learned_row(
     """The report's ``learned`` row and its ``learned_fusion`` section."""
     row = {
         "title": "Learned fusion (held-out folds)",
-        "members": list(preset.fused_modalities),
+        "members": list(preset.scored_modalities),
         "rule": preset.fusion,
         "weights": tuning.weights,
         "comparisons": tuning.comparisons,

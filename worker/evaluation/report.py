@@ -10,14 +10,14 @@ from typing import Any
 
 import numpy as np
 
-from worker.engine.presets import MODALITIES, PARTS, Preset
+from worker.engine.presets import MODALITIES, PARTS, SIZE, Preset
 from worker.recognition import metrics
 
 from .cache import engine_fingerprint
 from .compute import ComputedSet, descriptor_vectors
 from .partiality import collection_matrices
 from .robustness import PRESET_ROW
-from .scoring import COLUMNS, ROWS, dissimilarity_matrices, score_dissimilarity
+from .scoring import COLUMNS, dissimilarity_matrices, report_rows, score_dissimilarity
 from .shapedna import BASELINE, SHAPEDNA_K
 
 
@@ -31,7 +31,15 @@ def protocol_text(
         if preset.dissimilarity == "D2"
         else "D1 (eq. 8), mean normalized Manhattan distance"
     )
-    weights = ", ".join(f"{m}={preset.weight(m):g}" for m in MODALITIES)
+    weighed = (*MODALITIES, SIZE) if preset.units == "metric" else MODALITIES
+    weights = ", ".join(f"{m}={preset.weight(m):g}" for m in weighed)
+    units = {}
+    if preset.units == "metric":
+        units["units"] = (
+            "metric: the size sqrt(A) of each file's described surface (A its area in the "
+            f"file's units) compared by eq. (8), D1, at least {preset.size_tolerance:g}, "
+            "fused with the shape's modalities"
+        )
     return {
         "objects": n_objects,
         "classes": n_classes,
@@ -40,7 +48,8 @@ def protocol_text(
             "sum = sum_m w_m D_m, product = prod_m D_m ** w_m over the raw per-modality "
             f"matrices, preset weights ({weights})"
         ),
-        "preset_score": "+".join(preset.fused_modalities) + f" {preset.fusion}",
+        "preset_score": "+".join(preset.scored_modalities) + f" {preset.fusion}",
+        **units,
         "verification": (
             f"all {n_objects * (n_objects - 1) // 2} unordered pairs; genuine = same class; "
             "ROC = FRR against FAR over the threshold; EER where FRR = FAR"
@@ -94,9 +103,10 @@ def build_report(
     start = time.perf_counter()
     names = [m.name for m in computed.meshes]
     labels = [m.label for m in computed.meshes]
-    vectors = descriptor_vectors(computed)
+    vectors = descriptor_vectors(computed, size=preset.units == "metric")
     matrices, info = dissimilarity_matrices(vectors, preset, vectors[BASELINE])
-    titles = {key: ROWS[key] for key in matrices}
+    rows_of = report_rows(preset)
+    titles = {key: rows_of[key] for key in matrices}
     if preset.has_parts:
         baseline = matrices.pop(BASELINE)  # stays the last row
         matrices.update(collection_matrices(computed.descriptors, matrices, preset, jobs))
@@ -104,7 +114,7 @@ def build_report(
         titles[PARTS] = ("Parts", (PARTS,), None)
         titles[PRESET_ROW] = (
             "The preset's score (parts by partiality)",
-            (*preset.fused_modalities, PARTS),
+            (*preset.scored_modalities, PARTS),
             "product",
         )
     gallery_idx, probe_idx = metrics.first_instance_split(names, labels)

@@ -14,12 +14,13 @@ from typing import Any
 
 import numpy as np
 
-from worker.engine.presets import MODALITIES, Preset
+from worker.engine.presets import MODALITIES, SIZE, Preset
 from worker.recognition import metrics
 from worker.recognition.fusion import FOLDS, tune_fusion
 
 from .compute import ComputedSet, compute_descriptors, descriptor_vectors
-from .datasets import EvaluationError, LabeledMesh, pose_set, read_labels
+from .datasets import RESAMPLINGS, EvaluationError, LabeledMesh, pose_set, read_labels
+from .figures import compute_by_figure
 from .learned import LEARNED, learn_fusion, learned_row
 from .partial import PARTIAL_VARIANTS
 from .partiality import partial_row_titles, partiality_scores, parts_matrix
@@ -40,6 +41,7 @@ from .robustness import (
 )
 from .scoring import modality_dissimilarity
 from .shapedna import BASELINE
+from .size import size_tuning
 from .variants import VARIANTS
 
 
@@ -57,20 +59,32 @@ def run_evaluation(
     progress: bool = True,
     plot: Callable[[Mapping[str, Any], Path], None] | None = None,
     fusion: str = "preset",
+    resampling: str = "mesh",
 ) -> dict[str, Any]:
     """Describe, compare and score a labelled collection; write the report to ``out_dir``.
 
     Writes ``report.json``, ``report.md``, ``cmc.png`` and ``roc.png``. With ``fusion``
     ``"learned"`` the report also has the fusion learned on the collection, from
     held-out folds (:mod:`.learned`): a ``learned`` row before ShapeDNA's and a
-    ``learned_fusion`` section.
+    ``learned_fusion`` section. With the preset's units "metric" the size is compared
+    and fused too (:func:`.scoring.report_rows`). With ``resampling`` "figure" every
+    class is resampled once and its poses share that resampling by vertex id
+    (:mod:`.figures`; the report's ``resampling`` section says how).
 
     Returns
     -------
     The report dict (as in report.json).
     """
+    if resampling not in RESAMPLINGS:
+        raise EvaluationError(f"unknown resampling {resampling!r}; use {', '.join(RESAMPLINGS)}")
     meshes = read_labels(labels_csv, dataset_dir, per_class_limit)
-    computed = compute_descriptors(meshes, preset, cache_root, jobs=jobs, progress=progress)
+    about_resampling = None
+    if resampling == "figure":
+        computed, about_resampling = compute_by_figure(
+            meshes, preset, cache_root, jobs=jobs, progress=progress
+        )
+    else:
+        computed = compute_descriptors(meshes, preset, cache_root, jobs=jobs, progress=progress)
     if len({m.label for m in computed.meshes}) < 2:
         raise EvaluationError(
             f"fewer than two classes left after {len(computed.failures)} meshes failed"
@@ -79,6 +93,8 @@ def run_evaluation(
     report, _ = build_report(
         computed, preset, command=command, environment=env, dataset=str(dataset_dir), jobs=jobs
     )
+    if about_resampling is not None:
+        report["resampling"] = {"per": "figure", **about_resampling}
     if fusion == LEARNED:
         _add_learned(report, computed, preset)
     out = Path(out_dir)
@@ -98,8 +114,9 @@ def run_evaluation(
 def _add_learned(report: dict[str, Any], computed: ComputedSet, preset: Preset) -> None:
     names = [m.name for m in computed.meshes]
     labels = [m.label for m in computed.meshes]
+    vectors = descriptor_vectors(computed, size=preset.units == "metric")
     try:
-        tuning = learn_fusion(descriptor_vectors(computed), labels, preset)
+        tuning = learn_fusion(vectors, labels, preset)
     except ValueError as exc:
         raise EvaluationError(f"cannot learn the fusion on this collection: {exc}") from exc
     gallery_idx, probe_idx = metrics.first_instance_split(names, labels)
@@ -128,7 +145,9 @@ def run_tuning(
     The collection is described through the cache, each fused modality compared all to
     all with the preset's dissimilarity, and the weights chosen by class-stratified
     cross-validation under the preset's rule (:func:`worker.recognition.fusion.tune_fusion`;
-    the preset's own weights are scored on the same folds).
+    the preset's own weights are scored on the same folds). With the preset's units
+    "metric" only the size's weight is chosen, against the preset's score of the shape at
+    its own weights (:func:`.size.size_tuning`); the document has every weight.
 
     Returns
     -------
@@ -139,7 +158,8 @@ def run_tuning(
     grid point), ``folds`` (each fold's held-out meshes, choice and held-out scores),
     ``held_out`` (the mean over the folds: ``tuned`` and ``preset``, each ``eer``,
     ``nn``, ``map``), ``dataset``, ``meshes`` and ``failures`` (meshes left out, and
-    why).
+    why); ``units``, and ``chosen``, the modalities whose weights were chosen (the others
+    are the preset's).
 
     Raises
     ------
@@ -147,35 +167,48 @@ def run_tuning(
         When the preset fuses a single modality, or the collection cannot fill the
         folds (:func:`~worker.recognition.fusion.tune_fusion`'s conditions).
     """
-    if len(preset.fused_modalities) < 2:
+    metric = preset.units == "metric"
+    if len(preset.fused_modalities) < 2 and not metric:
         raise EvaluationError(
             f"{preset.name} fuses {list(preset.fused_modalities)} only: no weights to choose"
         )
     meshes = read_labels(labels_csv, dataset_dir, per_class_limit)
     computed = compute_descriptors(meshes, preset, cache_root, jobs=jobs, progress=progress)
-    vectors = descriptor_vectors(computed)
-    dissimilarities = {
-        m: modality_dissimilarity(vectors[m], preset.dissimilarity)[0]
-        for m in preset.fused_modalities
-    }
+    vectors = descriptor_vectors(computed, size=metric)
     labels = np.array([m.label for m in computed.meshes])
-    own = {m: preset.weight(m) for m in preset.fused_modalities}
+    shape_weights = {m: preset.weight(m) for m in preset.fused_modalities}
     try:
-        tuning = tune_fusion(dissimilarities, labels, preset.fusion, own, folds=folds)
+        if metric:
+            tuning = size_tuning(vectors, labels, preset, folds=folds)
+        else:
+            dissimilarities = {
+                m: modality_dissimilarity(vectors[m], preset.dissimilarity)[0]
+                for m in preset.fused_modalities
+            }
+            tuning = tune_fusion(dissimilarities, labels, preset.fusion, shape_weights, folds=folds)
     except ValueError as exc:
         raise EvaluationError(str(exc)) from exc
+
+    def every(weights: Mapping[str, float]) -> dict[str, float]:
+        """All the preset's weights: the shape's as the preset has them with the size's."""
+        return {**shape_weights, SIZE: weights[SIZE]} if metric else dict(weights)
+
+    chosen = [SIZE] if metric else list(preset.fused_modalities[:-1])
+    own = every({SIZE: preset.fusion_weights.get(SIZE, 0.0)}) if metric else shape_weights
     document = {
         "preset": preset.name,
         "preset_version": preset.version,
         "fusion": preset.fusion,
-        "weights": tuning.weights,
+        "units": preset.units,
+        "chosen": chosen,
+        "weights": every(tuning.weights),
         "grid": list(tuning.grid),
         "loss": tuning.loss,
         "sensitivity": {m: list(losses) for m, losses in tuning.sensitivity.items()},
         "folds": [
             {
                 "held_out_objects": fold.held_out_objects,
-                "weights": fold.weights,
+                "weights": every(fold.weights),
                 "held_out": {"tuned": asdict(fold.held_out), "preset": asdict(fold.preset)},
             }
             for fold in tuning.folds
@@ -195,14 +228,16 @@ def run_tuning(
 
 
 def weighted_preset(preset: Preset, weights_json: str | Path) -> Preset:
-    """``preset`` fusing with the weights of a ``shapes tune`` file (:func:`run_tuning`).
+    """``preset`` fusing with the weights of a ``shapes tune`` file (:func:`run_tuning`):
+    the fused modalities' weights, and the size's if the file has one (a metric tuning);
+    otherwise the preset's size weight stays.
 
     Raises
     ------
     EvaluationError
         When the file cannot be read or holds no weights, was tuned for another preset,
-        preset version or fusion rule, or weighs other modalities than the preset fuses,
-        or a weight is not a finite number >= 0.
+        preset version or fusion rule, or weighs other modalities than the preset fuses
+        (and the size), or a weight is not a finite number >= 0.
     """
     path = Path(weights_json)
     try:
@@ -218,12 +253,12 @@ def weighted_preset(preset: Preset, weights_json: str | Path) -> Preset:
             f"not for {preset.name} v{preset.version} ({preset.fusion} rule)"
         )
     weights: dict[str, Any] = document["weights"]
-    unknown = sorted(set(weights) - set(MODALITIES))
+    unknown = sorted(set(weights) - {*MODALITIES, SIZE})
     if unknown:
         raise EvaluationError(
-            f"{path} weighs unknown modalities {unknown}; known: {', '.join(MODALITIES)}"
+            f"{path} weighs unknown modalities {unknown}; known: {', '.join(MODALITIES)}, {SIZE}"
         )
-    if set(weights) != set(preset.fused_modalities):
+    if set(weights) - {SIZE} != set(preset.fused_modalities):
         raise EvaluationError(
             f"{path} weighs {sorted(weights)}; {preset.name} fuses "
             f"{sorted(preset.fused_modalities)}"
@@ -235,7 +270,8 @@ def weighted_preset(preset: Preset, weights_json: str | Path) -> Preset:
     }
     if bad:
         raise EvaluationError(f"{path} has weights that are not numbers >= 0: {bad}")
-    return replace(preset, fusion_weights={m: float(w) for m, w in weights.items()})
+    kept = {SIZE: preset.fusion_weights[SIZE]} if SIZE in preset.fusion_weights else {}
+    return replace(preset, fusion_weights={**kept, **{m: float(w) for m, w in weights.items()}})
 
 
 def run_robustness(

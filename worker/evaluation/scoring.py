@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from worker.engine.compare import fuse, gallery_sigma
-from worker.engine.presets import MODALITIES, Preset
+from worker.engine.compare import fuse, gallery_sigma, size_dissimilarity
+from worker.engine.presets import MODALITIES, SIZE, Preset
 from worker.recognition import metrics
 from worker.recognition.calibration import calibrate
 from worker.recognition.fusion import all_to_all
@@ -23,8 +23,8 @@ from worker.recognition.fusion import all_to_all
 from .shapedna import BASELINE, shapedna_dissimilarity
 
 #: Rows of the report, in table order: key -> (title, members, fusion rule).
-#: Rows of the report, in table order: key -> (title, members, fusion rule).
 #: ``members`` are modalities, or the baseline; ``rule`` is None for a single one.
+#: A collection of metric units has two more before the baseline's (:func:`report_rows`).
 ROWS: dict[str, tuple[str, tuple[str, ...], str | None]] = {
     "gdm": ("GDM", ("gdm",), None),
     "ddt": ("DDT", ("ddt",), None),
@@ -39,6 +39,33 @@ ROWS: dict[str, tuple[str, tuple[str, ...], str | None]] = {
     ),
     BASELINE: ("ShapeDNA (lapy)", (BASELINE,), None),
 }
+
+Row = tuple[str, tuple[str, ...], str | None]
+
+
+def metric_row_key(preset: Preset) -> str:
+    """The row of the preset's score with the size (units "metric"), e.g.
+    ``"gdm+ddt+spectrum+size product"``."""
+    return "+".join(preset.scored_modalities) + f" {preset.fusion}"
+
+
+def report_rows(preset: Preset) -> dict[str, Row]:
+    """The report's rows for ``preset``, in table order: :data:`ROWS`, and with units
+    "metric" the size alone and the preset's score with the size, before the baseline."""
+    if preset.units != "metric":
+        return dict(ROWS)
+    titles = {"gdm": "GDM", "ddt": "DDT", "spectrum": "Spectrum", SIZE: "Size"}
+    rows = {k: v for k, v in ROWS.items() if k != BASELINE}
+    rows[SIZE] = ("Size", (SIZE,), None)
+    scored = preset.scored_modalities
+    rows[metric_row_key(preset)] = (
+        "+".join(titles[m] for m in scored) + f" {preset.fusion}",
+        scored,
+        preset.fusion,
+    )
+    rows[BASELINE] = ROWS[BASELINE]
+    return rows
+
 
 #: Table columns: key in a row's scores -> header.
 COLUMNS: dict[str, str] = {
@@ -81,6 +108,20 @@ def modality_dissimilarity(vectors: np.ndarray, kind: str) -> tuple[np.ndarray, 
     return all_to_all(x, kind, sigma), info
 
 
+def preset_matrix(
+    modality: str, vectors: np.ndarray, preset: Preset
+) -> tuple[np.ndarray, dict[str, Any]]:
+    """All-to-all dissimilarity of one modality as the preset compares it: the size by
+    :func:`~worker.engine.compare.size_dissimilarity` at the preset's tolerance (zero on
+    the diagonal), the others by :func:`modality_dissimilarity` with its D1 or D2."""
+    if modality != SIZE:
+        return modality_dissimilarity(vectors, preset.dissimilarity)
+    x = np.atleast_2d(np.asarray(vectors, dtype=np.float64))
+    d = size_dissimilarity(x, x, preset.size_tolerance)
+    np.fill_diagonal(d, 0.0)
+    return d, {"dissimilarity": preset.comparison(SIZE)}
+
+
 def dissimilarity_matrices(
     vectors: Mapping[str, np.ndarray],
     preset: Preset,
@@ -90,13 +131,15 @@ def dissimilarity_matrices(
 
     Parameters
     ----------
-    vectors : modality -> (n, M) float, for every modality in ``MODALITIES``.
-    preset : gives the dissimilarity (D1/D2) and the fusion weights.
+    vectors : modality -> (n, M) float, for every modality in ``MODALITIES`` (and
+        ``SIZE`` when the preset's units are metric).
+    preset : gives the dissimilarity (D1/D2; the size's, :func:`preset_matrix`), the
+        fusion weights and the units.
     baseline : (n, k) float, ShapeDNA descriptors; the baseline row is left out if None.
 
     Returns
     -------
-    matrices : row key (see ``ROWS``) -> (n, n) float.
+    matrices : row key (:func:`report_rows`) -> (n, n) float.
     info : row key -> how the matrix was made.
 
     Notes
@@ -113,7 +156,9 @@ def dissimilarity_matrices(
         per_modality[modality], info[modality] = modality_dissimilarity(
             vectors[modality], preset.dissimilarity
         )
-    for key, (_, members, rule) in ROWS.items():
+    if preset.units == "metric":
+        per_modality[SIZE], info[SIZE] = preset_matrix(SIZE, vectors[SIZE], preset)
+    for key, (_, members, rule) in report_rows(preset).items():
         if key == BASELINE:
             if baseline is not None:
                 matrices[key] = shapedna_dissimilarity(baseline)

@@ -329,7 +329,7 @@ def tune_fusion(
     folds: int = FOLDS,
     grid: tuple[float, ...] = GRID,
     seed: int = 0,
-    comparison: str = PRESET_COMPARISON,
+    comparison: str | Mapping[str, str] = PRESET_COMPARISON,
     alternatives: Mapping[str, Mapping[str, ArrayLike]] | None = None,
 ) -> FusionTuning:
     """Choose one fusion weight (and comparison) per modality by class-stratified
@@ -346,7 +346,8 @@ def tune_fusion(
     folds : number of folds, at least 2.
     grid : the weights tried for every modality but the last.
     seed : of :func:`stratified_folds`.
-    comparison : the name of the comparison ``dissimilarities`` were made with.
+    comparison : the name of the comparison ``dissimilarities`` were made with, or
+        modality -> its name (modalities compared differently, such as the size).
     alternatives : modality -> comparison name -> (n, n), other comparisons of some
         modalities to choose from (the preset's is preferred on equal losses).
 
@@ -362,9 +363,10 @@ def tune_fusion(
         fold must hold an object and leave at least two of every class to choose on.
     """
     mats = {m: np.asarray(d, dtype=np.float64) for m, d in dissimilarities.items()}
+    named = {m: comparison if isinstance(comparison, str) else comparison[m] for m in mats}
     candidates = {
         m: {
-            comparison: d,
+            named[m]: d,
             **{
                 c: np.asarray(a, dtype=np.float64)
                 for c, a in (alternatives or {}).get(m, {}).items()
