@@ -59,7 +59,7 @@ def index_of(preset: Preset, vectors: list[dict[str, np.ndarray]]) -> GalleryInd
 
 def seconds_of(index: GalleryIndex, query: ShapeDescriptor, preset: Preset) -> tuple[float, float]:
     """A whole query's and a partial query's search time, each after a warm-up."""
-    flat = flat_vectors(query)
+    flat = flat_vectors(query, preset)
     profiles, reach = query.parts.astype(np.float64), query.parts_reach
     weights = weights_of(query, preset)
     out = []
@@ -98,7 +98,7 @@ def main(argv: list[str] | None = None) -> None:
         fast, slow = [], []
         for query in copies.descriptors:
             weights = weights_of(query, preset)
-            flat = flat_vectors(query)
+            flat = flat_vectors(query, preset)
             start = time.perf_counter()
             want = exhaustive(query, wholes.descriptors, preset)
             slow.append(time.perf_counter() - start)

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from worker.engine.compare import fuse, paired_dissimilarity
+from worker.engine.compare import fuse, paired_preset_dissimilarity
 from worker.engine.presets import Preset
 from worker.recognition.calibration import Calibration, calibrate
 
@@ -73,7 +73,7 @@ class GalleryCalibration:
         if len(modalities) == 1:
             return self.rows[modalities[0]]
         preset = self.preset
-        if modalities == tuple(preset.fused_modalities) and rule == preset.fusion:
+        if modalities == preset.scored_modalities and rule == preset.fusion:
             return self.rows[FUSED]
         key = (modalities, rule)
         with self._lock:
@@ -120,16 +120,18 @@ def fit_calibration(
     first, second, sampled = _pairs(codes, max_pairs, np.random.default_rng(seed))
     genuine = codes[first] == codes[second]
     per = {
-        m: paired_dissimilarity(
+        m: paired_preset_dissimilarity(
+            m,
             vectors[m][first],
             vectors[m][second],
-            preset.dissimilarity,
+            preset,
             None if sigma is None else sigma[m],
         )
         for m in index.modalities
     }
-    weights = {m: preset.weight(m) for m in preset.fused_modalities}
-    scores = {FUSED: fuse({m: per[m] for m in preset.fused_modalities}, preset.fusion, weights)}
+    scored = preset.scored_modalities
+    weights = {m: preset.weight(m) for m in scored}
+    scores = {FUSED: fuse({m: per[m] for m in scored}, preset.fusion, weights)}
     scores.update(per)
     try:
         rows = {key: calibrate(s[genuine], s[~genuine]) for key, s in scores.items()}

@@ -31,8 +31,8 @@ from worker.engine.presets import Preset
 from worker.recognition.fusion import (
     ADOPTION_MARGIN,
     FusionTuning,
-    all_to_all,
     feasible_folds,
+    preset_all_to_all,
     tune_fusion,
 )
 
@@ -74,7 +74,7 @@ class GalleryFusion:
 
 def preset_fusion(preset: Preset, reason: str, version: int = -1) -> GalleryFusion:
     return GalleryFusion(
-        weights={m: preset.weight(m) for m in preset.fused_modalities},
+        weights={m: preset.weight(m) for m in preset.scored_modalities},
         source="preset",
         reason=reason,
         version=version,
@@ -83,7 +83,8 @@ def preset_fusion(preset: Preset, reason: str, version: int = -1) -> GalleryFusi
 
 
 def pinned_fusion(preset: Preset, weights: Mapping[str, float]) -> GalleryFusion:
-    """The operator's weights, checked against the preset's modalities.
+    """The operator's weights, checked against the preset's fused modalities (in a
+    collection of metric units the size keeps the preset's weight).
 
     Raises
     ------
@@ -98,7 +99,7 @@ def pinned_fusion(preset: Preset, weights: Mapping[str, float]) -> GalleryFusion
     if any(not np.isfinite(w) or w < 0 for w in weights.values()):
         raise ValueError(f"SHAPES_FUSION_WEIGHTS must be numbers >= 0, got {dict(weights)}")
     return GalleryFusion(
-        weights={m: float(weights[m]) for m in preset.fused_modalities},
+        weights={m: float(weights.get(m, preset.weight(m))) for m in preset.scored_modalities},
         source="pinned",
         reason="pinned by the operator (SHAPES_FUSION_WEIGHTS)",
         fitted_at=time.time(),
@@ -137,13 +138,17 @@ def learn_gallery_fusion(
             f"{MIN_PER_CLASS} described shapes each ({classes} labels have)",
             version,
         )
+    scored = preset.scored_modalities
     mats = {
-        m: all_to_all(vectors[m], preset.dissimilarity, None if sigma is None else sigma[m])
-        for m in preset.fused_modalities
+        m: preset_all_to_all(m, vectors[m], preset, None if sigma is None else sigma[m])
+        for m in scored
     }
-    own = {m: preset.weight(m) for m in preset.fused_modalities}
+    own = {m: preset.weight(m) for m in scored}
     folds = feasible_folds(names)
-    tuning = tune_fusion(mats, names, preset.fusion, own, folds=folds, seed=seed)
+    comparison = {m: preset.comparison(m) for m in scored}
+    tuning = tune_fusion(
+        mats, names, preset.fusion, own, folds=folds, seed=seed, comparison=comparison
+    )
     held, base = tuning.held_out, tuning.preset_held_out
     measured = (
         f"held-out EER {100 * held.eer:.2f}% and mAP {100 * held.map:.2f}% against the "

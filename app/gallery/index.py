@@ -68,9 +68,9 @@ from dataclasses import dataclass
 import faiss
 import numpy as np
 
-from worker.engine.compare import dissimilarity, fuse, normalized_euclidean
+from worker.engine.compare import fuse, normalized_euclidean, preset_dissimilarity
 from worker.engine.parts import PartsMatch, best_scale, coarse, scale_scores
-from worker.engine.presets import PARTS, Preset
+from worker.engine.presets import PARTS, SIZE, Preset
 
 from .candidates import FIT_SAMPLE, MAX_DIMS, CandidateTransform
 from .vectors import GalleryVectors, ids_fingerprint
@@ -284,14 +284,15 @@ class GalleryIndex:
         rule: str,
     ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Fused and per-modality dissimilarities of ``query`` to gallery rows ``positions``."""
-        kind = self.preset.dissimilarity
+        preset = self.preset
         # The current gallery's sigma: the rows scored here may be a few candidates.
-        sigma = self.sigma() if kind == "D2" else None
+        sigma = self.sigma() if preset.dissimilarity == "D2" else None
         per: dict[str, np.ndarray] = {}
         for m in modalities:
             g = self.store.vectors[m][positions]
             q = np.asarray(query[m], dtype=np.float64).ravel()[None, :]
-            per[m] = dissimilarity(q, g, kind, None if sigma is None else sigma[m])[0]
+            scale = None if sigma is None else sigma[m]
+            per[m] = preset_dissimilarity(m, q, g, preset, scale)[0]
         weights = {m: self.preset.weight(m) for m in modalities}
         return np.asarray(fuse(per, rule, weights), dtype=np.float64), per
 
@@ -313,7 +314,8 @@ class GalleryIndex:
         query : modality -> (M_m,) float, the query's descriptor vectors.
         k : number of matches.
         fusion : "sum" or "product"; default the preset's rule.
-        modalities : fused modalities; default the preset's.
+        modalities : fused modalities; default the preset's scored ones (the size among
+            them in a collection of metric units).
         exclude : ids left out (e.g. the query shape itself).
         exhaustive : score every gallery shape (the reference ranking).
 
@@ -324,7 +326,7 @@ class GalleryIndex:
         start = time.perf_counter()
         _single_threaded_faiss()
         rule = fusion or self.preset.fusion
-        mods = tuple(modalities or self.preset.fused_modalities)
+        mods = tuple(modalities or self.preset.scored_modalities)
         excluded = set(int(e) for e in exclude)
         stats = stats if stats is not None else SearchStats()
         with self.lock:
@@ -334,7 +336,9 @@ class GalleryIndex:
             if self.fits is None and not exhaustive:
                 self.refit()
             want = min(n, k + len(excluded & self.store.pos.keys()))
-            if exhaustive:
+            # The certified D2 search bounds eq. (9) by its projections; the size is
+            # compared by eq. (8): a metric collection of a D2 preset is scored whole.
+            if exhaustive or (SIZE in mods and self.preset.dissimilarity == "D2"):
                 positions = np.arange(n)
                 fused, per = self.exact_scores(query, positions, mods, rule)
                 stats.candidates, stats.certified = n, True

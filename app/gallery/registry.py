@@ -18,7 +18,7 @@ from pathlib import Path
 
 from sqlalchemy.orm import Session, sessionmaker
 
-from worker.engine.presets import Preset, get_preset
+from worker.engine.presets import Preset, get_preset, with_units
 
 from ..collections import repository as collections
 from ..config import Settings
@@ -42,7 +42,9 @@ class CollectionSpec:
 
     @classmethod
     def of(cls, row: Collection, default_preset: str) -> CollectionSpec:
-        return cls(row.id, row.name, row.units, get_preset(row.preset or default_preset))
+        """The row's, its preset compared in its units (the size scored when metric)."""
+        preset = with_units(get_preset(row.preset or default_preset), row.units)
+        return cls(row.id, row.name, row.units, preset)
 
 
 class Galleries:

@@ -23,7 +23,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from worker.engine.compare import partiality, query_weights
 from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.parts import compared_profiles
-from worker.engine.presets import MODALITIES, PARTS, Preset
+from worker.engine.presets import PARTS, Preset
 
 from ..errors import UnavailableError
 from ..meshes import repository as meshes
@@ -39,10 +39,11 @@ log = logging.getLogger("shapes.gallery")
 FOLLOW_BATCH = 1000  # changes applied per round of following the log
 
 
-def flat_vectors(descriptor: ShapeDescriptor) -> dict[str, np.ndarray]:
+def flat_vectors(descriptor: ShapeDescriptor, preset: Preset) -> dict[str, np.ndarray]:
     """modality -> (M_m,) float, the flat vectors the index compares (all a query needs:
-    its parts are compared from its own profiles)."""
-    return {m: descriptor.vector(m) for m in MODALITIES}
+    its parts are compared from its own profiles): the shape's, and the size in a
+    collection of metric units."""
+    return {m: descriptor.vector(m) for m in preset.modality_sizes()}
 
 
 def descriptor_vectors(descriptor: ShapeDescriptor, preset: Preset) -> dict[str, np.ndarray]:
@@ -50,7 +51,7 @@ def descriptor_vectors(descriptor: ShapeDescriptor, preset: Preset) -> dict[str,
     -> the (m, K) profiles a whole is compared by when the preset has the parts modality
     (a surface with fewer samples repeats some: a nearest sample is found all the same).
     """
-    vectors = flat_vectors(descriptor)
+    vectors = flat_vectors(descriptor, preset)
     shape = preset.parts_shape()
     if shape is not None:
         compared = compared_profiles(descriptor.parts, preset)
@@ -176,8 +177,8 @@ class Gallery:
         index = self._ready()
         preset = self.preset
         stats = SearchStats()
-        vectors = flat_vectors(descriptor)
-        own = modalities == tuple(preset.fused_modalities) and fusion in (None, preset.fusion)
+        vectors = flat_vectors(descriptor, preset)
+        own = modalities == preset.scored_modalities and fusion in (None, preset.fusion)
         share = partiality(descriptor.longest_open_loop, descriptor.kept_area_fraction, preset)
         weights = query_weights(preset, share)
         if own and PARTS in weights:
@@ -210,9 +211,9 @@ class Gallery:
             if not len(present):
                 return {}
             fused, per = index.exact_scores(
-                flat_vectors(descriptor),
+                flat_vectors(descriptor, preset),
                 index.store.positions(present),
-                tuple(preset.fused_modalities),
+                preset.scored_modalities,
                 preset.fusion,
             )
         return {

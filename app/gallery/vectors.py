@@ -18,7 +18,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from worker.engine.presets import MODALITIES, PARTS
+from worker.engine.presets import MODALITIES, PARTS, SIZE
 
 INITIAL_CAPACITY = 64
 
@@ -41,7 +41,7 @@ class GalleryVectors:
         self.dims = dict(dims)
         self.parts_shape = parts_shape
         self.parts = np.empty((INITIAL_CAPACITY, *(parts_shape or (0, 0))), dtype=np.float16)
-        self.modalities = tuple(m for m in MODALITIES if m in self.dims)
+        self.modalities = tuple(m for m in (*MODALITIES, SIZE) if m in self.dims)
         self.ids = np.empty(INITIAL_CAPACITY, dtype=np.int64)  # (capacity,) id by position
         self.pos: dict[int, int] = {}
         self.n = 0

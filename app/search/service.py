@@ -141,7 +141,7 @@ def resolve_preset(gallery: Gallery, name: str | None) -> Preset:
 
 def parse_modalities(text: str | None, preset: Preset) -> tuple[str, ...]:
     if text is None:
-        return tuple(preset.fused_modalities)
+        return preset.scored_modalities
     names = tuple(dict.fromkeys(p.strip(" ") for p in text.split(",") if p.strip(" ")))
     unknown = [n for n in names if n not in MODALITIES]
     if unknown or not names:
@@ -424,8 +424,12 @@ def _known_descriptor(
         if mesh_format(mesh.filename) != mesh_format(upload.filename):
             continue
         stored = meshes.get_descriptor(session, mesh.id, preset.name, preset.version)
-        if stored is not None:
-            return ShapeDescriptor.from_npz_bytes(stored.data)
+        if stored is None:
+            continue
+        descriptor = ShapeDescriptor.from_npz_bytes(stored.data)
+        # One stored before areas were recorded has no size to compare in metric units.
+        if descriptor.area is not None or preset.units != "metric":
+            return descriptor
     return None
 
 

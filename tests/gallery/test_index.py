@@ -8,9 +8,15 @@ import pytest
 
 from app.gallery.index import PARTS_SHORTLIST, GalleryIndex, SearchStats
 from app.gallery.persistence import load_index, save_index
-from worker.engine.compare import dissimilarity, fuse, gallery_sigma, query_weights
+from worker.engine.compare import (
+    dissimilarity,
+    fuse,
+    fused_dissimilarity,
+    gallery_sigma,
+    query_weights,
+)
 from worker.engine.parts import compared_profiles, grid_radii, part_dissimilarity
-from worker.engine.presets import DEFAULT_PRESET, MODALITIES, PARTS, get_preset
+from worker.engine.presets import DEFAULT_PRESET, MODALITIES, PARTS, SIZE, get_preset, with_units
 
 SHREC = get_preset("smeets2010-shrec")  # D2, product rule
 TOSCA = get_preset("smeets2010-tosca")  # D1, sum rule
@@ -221,3 +227,26 @@ def test_parts_profiles_are_saved_and_loaded(tmp_path):
     for item in (10, 12, 13, 14):
         want = compared_profiles(profiles[item - 10], DEFAULT).astype(np.float16)
         np.testing.assert_array_equal(loaded.store.parts[loaded.store.pos[item]], want)
+
+
+@pytest.mark.parametrize("name", ["smeets2010-shrec", DEFAULT_PRESET], ids=["D2", "D1"])
+def test_a_metric_collection_ranks_by_shape_and_size_as_the_engine_does(name):
+    """With units "metric" the index scores the size with the shape (the engine's
+    ``fused_dissimilarity``, the reference), on its candidate path or, for D2, whole."""
+    preset = with_units(get_preset(name), "metric")
+    gallery = _gallery(400, preset=preset)
+    rng = np.random.default_rng(2)
+    gallery[SIZE] = rng.uniform(0.5, 2.0, size=(400, 1))  # sizes of similar shapes
+    index = GalleryIndex(preset, preset.modality_sizes(), candidates=64, max_candidates=256)
+    index.add_many((i, {m: gallery[m][i] for m in preset.modality_sizes()}) for i in range(400))
+    assert index.modalities[-1] == SIZE
+    for i in rng.choice(400, size=10, replace=False):
+        query = {m: gallery[m][i] * 1.01 for m in preset.modality_sizes()}
+        fused = fused_dissimilarity(
+            {m: v[None] for m, v in query.items()}, gallery, preset, index.sigma()
+        )[0]
+        expected = [int(j) for j in np.lexsort((np.arange(400), fused))[:10]]
+        found = index.search(query, 10)
+        assert [m.id for m in found] == expected
+        assert all(set(m.scores) == set(preset.scored_modalities) for m in found)
+        np.testing.assert_allclose([m.score for m in found], fused[expected], rtol=1e-9)

@@ -3,11 +3,15 @@ and calibration; the paths without ``/collections/{name}`` keep working on ``def
 
 from __future__ import annotations
 
+import gzip
+import io
 import sqlite3
 from collections.abc import Iterator
 
 import pytest
+import trimesh
 from alembic import command
+from conftest import example
 
 from app.migrations import alembic_config
 from benchmarks.common import Service
@@ -164,6 +168,54 @@ def test_deleting_a_collection_keeps_what_another_shares(two):
     again = svc.client.post("/collections", json={"name": "gone"}).json()
     assert again["meshes"] == 0
     assert svc.client.get("/collections/gone/meshes").json()["total"] == 0
+
+
+def _scaled(name: str, factor: float) -> bytes:
+    """The example ``name`` as an OFF file, scaled by ``factor``."""
+    data = io.BytesIO(gzip.decompress(example(name).read_bytes()))
+    mesh = trimesh.load(data, file_type="off", process=False)
+    mesh.apply_scale(factor)
+    return mesh.export(file_type="off").encode()
+
+
+def test_a_metric_collection_tells_sizes_apart(two):
+    """The same shape at twice the size: one object among others in a collection of
+    arbitrary units, another in a metric one, where the size is fused with the shape."""
+    svc, _ = two
+    files = {"hand-0": _scaled("hand-0", 1.0), "hand-0-large": _scaled("hand-0", 2.0)}
+    found = {}
+    for units in ("any", "metric"):
+        name = f"sizes-{units}"
+        made = svc.client.post("/collections", json={"name": name, "units": units})
+        assert made.status_code == 201 and made.json()["units"] == units
+        ids = {}
+        for label, data in files.items():
+            answer = svc.client.post(
+                f"/collections/{name}/meshes",
+                files={"file": (f"{label}.off", data)},
+                data={"label": label},
+            )
+            assert answer.status_code == 202, answer.text
+            ids[label] = answer.json()["id"]
+        for mesh_id in ids.values():
+            assert svc.wait_mesh(mesh_id, collection=name)["status"] == "ready"
+        query = svc.client.post(
+            f"/collections/{name}/query",
+            files={"file": ("probe.off", _scaled("hand-1", 2.0))},
+            data={"k": "2"},
+        ).json()
+        found[units] = query
+    metric = found["metric"]
+    assert metric["modalities"] == ["gdm", "ddt", "spectrum", "size"]
+    assert [m["name"] for m in metric["matches"]] == ["hand-0-large", "hand-0"]
+    large, small = (m["scores"]["size"] for m in metric["matches"])
+    assert large < 0.1 < 0.5 < small  # 2x apart: eq. (8) of the sizes is 2/3
+    scale_free = found["any"]
+    assert scale_free["modalities"] == ["gdm", "ddt", "spectrum"]
+    assert all("size" not in m["scores"] for m in scale_free["matches"])
+    # Scale-free, the two enrolled files are the same shape: their scores barely differ.
+    first, second = (m["score"] for m in scale_free["matches"])
+    assert second < 1.5 * first
 
 
 def test_the_migration_moves_every_mesh_into_the_default_collection(tmp_path):

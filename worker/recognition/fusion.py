@@ -39,7 +39,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from worker.engine.compare import dissimilarity, fuse
+from worker.engine.compare import dissimilarity, fuse, preset_dissimilarity
+from worker.engine.presets import Preset
 
 from . import metrics
 
@@ -62,10 +63,27 @@ def all_to_all(
     (eq. 9, with ``sigma``): exactly symmetric (D2's expansion differs from its
     transpose by rounding), zero on the diagonal."""
     x = np.atleast_2d(np.asarray(vectors, dtype=np.float64))
-    d = np.asarray(dissimilarity(x, x, kind, sigma), dtype=np.float64)
-    d = 0.5 * (d + d.T)
-    np.fill_diagonal(d, 0.0)
-    return d
+    return _symmetric(dissimilarity(x, x, kind, sigma))
+
+
+def preset_all_to_all(
+    modality: str,
+    vectors: NDArray[np.float64],
+    preset: Preset,
+    sigma: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
+    """:func:`all_to_all` with the modality's comparison under ``preset``
+    (:func:`~worker.engine.compare.preset_dissimilarity`: the size's, or D1/D2)."""
+    x = np.atleast_2d(np.asarray(vectors, dtype=np.float64))
+    return _symmetric(preset_dissimilarity(modality, x, x, preset, sigma))
+
+
+def _symmetric(d: ArrayLike) -> NDArray[np.float64]:
+    """Exactly symmetric (the mean with the transpose), zero on the diagonal."""
+    a = np.asarray(d, dtype=np.float64)
+    a = 0.5 * (a + a.T)
+    np.fill_diagonal(a, 0.0)
+    return a
 
 
 def stratified_folds(labels: ArrayLike, k: int, seed: int = 0) -> NDArray[np.int64]:
