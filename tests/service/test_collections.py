@@ -246,3 +246,44 @@ def test_the_migration_moves_every_mesh_into_the_default_collection(tmp_path):
     command.downgrade(alembic_config(url), "0006")
     with sqlite3.connect(tmp_path / "shapes.sqlite3") as db:
         assert db.execute("SELECT mesh_id FROM descriptors").fetchall() == [(5,)]
+
+
+def test_tosca_cats_and_dogs_in_two_collections(two, tosca_dir):
+    """The issue's check: TOSCA's cats in a collection of any units, its dogs in a metric
+    one; a query in the cats' never returns a dog, the dogs' calibration counts the dogs'
+    pairs only (all genuine: not enough impostor pairs to calibrate)."""
+    svc, _ = two
+    for name, units in (("cats", "any"), ("dogs", "metric")):
+        assert (
+            svc.client.post("/collections", json={"name": name, "units": units}).status_code == 201
+        )
+    enrolled: dict[str, list[int]] = {"cats": [], "dogs": []}
+    for collection, kind in (("cats", "cat"), ("dogs", "dog")):
+        for path in sorted(tosca_dir.glob(f"{kind}[0-9]*.off.gz")):
+            with open(path, "rb") as handle:
+                answer = svc.client.post(
+                    f"/collections/{collection}/meshes",
+                    files={"file": (path.name, handle)},
+                    data={"label": kind},
+                )
+            assert answer.status_code == 202, answer.text
+            enrolled[collection].append(answer.json()["id"])
+    for collection, ids in enrolled.items():
+        for mesh_id in ids:
+            assert svc.wait_mesh(mesh_id, collection=collection)["status"] == "ready"
+    for dog in sorted(tosca_dir.glob("dog[0-9]*.off.gz")):
+        with open(dog, "rb") as handle:
+            answer = svc.client.post(
+                "/collections/cats/query", files={"file": (dog.name, handle)}, data={"k": "50"}
+            ).json()
+        assert {m["label"] for m in answer["matches"]} == {"cat"}
+        assert {m["mesh_id"] for m in answer["matches"]} == set(enrolled["cats"])
+    dogs = svc.client.get("/collections/dogs/calibration")
+    assert dogs.status_code == 409
+    n = len(enrolled["dogs"])
+    assert (
+        f"make {n * (n - 1) // 2} genuine (same label) and 0 impostor pairs"
+        in dogs.json()["detail"]
+    )
+    cats = svc.client.get("/collections/cats/calibration")
+    assert cats.status_code == 409 and "0 impostor pairs" in cats.json()["detail"]
