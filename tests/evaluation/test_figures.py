@@ -79,6 +79,9 @@ def test_the_evaluation_describes_every_pose_with_its_figures_resampling(collect
     report = json.loads((out / "report.json").read_text())
     resampling = report["resampling"]
     assert resampling["per"] == "figure"
+    markdown = (out / "report.md").read_text()
+    assert "## Resampling: one per figure" in markdown
+    assert "| tube | `tube-0.0.off` |" in markdown and "`tube-coarser.off`." in markdown
     assert resampling["resampled_on_their_own"] == ["tube-coarser.off"]
     assert {c: f["made_on"] for c, f in resampling["figures"].items()} == {
         "thin": "thin-0.0.off",

@@ -161,7 +161,7 @@ def size_dissimilarity(
     the shape alone (pose and scanning move one body's size by a few percent), and a
     product rule never multiplies the shape's score by 0. Eq. (8) on the size and the
     tolerance were chosen over eq. (9), the log-ratio and other tolerances by
-    cross-validation (docs/decisions.md, "The size cue").
+    cross-validation (docs/decisions.md, "Metric units fuse the size").
 
     Parameters
     ----------

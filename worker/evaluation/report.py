@@ -196,6 +196,8 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         lines.append(f"| {row['title']} | " + " | ".join(cells) + " |")
     lines += ["", "## Protocol", ""]
     lines += [f"- **{key}**: {text}" for key, text in protocol.items()]
+    if "resampling" in report:
+        lines += _resampling_markdown(report["resampling"])
     lines += ["", "## Errors", "", "| | NN errors (class->nearest) | R1 errors (class->match) |"]
     lines.append("|---|---|---|")
     for row in report["rows"].values():
@@ -223,6 +225,31 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def _resampling_markdown(resampling: Mapping[str, Any]) -> list[str]:
+    """How the meshes were resampled when once per figure (``--resampling figure``)."""
+    lines = [
+        "",
+        "## Resampling: one per figure",
+        "",
+        "Each class's first file was resampled and its resampling carried to the class's "
+        "files of as many vertices through their shared vertex ids.",
+        "",
+        "| class | made on | vertices | files that took it |",
+        "|---|---|---:|---:|",
+    ]
+    for label, figure in resampling["figures"].items():
+        lines.append(
+            f"| {label} | `{figure['made_on']}` | {figure['vertices']} | {figure['poses']} |"
+        )
+    own = resampling["resampled_on_their_own"]
+    shown = ", ".join(f"`{name}`" for name in own) if own else "none"
+    lines += [
+        "",
+        f"Resampled on their own (another vertex count than their class's first): {shown}.",
+    ]
+    return lines
 
 
 def _learned_markdown(learned: Mapping[str, Any]) -> list[str]:
