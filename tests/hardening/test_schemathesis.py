@@ -120,7 +120,12 @@ def test_no_server_error_and_responses_match_the_schema(fuzzed: Service):
 
 
 def test_stateful_sequences_follow_the_links_without_errors(fuzzed: Service):
-    schema = schemathesis.openapi.from_url(f"{fuzzed.url}/openapi.json")
+    # The routes under /collections/{collection}/ are the mesh routes again (each checked
+    # by the test above); in sequences their generated collection names only meet 404s,
+    # and the keys' 401s, which starves the links among meshes of steps.
+    schema = schemathesis.openapi.from_url(f"{fuzzed.url}/openapi.json").exclude(
+        path_regex="^/collections/\\{collection\\}/|^/keys"
+    )
     links = schema.statistic.transitions.total
     assert links >= 10, "POST /meshes (200, 202) must link to the mesh operations and its job"
     enrolled = fuzzed.upload("quadruped-1", "quadruped")  # more than one to list, search, delete
