@@ -57,6 +57,8 @@ class Collection(Base):
     units: Mapped[str] = mapped_column(String(16), default=Units.any.value)
     # None: the service's preset (SHAPES_PRESET), followed when it changes.
     preset: Mapped[str | None] = mapped_column(String(64))
+    # Weights pinned by an admin (PUT /collections/{name}/fusion); None: learned or preset.
+    fusion_weights: Mapped[dict[str, float] | None] = mapped_column(JSON)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
 

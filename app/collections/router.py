@@ -20,7 +20,7 @@ from ..deps import (
 from ..models import Scope, Units
 from ..schemas import ACCESS_RESPONSES, ERROR_RESPONSES
 from . import service
-from .schemas import CollectionIn, CollectionLinks, CollectionList, CollectionOut
+from .schemas import CollectionIn, CollectionLinks, CollectionList, CollectionOut, FusionPin
 from .service import NAME_PATTERN, SCOPED_PREFIX
 
 router = APIRouter(
@@ -64,6 +64,7 @@ def collection_out(view: service.CollectionView) -> CollectionOut:
         units=Units(view.row.units),
         preset=view.preset,
         preset_version=view.preset_version,
+        fusion_weights=view.row.fusion_weights,
         meshes=view.meshes,
         ready=view.ready,
         created_at=view.row.created_at,
@@ -122,6 +123,29 @@ def list_collections(session: ReadSessionDep, state: StateDep, grant: GrantDep) 
 )
 def get_collection(name: Name, session: ReadSessionDep, state: StateDep) -> CollectionOut:
     return collection_out(service.get(session, state, name))
+
+
+@router.put(
+    "/{name}/fusion",
+    dependencies=ADMIN_ACCESS,
+    response_model=CollectionOut,
+    operation_id="pin_collection_fusion",
+    summary="Pin the collection's fusion weights, or unpin them",
+    description=(
+        "Pinned weights rank and calibrate the collection's searches instead of the ones it "
+        'learns from its labels (or the preset\'s); `{"weights": null}` unpins them. '
+        "`GET /collections/{name}/calibration` shows the weights in use and where they came "
+        "from.\n\n"
+        '`curl -X PUT -H \'Content-Type: application/json\' -d \'{"weights": {"gdm": 0, '
+        '"ddt": 0.25, "spectrum": 1}}\' http://127.0.0.1:8000/collections/casts/fusion`'
+    ),
+    responses=NOT_FOUND
+    | {422: {"description": "Not one weight >= 0 per fused modality (`invalid_weights`)"}},
+)
+def pin_collection_fusion(
+    name: Name, body: FusionPin, session: SessionDep, state: StateDep
+) -> CollectionOut:
+    return collection_out(service.pin_fusion(session, state, name, body.weights))
 
 
 @router.delete(

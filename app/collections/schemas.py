@@ -30,6 +30,16 @@ class CollectionIn(BaseModel):
     )
 
 
+class FusionPin(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    weights: dict[str, float] | None = Field(
+        description="one weight >= 0 per modality the preset fuses (and the size's, "
+        'optional, in metric units), e.g. {"gdm": 0, "ddt": 0.5, "spectrum": 1}; '
+        "null unpins them",
+    )
+
+
 class CollectionLinks(BaseModel):
     self: str
     meshes: str
@@ -42,6 +52,10 @@ class CollectionOut(BaseModel):
     units: Units
     preset: str
     preset_version: int
+    fusion_weights: dict[str, float] | None = Field(
+        description="the weights pinned for this collection; null: learned from its labels, "
+        "or the preset's (GET .../calibration says which)"
+    )
     meshes: int = Field(description="enrolled meshes")
     ready: int = Field(description="meshes described and searchable")
     created_at: UtcDatetime

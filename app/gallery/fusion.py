@@ -82,26 +82,32 @@ def preset_fusion(preset: Preset, reason: str, version: int = -1) -> GalleryFusi
     )
 
 
-def pinned_fusion(preset: Preset, weights: Mapping[str, float]) -> GalleryFusion:
-    """The operator's weights, checked against the preset's fused modalities (in a
-    collection of metric units the size keeps the preset's weight).
+def pinned_fusion(
+    preset: Preset, weights: Mapping[str, float], where: str = "SHAPES_FUSION_WEIGHTS"
+) -> GalleryFusion:
+    """The operator's weights (set by ``where``), checked against the preset's fused
+    modalities; in a collection of metric units the size's is optional (the preset's
+    when left out).
 
     Raises
     ------
     ValueError
-        Weights of other modalities than the preset fuses, or not numbers >= 0.
+        Weights of other modalities than the preset scores, one of its fused modalities
+        left out, or not numbers >= 0.
     """
-    if set(weights) != set(preset.fused_modalities):
+    needed, allowed = set(preset.fused_modalities), set(preset.scored_modalities)
+    if not needed <= set(weights) <= allowed:
+        optional = allowed - needed
         raise ValueError(
-            f"SHAPES_FUSION_WEIGHTS weighs {sorted(weights)}; the preset fuses "
-            f"{sorted(preset.fused_modalities)}"
+            f"{where} weighs {sorted(weights)}; the preset fuses {sorted(needed)}"
+            + (f" (and {', '.join(sorted(optional))}, optional)" if optional else "")
         )
     if any(not np.isfinite(w) or w < 0 for w in weights.values()):
-        raise ValueError(f"SHAPES_FUSION_WEIGHTS must be numbers >= 0, got {dict(weights)}")
+        raise ValueError(f"{where} must be numbers >= 0, got {dict(weights)}")
     return GalleryFusion(
         weights={m: float(weights.get(m, preset.weight(m))) for m in preset.scored_modalities},
         source="pinned",
-        reason="pinned by the operator (SHAPES_FUSION_WEIGHTS)",
+        reason=f"pinned by the operator ({where})",
         fitted_at=time.time(),
     )
 

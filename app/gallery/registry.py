@@ -30,6 +30,9 @@ from .service import Gallery
 
 log = logging.getLogger("shapes.gallery")
 
+#: Where a collection's own pinned weights are set (the reason /calibration shows).
+PINNED_HERE = "PUT /collections/{name}/fusion"
+
 
 @dataclass(frozen=True)
 class CollectionSpec:
@@ -39,12 +42,14 @@ class CollectionSpec:
     name: str
     units: str
     preset: Preset
+    #: Weights an admin pinned for the collection (None: learned, or the preset's).
+    pinned: dict[str, float] | None
 
     @classmethod
     def of(cls, row: Collection, default_preset: str) -> CollectionSpec:
         """The row's, its preset compared in its units (the size scored when metric)."""
         preset = with_units(get_preset(row.preset or default_preset), row.units)
-        return cls(row.id, row.name, row.units, preset)
+        return cls(row.id, row.name, row.units, preset, row.fusion_weights)
 
 
 class Galleries:
@@ -125,8 +130,8 @@ class Galleries:
 
     # -------------------------------------------------------------- sync
     def sync(self) -> None:
-        """Make a gallery for each new collection (its index loaded now) and drop the
-        deleted ones' (their saved index removed)."""
+        """Make a gallery for each new collection (its index loaded now), drop the
+        deleted ones' (their saved index removed), and follow pinned weights."""
         with self._sync_lock:
             with self.read_sessions() as session:
                 rows = collections.all_rows(session)
@@ -134,6 +139,12 @@ class Galleries:
             gone = [i for i in self._by_id if i not in specs]
             for collection_id in gone:
                 self._drop(collection_id)
+            for collection_id, gallery in list(self._by_id.items()):
+                spec = specs[collection_id]
+                if spec.pinned != self._specs[collection_id].pinned:
+                    pin, learn, where = self._fusion_of(spec)
+                    gallery.pin_fusion(pin, learn=learn, where=where)
+                    self._specs[collection_id] = spec
             new = [spec for i, spec in specs.items() if i not in self._by_id]
             for spec in new:
                 gallery = self._make(spec)
@@ -164,11 +175,19 @@ class Galleries:
             / f"{preset.name}-v{preset.version}"
         )
 
+    def _fusion_of(self, spec: CollectionSpec) -> tuple[dict[str, float] | None, bool, str]:
+        """The weights a collection's gallery is pinned to (its own, else the operator's
+        SHAPES_FUSION_WEIGHTS for the service's preset, else None), whether it learns, and
+        where the pin was set."""
+        settings = self.settings
+        if spec.pinned is not None:
+            return spec.pinned, False, PINNED_HERE
+        pin = settings.fusion_weights if spec.preset.name == settings.preset else None
+        return pin, pin is None and settings.fusion == "learned", "SHAPES_FUSION_WEIGHTS"
+
     def _make(self, spec: CollectionSpec) -> Gallery:
         settings = self.settings
-        pin = settings.fusion_weights
-        # The operator's pinned weights are the service preset's modalities'.
-        pinned = pin is not None and spec.preset.name == settings.preset
+        pin, learn, where = self._fusion_of(spec)
         return Gallery(
             (spec.id, spec.name),
             spec.preset,
@@ -176,8 +195,8 @@ class Galleries:
             refit_fraction=settings.index_refit_fraction,
             metrics=self.metrics,
             lock=self._lock,
-            fusion=pinned_fusion(spec.preset, pin) if pinned and pin is not None else None,
-            learn_fusion=settings.fusion == "learned" and not pinned,
+            fusion=None if pin is None else pinned_fusion(spec.preset, pin, where),
+            learn_fusion=learn,
             fusion_max_shapes=settings.fusion_max_shapes,
         )
 

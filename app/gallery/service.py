@@ -30,7 +30,7 @@ from ..meshes import repository as meshes
 from ..metrics import Metrics
 from . import changes
 from .calibration import GalleryCalibration, fit_calibration
-from .fusion import GalleryFusion, learn_gallery_fusion, preset_fusion
+from .fusion import GalleryFusion, learn_gallery_fusion, pinned_fusion, preset_fusion
 from .index import GalleryIndex, Match, SearchStats
 from .persistence import load_index, save_index
 
@@ -294,7 +294,20 @@ class Gallery:
         except Exception:  # the weights in use stay; the next change tries again
             log.exception("learning the fusion weights failed")
             return
-        self.adopt_fusion(fit)
+        with self._lock:
+            if self.learn_fusion:  # not pinned while this fit ran
+                self.adopt_fusion(fit)
+
+    def pin_fusion(self, weights: dict[str, float] | None, *, learn: bool, where: str) -> None:
+        """Rank with ``weights`` (pinned by ``where``) from now on; None: with the preset's,
+        and learn again when ``learn``."""
+        with self._lock:
+            self.learn_fusion = learn and weights is None
+            self.adopt_fusion(
+                preset_fusion(self.base_preset, "the preset's weights (unpinned)")
+                if weights is None
+                else pinned_fusion(self.base_preset, weights, where)
+            )
 
     def adopt_fusion(self, fusion: GalleryFusion) -> None:
         """Rank and calibrate with ``fusion``'s weights from now on."""

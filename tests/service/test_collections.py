@@ -170,6 +170,31 @@ def test_deleting_a_collection_keeps_what_another_shares(two):
     assert svc.client.get("/collections/gone/meshes").json()["total"] == 0
 
 
+def test_a_collections_fusion_weights_can_be_pinned_and_unpinned(two):
+    svc, _ = two
+    before = svc.client.get("/collections/a/calibration").json()["fusion"]
+    assert before["source"] in ("preset", "learned")
+    pin = {"gdm": 1.0, "ddt": 0.0, "spectrum": 0.25}
+    pinned = svc.client.put("/collections/a/fusion", json={"weights": pin})
+    assert pinned.status_code == 200 and pinned.json()["fusion_weights"] == pin
+    fusion = svc.client.get("/collections/a/calibration").json()["fusion"]
+    assert fusion["source"] == "pinned" and fusion["weights"] == pin
+    assert "PUT /collections/{name}/fusion" in fusion["reason"]
+    # b keeps its own; a search in a ranks with the pinned weights.
+    assert svc.client.get("/collections/b/calibration").json()["fusion"]["source"] != "pinned"
+    ranked = svc.query("quadruped-3", collection="a", k=3).json()["matches"][0]
+    scores = ranked["scores"]
+    assert ranked["score"] == pytest.approx(scores["gdm"] * scores["spectrum"] ** 0.25)
+    for bad in ({"gdm": 1.0}, {"gdm": 1, "ddt": 1, "spectrum": -1}, {"gdm": 1, "colour": 1}):
+        refused = svc.client.put("/collections/a/fusion", json={"weights": bad})
+        assert refused.status_code == 422, bad
+        assert refused.json()["error"] in ("invalid_weights", "invalid_input"), refused.text
+    unpinned = svc.client.put("/collections/a/fusion", json={"weights": None})
+    assert unpinned.status_code == 200 and unpinned.json()["fusion_weights"] is None
+    after = svc.client.get("/collections/a/calibration").json()["fusion"]
+    assert after["source"] in ("preset", "learned")
+
+
 def _scaled(name: str, factor: float) -> bytes:
     """The example ``name`` as an OFF file, scaled by ``factor``."""
     data = io.BytesIO(gzip.decompress(example(name).read_bytes()))
