@@ -139,13 +139,13 @@ def get_collection(name: Name, session: ReadSessionDep, state: StateDep) -> Coll
         '`curl -X PUT -H \'Content-Type: application/json\' -d \'{"weights": {"gdm": 0, '
         '"ddt": 0.25, "spectrum": 1}}\' http://127.0.0.1:8000/collections/casts/fusion`'
     ),
-    responses=NOT_FOUND
-    | {422: {"description": "Not one weight >= 0 per fused modality (`invalid_weights`)"}},
+    responses=NOT_FOUND,
 )
 def pin_collection_fusion(
     name: Name, body: FusionPin, session: SessionDep, state: StateDep
 ) -> CollectionOut:
-    return collection_out(service.pin_fusion(session, state, name, body.weights))
+    weights = None if body.weights is None else {str(m): w for m, w in body.weights.items()}
+    return collection_out(service.pin_fusion(session, state, name, weights))
 
 
 @router.delete(

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+from typing import Annotated, Literal
+
 from pydantic import BaseModel, ConfigDict, Field, JsonValue
 
 from worker.engine.presets import PRESETS
 
 from ..models import Units
 from ..schemas import UtcDatetime
-from .service import NAME_PATTERN
+from .service import MAX_WEIGHT, NAME_PATTERN
 
 PRESET_NAMES: list[JsonValue] = [name for name in sorted(PRESETS)]
 
@@ -30,13 +32,18 @@ class CollectionIn(BaseModel):
     )
 
 
+Modality = Literal["gdm", "ddt", "spectrum", "size"]
+Weight = Annotated[float, Field(ge=0, le=MAX_WEIGHT)]
+
+
 class FusionPin(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
-    weights: dict[str, float] | None = Field(
-        description="one weight >= 0 per modality the preset fuses (and the size's, "
-        'optional, in metric units), e.g. {"gdm": 0, "ddt": 0.5, "spectrum": 1}; '
-        "null unpins them",
+    weights: dict[Modality, Weight] | None = Field(
+        description="the product's exponent (or the sum's factor) per modality, e.g. "
+        '{"gdm": 0, "ddt": 0.5, "spectrum": 1}; a modality left out keeps the preset\'s '
+        "weight, and one the collection does not score (the size in units any) is kept "
+        "unused; null unpins them",
     )
 
 

@@ -27,7 +27,7 @@ from typing import Literal
 
 import numpy as np
 
-from worker.engine.presets import Preset
+from worker.engine.presets import MODALITIES, SIZE, Preset
 from worker.recognition.fusion import (
     ADOPTION_MARGIN,
     FusionTuning,
@@ -85,23 +85,17 @@ def preset_fusion(preset: Preset, reason: str, version: int = -1) -> GalleryFusi
 def pinned_fusion(
     preset: Preset, weights: Mapping[str, float], where: str = "SHAPES_FUSION_WEIGHTS"
 ) -> GalleryFusion:
-    """The operator's weights (set by ``where``), checked against the preset's fused
-    modalities; in a collection of metric units the size's is optional (the preset's
-    when left out).
+    """The operator's weights (set by ``where``) for the preset's scored modalities; one
+    left out keeps the preset's weight, and one the preset does not score is unused.
 
     Raises
     ------
     ValueError
-        Weights of other modalities than the preset scores, one of its fused modalities
-        left out, or not numbers >= 0.
+        Weights of unknown modalities, or not numbers >= 0.
     """
-    needed, allowed = set(preset.fused_modalities), set(preset.scored_modalities)
-    if not needed <= set(weights) <= allowed:
-        optional = allowed - needed
-        raise ValueError(
-            f"{where} weighs {sorted(weights)}; the preset fuses {sorted(needed)}"
-            + (f" (and {', '.join(sorted(optional))}, optional)" if optional else "")
-        )
+    unknown = set(weights) - {*MODALITIES, SIZE}
+    if unknown:
+        raise ValueError(f"{where} weighs unknown modalities {sorted(unknown)}")
     if any(not np.isfinite(w) or w < 0 for w in weights.values()):
         raise ValueError(f"{where} must be numbers >= 0, got {dict(weights)}")
     return GalleryFusion(

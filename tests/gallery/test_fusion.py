@@ -86,10 +86,12 @@ def test_weights_that_do_not_beat_the_preset_are_not_adopted():
     assert "not better" in fit.reason and fit.tuning is not None
 
 
-def test_pinned_weights_are_the_presets_modalities_only():
+def test_pinned_weights_weigh_known_modalities_and_keep_the_presets_for_the_rest():
     pinned = pinned_fusion(EQUAL, {"gdm": 0.25, "ddt": 0.5, "spectrum": 1.0})
     assert pinned.source == "pinned" and pinned.weights["gdm"] == 0.25
-    for bad in ({"gdm": 1.0}, {"gdm": -1.0, "ddt": 1.0, "spectrum": 1.0}):
+    some = pinned_fusion(EQUAL, {"gdm": 0.25, "size": 3.0})  # the size: unused, any units
+    assert some.weights == {m: 0.25 if m == "gdm" else EQUAL.weight(m) for m in MODALITIES}
+    for bad in ({"colour": 1.0}, {"gdm": -1.0, "ddt": 1.0, "spectrum": 1.0}):
         try:
             pinned_fusion(EQUAL, bad)
         except ValueError:
