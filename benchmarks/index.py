@@ -245,29 +245,31 @@ def collection_rows(
     picks = rng.choice(np.flatnonzero(member == per_class), size=n_queries, replace=False)
     queries = [{m: data[m][i] for m in MODALITIES} for i in picks]
     shards = [enrolled] + [enrolled[collection_of[enrolled] == c] for c in range(collections)]
-    built: list[tuple[GalleryIndex, Vectors, np.ndarray, float]] = []
+    built: list[tuple[GalleryIndex, Vectors, np.ndarray, float, Vectors | None]] = []
     for ids in shards:
         gallery = {m: data[m][ids] for m in MODALITIES}
         started = time.perf_counter()
         index = build(preset, gallery, ids)
-        built.append((index, gallery, ids, time.perf_counter() - started))
+        seconds = time.perf_counter() - started
+        # eq. (9)'s sigma of the reference ranking, once per gallery (not per query).
+        sigma = (
+            {m: gallery_sigma(gallery[m]) for m in MODALITIES}
+            if preset.dissimilarity == "D2"
+            else None
+        )
+        built.append((index, gallery, ids, seconds, sigma))
         index.search(queries[0], K)  # warm-up
     hits = np.zeros(2)
     times: list[list[float]] = [[], []]
     for query, i in zip(queries, picks, strict=True):  # interleaved, query by query
         for j, shard in enumerate((0, 1 + collection_of[i])):
-            index, gallery, ids, _ = built[shard]
-            sigma = (
-                {m: gallery_sigma(gallery[m]) for m in MODALITIES}
-                if preset.dissimilarity == "D2"
-                else None
-            )
+            index, gallery, ids, _, sigma = built[shard]
             ref = {int(ids[r]) for r in exhaustive_topk(preset, gallery, sigma, [query], K)[0]}
             start = time.perf_counter()
             found = index.search(query, K)
             times[j].append((time.perf_counter() - start) * 1000)
             hits[j] += len({m.id for m in found} & ref) / K
-    sizes = sorted({len(ids) for _, _, ids, _ in built[1:]})
+    sizes = sorted({len(b[2]) for b in built[1:]})
     rows = []
     for j, what in enumerate(("one gallery", f"its own of {collections} collections")):
         ms = np.array(times[j])

@@ -40,7 +40,8 @@ def labels(session: Session, collection_id: int) -> dict[int, str]:
     query = select(Mesh.id, Mesh.label).where(
         Mesh.collection_id == collection_id, Mesh.label.is_not(None)
     )
-    return {mesh_id: label for mesh_id, label in session.execute(query).tuples() if label}
+    rows = session.execute(query).tuples()
+    return {mesh_id: label for mesh_id, label in rows if label is not None}
 
 
 def ids_with_label(session: Session, collection_id: int, label: str) -> list[int]:

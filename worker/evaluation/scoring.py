@@ -14,11 +14,11 @@ from typing import Any
 
 import numpy as np
 
-from worker.engine.compare import fuse, gallery_sigma, size_dissimilarity
+from worker.engine.compare import fuse, gallery_sigma
 from worker.engine.presets import MODALITIES, SIZE, Preset
 from worker.recognition import metrics
 from worker.recognition.calibration import calibrate
-from worker.recognition.fusion import all_to_all
+from worker.recognition.fusion import all_to_all, preset_all_to_all
 
 from .shapedna import BASELINE, shapedna_dissimilarity
 
@@ -112,14 +112,12 @@ def preset_matrix(
     modality: str, vectors: np.ndarray, preset: Preset
 ) -> tuple[np.ndarray, dict[str, Any]]:
     """All-to-all dissimilarity of one modality as the preset compares it: the size by
-    :func:`~worker.engine.compare.size_dissimilarity` at the preset's tolerance (zero on
-    the diagonal), the others by :func:`modality_dissimilarity` with its D1 or D2."""
+    :func:`~worker.recognition.fusion.preset_all_to_all` (the size's comparison at the
+    preset's tolerance, zero on the diagonal), the others by :func:`modality_dissimilarity`
+    with its D1 or D2."""
     if modality != SIZE:
         return modality_dissimilarity(vectors, preset.dissimilarity)
-    x = np.atleast_2d(np.asarray(vectors, dtype=np.float64))
-    d = size_dissimilarity(x, x, preset.size_tolerance)
-    np.fill_diagonal(d, 0.0)
-    return d, {"dissimilarity": preset.comparison(SIZE)}
+    return preset_all_to_all(SIZE, vectors, preset), {"dissimilarity": preset.comparison(SIZE)}
 
 
 def dissimilarity_matrices(
