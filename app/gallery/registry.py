@@ -165,15 +165,10 @@ class Galleries:
     def _directory(self, collection_id: int, preset: Preset) -> Path:
         """Where a collection's index is saved: the default collection's where the
         service kept its one gallery's, the others' under ``collections/<id>``."""
-        settings = self.settings
-        if collection_id == 1:
-            return settings.index_directory / f"{preset.name}-v{preset.version}"
-        return (
-            settings.index_directory
-            / "collections"
-            / str(collection_id)
-            / f"{preset.name}-v{preset.version}"
-        )
+        root = self.settings.index_directory
+        if collection_id != 1:
+            root = root / "collections" / str(collection_id)
+        return root / f"{preset.name}-v{preset.version}"
 
     def _fusion_of(self, spec: CollectionSpec) -> tuple[dict[str, float] | None, bool, str]:
         """The weights a collection's gallery is pinned to (its own, else the operator's
