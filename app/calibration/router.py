@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+from dataclasses import asdict
 from typing import Any
 
 import numpy as np
@@ -9,7 +11,7 @@ from fastapi import APIRouter
 
 from worker.engine.presets import Preset
 from worker.recognition.calibration import Calibration
-from worker.recognition.fusion import ADOPTION_MARGIN, FusionScores
+from worker.recognition.fusion import Adoption, FusionScores
 
 from ..deps import (
     MAX_ROW_ID,
@@ -34,6 +36,7 @@ from ..schemas import (
 from ..search.service import parse_far
 from . import service
 from .schemas import (
+    AdoptionOut,
     CalibrationOut,
     FusionFold,
     FusionOut,
@@ -148,13 +151,21 @@ def _scores(scores: FusionScores) -> RecognitionScores:
     return RecognitionScores(eer=scores.eer, nn=scores.nn, map=scores.map)
 
 
+def _adoption(adoption: Adoption) -> AdoptionOut:
+    fields = asdict(adoption)
+    fields["statistic"] = adoption.statistic if math.isfinite(adoption.statistic) else None
+    return AdoptionOut(**fields)
+
+
 def fusion_out(fusion: GalleryFusion, preset: Preset) -> FusionOut:
     tuning = fusion.tuning
     return FusionOut(
         weights=fusion.weights,
+        comparisons=fusion.comparisons,
         source=fusion.source,
         reason=fusion.reason,
         preset_weights={m: preset.weight(m) for m in preset.scored_modalities},
+        preset_comparisons={m: preset.comparison(m) for m in preset.scored_modalities},
         labelled_shapes=fusion.shapes,
         labels=fusion.classes,
         sampled=fusion.sampled,
@@ -164,6 +175,7 @@ def fusion_out(fusion: GalleryFusion, preset: Preset) -> FusionOut:
             FusionFold(
                 held_out_shapes=fold.held_out_objects,
                 weights=fold.weights,
+                comparisons=fold.comparisons,
                 held_out=_scores(fold.held_out),
                 preset=_scores(fold.preset),
             )
@@ -171,7 +183,7 @@ def fusion_out(fusion: GalleryFusion, preset: Preset) -> FusionOut:
         ],
         held_out=None if tuning is None else _scores(tuning.held_out),
         preset_held_out=None if tuning is None else _scores(tuning.preset_held_out),
-        adoption_margin=ADOPTION_MARGIN,
+        adoption=None if fusion.adoption is None else AdoptionOut(**asdict(fusion.adoption)),
         fitted_at=fusion.fitted_at,
     )
 

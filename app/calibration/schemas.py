@@ -31,15 +31,37 @@ class RecognitionScores(BaseModel):
 class FusionFold(BaseModel):
     held_out_shapes: int
     weights: dict[str, float] = Field(description="chosen on the other folds' shapes")
+    comparisons: dict[str, str] = Field(description="each modality's comparison, chosen with them")
     held_out: RecognitionScores = Field(description="those weights on this fold's shapes")
     preset: RecognitionScores = Field(description="the preset's weights on the same shapes")
 
 
+class AdoptionOut(BaseModel):
+    gain: float = Field(
+        description="mean over the folds of the preset's loss (mean of EER and 1 - mAP) "
+        "minus the learned choice's"
+    )
+    statistic: float | None = Field(
+        description="the gain's corrected resampled t statistic (null: every fold gained "
+        "the same, so the gain has no spread)"
+    )
+    critical: float = Field(description="Student's one-sided quantile it must exceed")
+    confidence: float
+    adopted: bool
+
+
 class FusionOut(BaseModel):
     weights: dict[str, float] = Field(description="the weights the gallery fuses with")
-    source: str = Field(description="preset, pinned (SHAPES_FUSION_WEIGHTS) or learned")
+    comparisons: dict[str, str] = Field(
+        description="each modality's comparison: D1 (eq. 8), D2 (eq. 9), reweighted "
+        "euclidean (ShapeDNA's, the spectrum) or the size's"
+    )
+    source: str = Field(
+        description="preset, pinned (SHAPES_FUSION_WEIGHTS or the collection's) or learned"
+    )
     reason: str = Field(description="why these weights, in a sentence")
     preset_weights: dict[str, float]
+    preset_comparisons: dict[str, str]
     labelled_shapes: int = Field(description="labelled shapes learned on (0: none)")
     labels: int
     sampled: bool = Field(description="learned on a stratified sample of the labelled shapes")
@@ -50,8 +72,8 @@ class FusionOut(BaseModel):
     preset_held_out: RecognitionScores | None = Field(
         description="the preset's weights on the same held-out shapes"
     )
-    adoption_margin: float = Field(
-        description="loss (mean of EER and 1 - mAP) the learned weights must gain to be used"
+    adoption: AdoptionOut | None = Field(
+        description="the test of the folds' gain: the learned fusion is used when it passes"
     )
     fitted_at: float
 

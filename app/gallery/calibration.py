@@ -125,7 +125,7 @@ def fit_calibration(
             vectors[m][first],
             vectors[m][second],
             preset,
-            None if sigma is None else sigma[m],
+            sigma[m],
         )
         for m in index.modalities
     }

@@ -1,8 +1,10 @@
 """Candidate transforms: the vector faiss holds per modality, fixed between refits.
 
-D2: ``t(x) = P^T (x / sigma_fit - mu)``; D1: ``t(x) = P^T (log max(x, floor) - mu)``
-(eq. 8's terms are ``2 tanh(|log a - log b| / 2)``). ``P`` is orthonormal, so a
-projected D2 distance never exceeds the whitened one: it is a lower bound.
+D2: ``t(x) = P^T (x / sigma_fit - mu)``; D1 (and the size's): ``t(x) = P^T (log max(x,
+floor) - mu)`` (eq. 8's terms are ``2 tanh(|log a - log b| / 2)``); ShapeDNA's reweighted
+Euclidean distance: ``t(x) = P^T (x / w - mu)`` with its fixed weights ``w``. ``P`` is
+orthonormal, so a projected D2 distance never exceeds the whitened one: it is a lower
+bound.
 
 faiss index: an exact scan (``IndexFlatL2``) below ``IVF_MIN_SHAPES``; above, an
 inverted file (``IndexIVFFlat``: k-means cells, the query's ``IVF_PROBES`` nearest
@@ -21,6 +23,9 @@ from dataclasses import dataclass, field
 import faiss
 import numpy as np
 
+from worker.engine.compare import spectrum_weights
+from worker.engine.presets import REWEIGHTED
+
 MAX_DIMS = 64  # columns of the candidate projection per modality
 FIT_SAMPLE = 5_000  # rows used to fit a projection (any orthonormal P keeps the bound)
 _CHUNK = 8192  # rows transformed at once: bounded temporary memory
@@ -37,29 +42,45 @@ class CandidateTransform:
 
     Attributes
     ----------
-    log : D1 (compare logarithms) rather than D2 (compare whitened values).
+    comparison : the modality's (:meth:`~worker.engine.presets.Preset.comparison`); all
+        but D2 and ShapeDNA's compare logarithms.
     mu : (M,) shift (mean of the scaled vectors, or of their logarithms for D1).
-    scale : (M,) divisor before projecting (sigma at the fit for D2, 1 for D1).
+    scale : (M,) divisor before projecting (sigma at the fit for D2, ShapeDNA's weights
+        for its comparison, 1 for D1).
     floor : (M,) D1 only: values are clipped here before the logarithm.
     projection : (M, r) orthonormal columns.
     index : faiss ``IndexIDMap2`` over the transformed gallery, by shape id.
     """
 
-    log: bool
+    comparison: str
     mu: np.ndarray
     scale: np.ndarray
     floor: np.ndarray
     projection: np.ndarray
     index: faiss.Index = field(repr=False)
 
+    @property
+    def log(self) -> bool:
+        """Logarithms are compared (eq. 8's modalities)."""
+        return self.comparison not in ("D2", REWEIGHTED)
+
     @classmethod
     def fit(
-        cls, rows: np.ndarray, *, log: bool, max_dims: int = MAX_DIMS, gallery_size: int = 0
+        cls,
+        rows: np.ndarray,
+        *,
+        comparison: str,
+        max_dims: int = MAX_DIMS,
+        gallery_size: int = 0,
     ) -> CandidateTransform:
-        """Fit on ``rows`` ((n, M) float, a sample of the gallery); the faiss index is empty
-        (an inverted file, untrained, when ``gallery_size`` reaches ``IVF_MIN_SHAPES``)."""
+        """Fit on ``rows`` ((n, M) float, a sample of the gallery) for the modality's
+        ``comparison``; the faiss index is empty (an inverted file, untrained, when
+        ``gallery_size`` reaches ``IVF_MIN_SHAPES``)."""
         dim = rows.shape[1]
-        if not log:
+        if comparison == REWEIGHTED:
+            floor, scale = np.zeros(dim), spectrum_weights(dim)
+            t = rows / scale
+        elif comparison == "D2":
             floor = np.zeros(dim)
             std = rows.std(axis=0) if len(rows) else np.ones(dim)
             scale = np.where(std > 0, std, 1.0)
@@ -86,7 +107,14 @@ class CandidateTransform:
                 basis = q[:, :r]
             projection = basis
         index = _empty_index(projection.shape[1], gallery_size)
-        return cls(log=log, mu=mu, scale=scale, floor=floor, projection=projection, index=index)
+        return cls(
+            comparison=comparison,
+            mu=mu,
+            scale=scale,
+            floor=floor,
+            projection=projection,
+            index=index,
+        )
 
     def transform(self, x: np.ndarray) -> np.ndarray:
         """(p, M) float -> (p, r) float32, what faiss compares."""

@@ -2,12 +2,14 @@
 gallery's own labelled shapes.
 
 The paper leaves the fusion weights to future work (sec. 5); the preset's were chosen on
-TOSCA. A gallery with labels can do better for its own kind of objects: the weights are
-chosen by class-stratified cross-validation on its labelled shapes with the code
-``shapes tune`` and ``shapes evaluate --fusion learned`` use
-(:func:`worker.recognition.fusion.tune_fusion`, the preset's rule and comparison), and
-adopted only if the held-out folds beat the preset's weights by ``ADOPTION_MARGIN`` of
-loss (the mean of EER and 1 - mAP); otherwise the preset's stay, and the answer says why.
+TOSCA. A gallery with labels can do better for its own kind of objects: each modality's
+weight and comparison (D1, D2, ShapeDNA's for the spectrum) are chosen by
+class-stratified cross-validation on its labelled shapes with the code ``shapes evaluate
+--fusion learned`` uses (:func:`worker.recognition.fusion.learn_fusion`, the preset's
+rule), and adopted only if the held-out folds favour them over the preset's beyond the
+folds' noise (:meth:`~worker.recognition.fusion.FusionTuning.adoption`, a corrected
+resampled t-test of the gain in loss, the mean of EER and 1 - mAP); otherwise the
+preset's stay, and the answer says why.
 
 Learning needs at least ``MIN_CLASSES`` labels with at least ``MIN_PER_CLASS`` shapes
 each (a fold must leave two of every class to choose on); smaller labels take no part.
@@ -27,14 +29,8 @@ from typing import Literal
 
 import numpy as np
 
-from worker.engine.presets import MODALITIES, SIZE, Preset
-from worker.recognition.fusion import (
-    ADOPTION_MARGIN,
-    FusionTuning,
-    feasible_folds,
-    preset_all_to_all,
-    tune_fusion,
-)
+from worker.engine.presets import MODALITIES, SIZE, Preset, with_fusion
+from worker.recognition.fusion import Adoption, FusionTuning, learn_fusion
 
 from .index import GalleryIndex
 
@@ -46,15 +42,18 @@ Source = Literal["preset", "pinned", "learned"]
 
 @dataclass(frozen=True)
 class GalleryFusion:
-    """The weights a gallery fuses with, where they came from, and why.
+    """The weights and comparisons a gallery fuses with, where they came from, and why.
 
     Attributes
     ----------
     weights : modality -> weight, in use.
-    source : ``preset``, ``pinned`` (``SHAPES_FUSION_WEIGHTS``) or ``learned``.
+    comparisons : modality -> comparison, in use (:meth:`Preset.comparison`).
+    source : ``preset``, ``pinned`` (``SHAPES_FUSION_WEIGHTS`` or the collection's pin)
+        or ``learned``.
     reason : a sentence for the operator.
     tuning : the cross-validation (each fold's choice, the held-out scores of the choice
         and of the preset's weights), when one ran.
+    adoption : its test against the preset's weights, when one ran.
     shapes, classes : labelled shapes and labels learned on.
     sampled : a sample of the labelled shapes was learned on (above ``max_shapes``).
     version : the gallery's change counter when fitted (-1: never fitted).
@@ -62,19 +61,30 @@ class GalleryFusion:
     """
 
     weights: dict[str, float]
+    comparisons: dict[str, str]
     source: Source
     reason: str
     tuning: FusionTuning | None = None
+    adoption: Adoption | None = None
     shapes: int = 0
     classes: int = 0
     sampled: bool = False
     version: int = -1
     fitted_at: float = 0.0
 
+    def applied(self, preset: Preset) -> Preset:
+        """``preset`` fusing with these weights and comparisons."""
+        return with_fusion(preset, self.weights, self.comparisons)
+
+
+def _comparisons(preset: Preset) -> dict[str, str]:
+    return {m: preset.comparison(m) for m in preset.scored_modalities}
+
 
 def preset_fusion(preset: Preset, reason: str, version: int = -1) -> GalleryFusion:
     return GalleryFusion(
         weights={m: preset.weight(m) for m in preset.scored_modalities},
+        comparisons=_comparisons(preset),
         source="preset",
         reason=reason,
         version=version,
@@ -100,6 +110,7 @@ def pinned_fusion(
         raise ValueError(f"{where} must be numbers >= 0, got {dict(weights)}")
     return GalleryFusion(
         weights={m: float(weights.get(m, preset.weight(m))) for m in preset.scored_modalities},
+        comparisons=_comparisons(preset),
         source="pinned",
         reason=f"pinned by the operator ({where})",
         fitted_at=time.time(),
@@ -115,9 +126,10 @@ def learn_gallery_fusion(
     version: int,
     seed: int = 0,
 ) -> GalleryFusion:
-    """Cross-validate the fusion weights on the labelled shapes of ``index`` (the
-    preset's rule and comparison) and adopt them if they beat the preset's; ``preset``
-    is the service's own (its weights are the ones to beat)."""
+    """Cross-validate the fusion's weights and comparisons on the labelled shapes of
+    ``index`` (eq. 9's sigma the whole gallery's) and adopt them if the held-out folds
+    favour them over the preset's; ``preset`` is the service's own (its weights and
+    comparisons are the ones to beat)."""
     rng = np.random.default_rng(seed)
     described: list[int] = []  # how many labelled shapes there were to choose from
 
@@ -138,32 +150,26 @@ def learn_gallery_fusion(
             f"{MIN_PER_CLASS} described shapes each ({classes} labels have)",
             version,
         )
-    scored = preset.scored_modalities
-    mats = {
-        m: preset_all_to_all(m, vectors[m], preset, None if sigma is None else sigma[m])
-        for m in scored
-    }
-    own = {m: preset.weight(m) for m in scored}
-    folds = feasible_folds(names)
-    comparison = {m: preset.comparison(m) for m in scored}
-    tuning = tune_fusion(
-        mats, names, preset.fusion, own, folds=folds, seed=seed, comparison=comparison
-    )
+    tuning = learn_fusion(vectors, names, preset, sigma, seed=seed)
     held, base = tuning.held_out, tuning.preset_held_out
+    adoption = tuning.adoption()
     measured = (
         f"held-out EER {100 * held.eer:.2f}% and mAP {100 * held.map:.2f}% against the "
-        f"preset's {100 * base.eer:.2f}% and {100 * base.map:.2f}% ({folds} folds, "
-        f"{len(names)} labelled shapes)"
+        f"preset's {100 * base.eer:.2f}% and {100 * base.map:.2f}% ({len(tuning.folds)} "
+        f"folds, {len(names)} labelled shapes; gain {100 * adoption.gain:.2f} points of "
+        f"loss, t {adoption.statistic:.2f} against {adoption.critical:.2f})"
     )
-    adopted = tuning.beats_preset(ADOPTION_MARGIN)
+    chosen = preset_fusion(preset, "") if not adoption.adopted else None
     return GalleryFusion(
-        weights=dict(tuning.weights) if adopted else own,
-        source="learned" if adopted else "preset",
+        weights=dict(tuning.weights) if chosen is None else chosen.weights,
+        comparisons=dict(tuning.comparisons) if chosen is None else chosen.comparisons,
+        source="learned" if chosen is None else "preset",
         reason=f"learned: {measured}"
-        if adopted
-        else f"the preset's weights: the learned ones were not better by "
-        f"{100 * ADOPTION_MARGIN:g} points of loss ({measured})",
+        if chosen is None
+        else f"the preset's weights: the learned ones were not better beyond the folds' "
+        f"noise ({measured})",
         tuning=tuning,
+        adoption=adoption,
         shapes=len(names),
         classes=classes,
         sampled=len(names) < described[0],

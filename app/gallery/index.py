@@ -70,7 +70,7 @@ import numpy as np
 
 from worker.engine.compare import fuse, normalized_euclidean, preset_dissimilarity
 from worker.engine.parts import PartsMatch, best_scale, coarse, scale_scores
-from worker.engine.presets import PARTS, SIZE, Preset
+from worker.engine.presets import PARTS, Preset
 
 from .candidates import FIT_SAMPLE, MAX_DIMS, CandidateTransform
 from .vectors import GalleryVectors, ids_fingerprint
@@ -160,11 +160,11 @@ class GalleryIndex:
         self,
         labels: Mapping[int, str],
         choose: Callable[[np.ndarray], np.ndarray] | None = None,
-    ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray] | None]:
+    ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
         """A copy, taken under the lock, of what a fit on the labelled shapes reads:
-        their labels, their vectors and D2's current sigma (None for D1). ``choose``
-        picks among the labelled shapes (indices, from their labels), so only those are
-        copied."""
+        their labels, their vectors and eq. (9)'s sigma over the whole gallery.
+        ``choose`` picks among the labelled shapes (indices, from their labels), so only
+        those are copied."""
         with self.lock:
             ids = self.ids()
             ids = ids[np.array([int(i) in labels for i in ids], dtype=bool)]
@@ -174,7 +174,7 @@ class GalleryIndex:
                 ids, names = ids[picked], names[picked]
             positions = self.store.positions(ids)
             vectors = {m: self.store.vectors[m][positions].copy() for m in self.modalities}
-            sigma = self.sigma() if self.preset.dissimilarity == "D2" else None
+            sigma = {m: v.copy() for m, v in self.sigma().items()}
         return names, vectors, sigma
 
     def fingerprint(self) -> str:
@@ -249,19 +249,22 @@ class GalleryIndex:
             return self.store.sigma()
 
     # ----------------------------------------------------------------- fit
-    def refit(self) -> None:
-        """Refit the candidate transforms on the current gallery and rebuild faiss."""
+    def refit(self, modalities: Iterable[str] | None = None) -> None:
+        """Refit the candidate transforms on the current gallery and rebuild faiss (of
+        ``modalities`` only, e.g. those whose comparison changed; default all)."""
         with self.lock:
             n = self.store.n
             rng = np.random.default_rng(0)
             sample = np.sort(rng.choice(n, FIT_SAMPLE, replace=False)) if n > FIT_SAMPLE else None
-            self.store.recentre()
-            fits: dict[str, CandidateTransform] = {}
-            for m in self.modalities:
+            whole = modalities is None or self.fits is None
+            if whole:
+                self.store.recentre()
+            fits: dict[str, CandidateTransform] = dict(self.fits or {})
+            for m in self.modalities if whole else tuple(modalities or ()):
                 x = self.store.vectors[m][:n]
                 fit = CandidateTransform.fit(
                     x if sample is None else x[sample],
-                    log=self.preset.dissimilarity != "D2",
+                    comparison=self.preset.comparison(m),
                     max_dims=self.max_dims,
                     gallery_size=n,
                 )
@@ -270,10 +273,23 @@ class GalleryIndex:
                 self.reduced[m] = reduced
                 fits[m] = fit
             self.fits = fits
-            self.n_at_fit = n
-            self.changes_since_fit = 0
+            if whole:
+                self.n_at_fit = n
+                self.changes_since_fit = 0
             self.refits += 1
             self.dirty = True
+
+    def compare_with(self, preset: Preset) -> None:
+        """Rank with ``preset`` (the same descriptors; other fusion weights or
+        comparisons) from now on, refitting the candidates of every modality whose
+        comparison changed."""
+        with self.lock:
+            changed = [
+                m for m in self.modalities if preset.comparison(m) != self.preset.comparison(m)
+            ]
+            self.preset = preset
+            if changed and self.fits is not None:
+                self.refit(changed)
 
     # ---------------------------------------------------------------- search
     def exact_scores(
@@ -286,7 +302,7 @@ class GalleryIndex:
         """Fused and per-modality dissimilarities of ``query`` to gallery rows ``positions``."""
         preset = self.preset
         # The current gallery's sigma: the rows scored here may be a few candidates.
-        sigma = self.sigma() if preset.dissimilarity == "D2" else None
+        sigma = self.sigma() if preset.uses_sigma(modalities) else None
         per: dict[str, np.ndarray] = {}
         for m in modalities:
             g = self.store.vectors[m][positions]
@@ -336,9 +352,7 @@ class GalleryIndex:
             if self.fits is None and not exhaustive:
                 self.refit()
             want = min(n, k + len(excluded & self.store.pos.keys()))
-            # The certified D2 search bounds eq. (9) by its projections; the size is
-            # compared by eq. (8): a metric collection of a D2 preset is scored whole.
-            if exhaustive or (SIZE in mods and self.preset.dissimilarity == "D2"):
+            if exhaustive:
                 positions = np.arange(n)
                 fused, per = self.exact_scores(query, positions, mods, rule)
                 stats.candidates, stats.certified = n, True
@@ -453,7 +467,9 @@ class GalleryIndex:
         """
         assert self.fits is not None
         n = self.store.n
-        d2 = self.preset.dissimilarity == "D2"
+        # The certified search bounds eq. (9) by its projections: when every modality is
+        # compared by it. Otherwise every candidate is scored exactly.
+        d2 = all(self.preset.comparison(m) == "D2" for m in mods)
         weights = {m: self.preset.weight(m) for m in mods}
         q = {m: np.asarray(query[m], dtype=np.float64).ravel() for m in mods}
         transformed = {m: self.fits[m].transform(q[m][None, :]) for m in mods}

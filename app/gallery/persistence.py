@@ -61,6 +61,7 @@ def save_index(index: GalleryIndex, directory: Path) -> None:
             "preset": index.preset.name,
             "preset_version": index.preset.version,
             "dims": index.dims,
+            "comparisons": {m: fits[m].comparison for m in index.modalities},
             "parts_shape": store.parts_shape,
             "size": n,
             "n_at_fit": index.n_at_fit,
@@ -117,6 +118,8 @@ def _read(directory: Path, preset: Preset, **options: Any) -> GalleryIndex:
     store.n = n
     store.parts[:n] = arrays["parts"]
     fits = {}
+    # Files written before the comparisons were recorded: the preset's D1 or D2 for all.
+    saved = manifest.get("comparisons") or {m: preset.dissimilarity for m in index.modalities}
     for m in index.modalities:
         store.vectors[m][:n] = arrays[f"{m}.vectors"]
         store.shift[m] = arrays[f"{m}.shift"]
@@ -129,7 +132,7 @@ def _read(directory: Path, preset: Preset, **options: Any) -> GalleryIndex:
         if faiss_index.ntotal != n:
             raise ValueError(f"faiss index of {m} has {faiss_index.ntotal} rows, not {n}")
         fits[m] = CandidateTransform(
-            log=preset.dissimilarity != "D2",
+            comparison=saved[m],
             mu=arrays[f"{m}.mu"],
             scale=arrays[f"{m}.scale"],
             floor=arrays[f"{m}.floor"],
@@ -140,4 +143,7 @@ def _read(directory: Path, preset: Preset, **options: Any) -> GalleryIndex:
     index.n_at_fit = int(manifest["n_at_fit"])
     index.changes_since_fit = int(manifest["changes_since_fit"])
     index.dirty = False
+    changed = [m for m in index.modalities if saved[m] != preset.comparison(m)]
+    if changed:  # saved under another fusion's comparisons
+        index.refit(changed)
     return index

@@ -14,7 +14,6 @@ import logging
 import threading
 import time
 from collections.abc import Iterable, Iterator
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -97,10 +96,10 @@ class Gallery:
         fusion_max_shapes: int = 300,
     ) -> None:
         self.collection_id, self.name = collection
-        #: The collection's preset; ``preset`` is it with the fusion weights in use.
+        #: The collection's preset; ``preset`` is it with the fusion in use.
         self.base_preset = preset
         self._fusion = fusion or preset_fusion(preset, "the preset's weights")
-        self.preset = replace(preset, fusion_weights=self._fusion.weights)
+        self.preset = self._fusion.applied(preset)
         self.learn_fusion = learn_fusion
         self.fusion_max_shapes = fusion_max_shapes
         self._fusion_thread: threading.Thread | None = None
@@ -310,18 +309,18 @@ class Gallery:
             )
 
     def adopt_fusion(self, fusion: GalleryFusion) -> None:
-        """Rank and calibrate with ``fusion``'s weights from now on."""
+        """Rank and calibrate with ``fusion``'s weights and comparisons from now on."""
         with self._lock:
             self._fusion = fusion
-            if fusion.weights == {m: self.preset.weight(m) for m in fusion.weights}:
+            preset = fusion.applied(self.base_preset)
+            if preset == self.preset:
                 return
-            self.preset = replace(self.base_preset, fusion_weights=fusion.weights)
+            self.preset = preset
             if self._index is not None:
-                with self._index.lock:
-                    self._index.preset = self.preset
+                self._index.compare_with(preset)
             with self._calibration_lock:
                 self._calibration = None  # the calibration follows the fusion in use
-        log.info("fusion weights %s (%s)", fusion.weights, fusion.source)
+        log.info("fusion %s %s (%s)", fusion.weights, fusion.comparisons, fusion.source)
 
     def check_ready(self) -> None:
         """Raise ``index_loading`` now rather than after a query's descriptor is computed."""

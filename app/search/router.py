@@ -7,6 +7,8 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Path, Request, Response
 
+from worker.engine.presets import PRESETS
+
 from ..collections.service import SCOPED_PREFIX
 from ..deps import (
     READ_ACCESS,
@@ -100,15 +102,19 @@ SIMILAR_PARAMETERS = {
 }
 
 QUERY_ERRORS: dict[int | str, dict[str, Any]] = FILE_RESPONSES | {
-    409: {"description": "far given but the gallery is not calibrated (`not_calibrated`)"},
+    409: {
+        "description": "far given but the gallery is not calibrated (`not_calibrated`), or "
+        "a preset other than the collection's (`preset_not_enrolled`)"
+    },
     422: {"description": "Unreadable mesh, bad k/preset/fusion/modalities/far"},
     503: {"description": "Index loading, or no worker answered in time"},
 }
 SIMILAR_ERRORS: dict[int | str, dict[str, Any]] = {
     404: {"description": 'Unknown id: `{"error": "not_found", "detail": ...}`'},
     409: {
-        "description": "The mesh is not ready yet (`mesh_not_ready`), or far given but the "
-        "gallery is not calibrated (`not_calibrated`)"
+        "description": "The mesh is not ready yet (`mesh_not_ready`), far given but the "
+        "gallery is not calibrated (`not_calibrated`), or a preset other than the "
+        "collection's (`preset_not_enrolled`)"
     },
     422: {"description": "Bad k/preset/fusion/modalities/far"},
     503: {"description": "Index loading"},
@@ -117,8 +123,10 @@ SIMILAR_ERRORS: dict[int | str, dict[str, Any]] = {
 
 def document_limits(openapi: dict[str, Any], *, max_k: int, preset: str) -> None:
     """Write the deployment's own limits into the options' schemas (in place): ``k`` at
-    most ``SHAPES_MAX_K``, ``preset`` only the service's (the default collection's, and
-    every collection's created without one), so that documented and accepted values agree."""
+    most ``SHAPES_MAX_K``; ``preset`` the service's on the default collection's paths (its
+    preset, and every collection's created without one), any preset on a collection's
+    (which may have been created with another; naming another than its own is 409
+    ``preset_not_enrolled``), so that documented and accepted values agree."""
     searches = (("/query", "form"), ("/meshes/{mesh_id}/similar", "query"))
     for prefix, (path, where) in itertools.product(("", SCOPED_PREFIX), searches):
         operation = openapi["paths"][prefix + path]["post"]
@@ -129,7 +137,7 @@ def document_limits(openapi: dict[str, Any], *, max_k: int, preset: str) -> None
         else:
             options = {p["name"]: p["schema"] for p in operation["parameters"]}
         options["k"]["maximum"] = max_k
-        options["preset"]["enum"] = [preset]
+        options["preset"]["enum"] = sorted(PRESETS) if prefix else [preset]
 
 
 def query_out(result: service.SearchResult) -> QueryOut:
@@ -138,6 +146,7 @@ def query_out(result: service.SearchResult) -> QueryOut:
         preset=options.preset.name,
         preset_version=options.preset.version,
         dissimilarity=options.preset.dissimilarity,
+        comparisons={m: options.preset.comparison(m) for m in options.modalities},
         fusion=result.fusion,
         modalities=list(options.modalities),
         k=options.k,
@@ -179,8 +188,8 @@ def query_out(result: service.SearchResult) -> QueryOut:
     summary="Rank the gallery by similarity to an uploaded mesh",
     description=(
         "Computes the query's descriptor in the worker pool (a few seconds), then ranks the "
-        "gallery by the preset's exact fused dissimilarity (D2 + product rule for the "
-        "default preset; lower is more similar).\n\n"
+        "gallery by the collection's exact fused dissimilarity (the preset's, or the fusion "
+        "the collection learned from its labels; lower is more similar).\n\n"
         "`curl -F file=@wolf2.off.gz -F k=3 http://127.0.0.1:8000/query`"
     ),
     responses=QUERY_ERRORS,

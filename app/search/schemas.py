@@ -13,7 +13,10 @@ class MatchOut(BaseModel):
     label: str | None
     rank: int = Field(description="1 = most similar")
     score: float = Field(description="fused dissimilarity (lower is more similar)")
-    scores: dict[str, float] = Field(description="per-modality dissimilarity (D1 or D2)")
+    scores: dict[str, float] = Field(
+        description="per-modality dissimilarity, each by its comparison (the answer's "
+        "'comparisons')"
+    )
     confidence: float | None = Field(
         None,
         description="probability that the match has the query's label, from the gallery's "
@@ -45,6 +48,7 @@ class QueryOut(BaseModel):
                     "preset": "smeets2010-shrec",
                     "preset_version": 1,
                     "dissimilarity": "D2",
+                    "comparisons": {"gdm": "D2", "ddt": "D2"},
                     "fusion": "product",
                     "modalities": ["gdm", "ddt"],
                     "k": 2,
@@ -75,7 +79,12 @@ class QueryOut(BaseModel):
 
     preset: str
     preset_version: int
-    dissimilarity: str
+    dissimilarity: str = Field(description="the preset's comparison, D1 (eq. 8) or D2 (eq. 9)")
+    comparisons: dict[str, str] = Field(
+        description="each searched modality's comparison in this collection: the preset's, "
+        "or one its learned fusion chose (D1, D2, 'reweighted euclidean' for the spectrum), "
+        "the size's in metric units"
+    )
     fusion: str
     modalities: list[str]
     k: int

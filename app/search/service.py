@@ -132,7 +132,7 @@ def resolve_preset(gallery: Gallery, name: str | None) -> Preset:
         raise InvalidInputError(
             f"There is no preset called {name!r}; known presets: {known}.", code="unknown_preset"
         )
-    raise InvalidInputError(
+    raise ConflictError(
         f"Collection {gallery.name!r} is described with preset {gallery.preset.name!r}, so "
         f"it can only be searched with that preset, not {name!r}.",
         code="preset_not_enrolled",
@@ -198,8 +198,10 @@ def parse_options(
 
     Raises
     ------
+    ConflictError
+        ``preset_not_enrolled``: a preset other than the collection's.
     InvalidInputError
-        ``unknown_preset``, ``preset_not_enrolled``, ``unknown_modality``,
+        ``unknown_preset``, ``unknown_modality``,
         ``invalid_k`` or ``invalid_fusion``, each with a sentence.
     """
     rule = _blank_to_none(fusion)

@@ -539,16 +539,8 @@ async function loadCalibration() {
         ? "Enough pairs to trust these rates."
         : `Few pairs, so these are rough estimates; trusted rates need ${c.trust_rule.split(";")[0]}.`);
     drawRoc(c.roc, c.eer);
-    const body = $("calibration-table").tBodies[0];
-    body.replaceChildren(...c.operating_points.map((p) => {
-      const row = document.createElement("tr");
-      for (const text of [percent(p.far), p.threshold.toPrecision(3), percent(p.estimated_far), percent(p.estimated_frr)]) {
-        const cell = document.createElement("td");
-        cell.textContent = text;
-        row.append(cell);
-      }
-      return row;
-    }));
+    fillRows($("calibration-table"), c.operating_points.map((p) =>
+      [percent(p.far), p.threshold.toPrecision(3), percent(p.estimated_far), percent(p.estimated_frr)]));
     $("calibration-table").hidden = false;
     showFusion(c.fusion);
   } catch (err) {
@@ -556,16 +548,45 @@ async function loadCalibration() {
     $("calibration-roc").toggleAttribute("hidden", true); // an SVG element has no .hidden
     $("calibration-table").hidden = true;
     $("calibration-fusion").hidden = true;
+    $("calibration-folds").hidden = true;
   }
 }
 
-// The weights the fused score uses: learned on the labelled meshes, the preset's, or pinned.
+// One row of cells per list of texts, in the table's body.
+function fillRows(table, rows) {
+  table.tBodies[0].replaceChildren(...rows.map((texts) => {
+    const row = document.createElement("tr");
+    for (const text of texts) {
+      const cell = document.createElement("td");
+      cell.textContent = text;
+      row.append(cell);
+    }
+    return row;
+  }));
+}
+
+// The weights the fused score uses: learned on the labelled meshes, the preset's, or
+// pinned; a modality's comparison is named where it is not the preset's. Then the
+// cross-validation that chose them, fold by fold, beside the preset's weights.
 function showFusion(fusion) {
-  const weights = Object.entries(fusion.weights).map(([m, w]) => `${m.toUpperCase()} ${w}`).join(", ");
+  const weighed = (weights, comparisons) => Object.entries(weights).map(([m, w]) =>
+    `${m.toUpperCase()} ${w}`
+    + (comparisons[m] && comparisons[m] !== fusion.preset_comparisons[m] ? ` (${comparisons[m]})` : ""))
+    .join(", ");
   const source = { learned: "learned on this gallery", preset: "the preset's", pinned: "pinned by the operator" };
-  $("calibration-fusion").textContent = `Fusion weights: ${weights} (${source[fusion.source] || fusion.source}). `
+  $("calibration-fusion").textContent = `Fusion weights: ${weighed(fusion.weights, fusion.comparisons)} `
+    + `(${source[fusion.source] || fusion.source}). `
     + `${fusion.reason.charAt(0).toUpperCase()}${fusion.reason.slice(1)}.`;
   $("calibration-fusion").hidden = false;
+  const folds = $("calibration-folds");
+  folds.hidden = fusion.folds.length === 0;
+  if (folds.hidden) return;
+  const scores = (s) => [percent(s.eer), percent(s.map)];
+  fillRows(folds, [
+    ...fusion.folds.map((f, i) => [String(i + 1), String(f.held_out_shapes),
+      weighed(f.weights, f.comparisons), ...scores(f.held_out), ...scores(f.preset)]),
+    ["mean", String(fusion.labelled_shapes), "", ...scores(fusion.held_out), ...scores(fusion.preset_held_out)],
+  ]);
 }
 
 function drawRoc(roc, eer) {

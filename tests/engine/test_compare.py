@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from lapy.shapedna import compute_distance, reweight_ev
 
 from worker.engine.compare import (
     dissimilarity,
@@ -18,10 +19,19 @@ from worker.engine.compare import (
     preset_dissimilarity,
     product_fusion,
     query_weights,
+    reweighted_euclidean,
     size_dissimilarity,
     sum_fusion,
 )
-from worker.engine.presets import DEFAULT_PRESET, PRESETS, SIZE, get_preset, with_units
+from worker.engine.presets import (
+    DEFAULT_PRESET,
+    PRESETS,
+    REWEIGHTED,
+    SIZE,
+    get_preset,
+    with_fusion,
+    with_units,
+)
 
 
 def test_d1_hand_computed():
@@ -63,7 +73,7 @@ def test_fusion_rules():
         fuse(d, "max")
 
 
-@pytest.mark.parametrize("kind", ["D1", "D2"])
+@pytest.mark.parametrize("kind", ["D1", "D2", REWEIGHTED])
 def test_paired_dissimilarity_is_the_diagonal_of_the_matrix(kind):
     rng = np.random.default_rng(3)
     a, b = rng.random((7, 12)), rng.random((7, 12))
@@ -71,6 +81,51 @@ def test_paired_dissimilarity_is_the_diagonal_of_the_matrix(kind):
     np.testing.assert_allclose(
         paired_dissimilarity(a, b, kind, sigma), np.diag(dissimilarity(a, b, kind, sigma))
     )
+
+
+def test_the_reweighted_euclidean_is_shapednas_comparison():
+    """Against lapy itself: ``reweight_ev`` of the spectra with their zero eigenvalue
+    first, then ``compute_distance(..., "euc")``, pair by pair (the plain reference)."""
+    rng = np.random.default_rng(5)
+    spectra = np.sort(rng.uniform(0.5, 80.0, (6, 50)), axis=1)  # without the zero one
+    fast = dissimilarity(spectra[:2], spectra, REWEIGHTED)
+    for i in range(2):
+        for j in range(6):
+            a, b = (reweight_ev(np.concatenate([[0.0], spectra[k]])) for k in (i, j))
+            assert fast[i, j] == pytest.approx(compute_distance(a, b, "euc"), rel=1e-12)
+
+
+def test_a_modality_is_compared_by_its_own_comparison_under_a_preset():
+    """``with_fusion`` gives the spectrum ShapeDNA's comparison: the spectrum's score is
+    then that, the other modalities' stay the preset's, and the weights are the new ones."""
+    rng = np.random.default_rng(6)
+    preset = get_preset(DEFAULT_PRESET)
+    vectors = _flat_vectors(rng, 8)
+    learned = with_fusion(preset, {"ddt": 0.25}, {"spectrum": REWEIGHTED, "ddt": "D1"})
+    assert learned.comparison("spectrum") == REWEIGHTED and learned.comparison("ddt") == "D1"
+    assert learned.comparisons == {"spectrum": REWEIGHTED} and learned.weight("ddt") == 0.25
+    q, g = vectors["spectrum"][:3], vectors["spectrum"]
+    np.testing.assert_array_equal(
+        preset_dissimilarity("spectrum", q, g, learned), reweighted_euclidean(q, g)
+    )
+    np.testing.assert_array_equal(
+        preset_dissimilarity("ddt", vectors["ddt"][:3], vectors["ddt"], learned),
+        mean_normalized_manhattan(vectors["ddt"][:3], vectors["ddt"]),
+    )
+    fused_ones = learned.fused_modalities
+    per = {m: dissimilarity(vectors[m][:3], vectors[m], learned.comparison(m)) for m in fused_ones}
+    expected = fuse(
+        per,
+        "product",
+        {m: learned.weight(m) for m in learned.fused_modalities},
+    )
+    fused = fused_dissimilarity({m: v[:3] for m, v in vectors.items()}, vectors, learned)
+    np.testing.assert_allclose(fused, expected, rtol=1e-12)
+    assert learned.descriptor_fields() == preset.descriptor_fields()
+    with pytest.raises(ValueError, match="gdm cannot be compared by 'reweighted euclidean'"):
+        with_fusion(preset, {}, {"gdm": REWEIGHTED})
+    with pytest.raises(ValueError, match="unknown comparison 'cosine'"):
+        with_fusion(preset, {}, {"gdm": "cosine"})
 
 
 # ------------------------------------------------------------------- the size, units

@@ -7,12 +7,14 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from app.gallery.fusion import MIN_CLASSES, learn_gallery_fusion, pinned_fusion
 from app.gallery.index import GalleryIndex
 from app.gallery.service import Gallery
 from app.metrics import Metrics
-from worker.engine.presets import DEFAULT_PRESET, MODALITIES, get_preset
+from worker.engine.compare import reweighted_euclidean
+from worker.engine.presets import DEFAULT_PRESET, MODALITIES, REWEIGHTED, get_preset
 
 #: The default preset with every weight 1: a modality of noise costs it.
 EQUAL = replace(get_preset(DEFAULT_PRESET), fusion_weights={})
@@ -97,3 +99,31 @@ def test_pinned_weights_weigh_known_modalities_and_keep_the_presets_for_the_rest
         except ValueError:
             continue
         raise AssertionError(f"{bad} accepted")
+
+
+def test_a_learned_comparison_is_adopted_and_the_index_ranks_with_it():
+    """A spectrum that only ShapeDNA's comparison reads well (its first eigenvalue knows
+    the class; eq. 8 averages it with 49 elements of noise): the gallery learns that
+    comparison, and after adopting it the index and its scores use it."""
+    rng = np.random.default_rng(5)
+    n = 60
+    classes = np.repeat(np.arange(6), 10)
+    gallery = {m: np.exp(rng.normal(0.0, 1.0, (n, d))) for m, d in EQUAL.modality_sizes().items()}
+    spectrum = np.exp(rng.normal(0.0, 0.05, (n, gallery["spectrum"].shape[1])))
+    spectrum[:, 0] = 50.0 * (1 + classes) + rng.normal(0.0, 1.0, n)
+    gallery["spectrum"] = spectrum
+    labels = {i: f"class-{c}" for i, c in enumerate(classes)}
+    g = _loaded(EQUAL, gallery)
+    fit = learn_gallery_fusion(g._index, labels, EQUAL, max_shapes=300, version=1)
+    assert fit.source == "learned" and fit.comparisons["spectrum"] == REWEIGHTED
+    assert fit.adoption is not None and fit.adoption.adopted
+    assert all(fold.comparisons["spectrum"] == REWEIGHTED for fold in fit.tuning.folds)
+    g.adopt_fusion(fit)
+    assert g.preset.comparison("spectrum") == REWEIGHTED and g._index.preset is g.preset
+    assert g._index.fits["spectrum"].comparison == REWEIGHTED
+    query = {m: gallery[m][0] for m in MODALITIES}
+    best = g._index.search(query, 2, exclude=[0])[0]
+    assert best.scores["spectrum"] == pytest.approx(
+        float(reweighted_euclidean(spectrum[:1], spectrum[best.id : best.id + 1])[0, 0])
+    )
+    assert labels[best.id] == labels[0]

@@ -6,13 +6,17 @@ import numpy as np
 import pytest
 
 from worker.engine.compare import fuse
+from worker.engine.presets import DEFAULT_PRESET, REWEIGHTED, get_preset
 from worker.recognition.fusion import (
     GRID,
     PRESET_COMPARISON,
+    FoldResult,
     FusionScores,
+    FusionTuning,
     choose_weights,
     feasible_folds,
     fusion_scores,
+    learn_fusion,
     stratified_folds,
     tune_fusion,
 )
@@ -147,7 +151,46 @@ def test_a_better_comparison_of_a_modality_is_chosen_with_its_weight():
     assert tuning.comparisons == {"a": "other", "b": PRESET_COMPARISON}
     assert all(f.comparisons["a"] == "other" for f in tuning.folds)
     assert tuning.held_out.loss < tuning.preset_held_out.loss
-    assert tuning.beats_preset(0.05) and not tuning.beats_preset(1.0)
+    assert tuning.adoption().adopted
+
+
+def test_the_preset_is_kept_when_the_learned_choice_gains_nothing_beyond_noise():
+    """Two modalities that carry the same signal: whatever the folds choose scores
+    about as the preset's weights, and the test keeps the preset's."""
+    rng = np.random.default_rng(7)
+    mats = {"a": clustered(LABELS, 4.0, rng), "b": clustered(LABELS, 4.0, rng)}
+    adoption = tune_fusion(mats, LABELS, "product", {"a": 1.0, "b": 1.0}).adoption()
+    assert not adoption.adopted and adoption.statistic <= adoption.critical
+
+
+def _folds(gains: list[float], held_out: int = 17, n: int = 85) -> FusionTuning:
+    """A tuning whose folds gain ``gains`` of loss over the preset (EER only)."""
+    base = FusionScores(eer=0.1, nn=1.0, map=1.0)
+    folds = tuple(
+        FoldResult(held_out, {}, {}, FusionScores(0.1 - 2 * g, 1.0, 1.0), base) for g in gains
+    )
+    empty = np.zeros((n, n))
+    return FusionTuning(
+        "product", GRID, {}, {}, 0.0, folds, base, base, {}, empty, np.zeros(n, np.int64)
+    )
+
+
+def test_the_adoption_test_is_the_corrected_resampled_t_test():
+    """Nadeau and Bengio's statistic by hand: mean gain over ``s sqrt(1/k + n2/n1)``,
+    against Student's one-sided 95% quantile with k - 1 degrees of freedom (2.132 at 5)."""
+    gains = [0.0051, 0.0018, 0.0034, 0.0039, 0.0020]
+    adoption = _folds(gains).adoption()
+    s = np.std(gains, ddof=1)
+    expected = np.mean(gains) / (s * np.sqrt(1 / 5 + 17 / 68))
+    assert adoption.gain == pytest.approx(np.mean(gains))
+    assert adoption.statistic == pytest.approx(expected)
+    assert adoption.critical == pytest.approx(2.131847, abs=1e-6)
+    assert adoption.adopted  # consistent gains: t = 5.3
+    noisy = _folds([0.02, -0.015, 0.01, -0.01, 0.004]).adoption()  # mean > 0, noise
+    assert noisy.gain > 0 and not noisy.adopted
+    assert _folds([0.003] * 5).adoption().adopted  # the same gain on every fold
+    assert not _folds([0.0] * 5).adoption().adopted
+    assert not _folds([-0.01] * 5).adoption().adopted
 
 
 def test_each_modality_names_the_comparison_it_was_made_with():
@@ -204,3 +247,24 @@ def test_the_most_folds_that_cross_validate_are_used():
     assert len(tune_fusion(mats, six, "sum", {}, folds=4).folds) == 4
     with pytest.raises(ValueError, match="keep fewer than two"):
         feasible_folds(np.repeat(np.arange(3), [3, 3, 2]))
+
+
+def test_learn_fusion_offers_every_comparison_a_modality_may_take():
+    """The spectrum with D1, D2 and ShapeDNA's comparison, the GDM and DDT with D1 and D2,
+    the preset's first; a spectrum whose reweighted distance alone knows the classes is
+    given it."""
+    rng = np.random.default_rng(8)
+    preset = get_preset(DEFAULT_PRESET)
+    sizes = preset.modality_sizes()
+    labels = np.repeat(np.arange(4), 6)
+    vectors = {m: np.exp(rng.normal(0.0, 1.0, (24, d))) for m, d in sizes.items()}
+    # The first eigenvalue tells the classes apart; ShapeDNA's weights (1/2 there) keep it
+    # dominant while eq. (8) averages it with 49 elements of noise.
+    spectrum = np.exp(rng.normal(0.0, 0.05, (24, sizes["spectrum"])))
+    spectrum[:, 0] = 50.0 * (1 + labels) + rng.normal(0.0, 1.0, 24)
+    vectors["spectrum"] = spectrum
+    tuning = learn_fusion(vectors, labels, preset)
+    assert tuning.comparisons["spectrum"] == REWEIGHTED
+    assert set(tuning.comparisons) == set(preset.fused_modalities)
+    assert {tuning.comparisons[m] for m in ("gdm", "ddt")} <= {"D1", "D2"}
+    assert tuning.held_out.loss < tuning.preset_held_out.loss

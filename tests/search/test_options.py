@@ -8,7 +8,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from app.errors import InvalidInputError
+from app.errors import ConflictError, InvalidInputError
 from app.search.service import MODALITIES_PATTERN, parse_options
 from worker.engine.presets import get_preset
 
@@ -52,10 +52,18 @@ def test_blank_options_are_the_defaults():
         ({"k": "2.5"}, "invalid_k"),
         ({"fusion": "max"}, "invalid_fusion"),
         ({"preset": "nope"}, "unknown_preset"),
-        ({"preset": "lb-spectrum"}, "preset_not_enrolled"),
     ],
 )
 def test_bad_options_are_refused_with_their_code(fields, code):
     with pytest.raises(InvalidInputError) as error:
         options(**fields)
     assert error.value.code == code and error.value.detail.endswith(".")
+
+
+def test_another_known_preset_conflicts_with_the_collections():
+    """A collection's routes document every preset (a collection may have been created
+    with another); naming one that is not the collection's is a conflict, 409."""
+    with pytest.raises(ConflictError) as error:
+        options(preset="lb-spectrum")
+    assert error.value.code == "preset_not_enrolled" and error.value.status == 409
+    assert "'smeets2010-shrec'" in error.value.detail

@@ -108,7 +108,12 @@ def test_the_fusion_weights_are_learned_from_the_labels_and_ranked_with(
     assert fusion["preset_weights"] == {"gdm": 0.0, "ddt": 0.5, "spectrum": 1.0}
     learned = fusion["held_out"]["eer"] + 1 - fusion["held_out"]["map"]
     preset = fusion["preset_held_out"]["eer"] + 1 - fusion["preset_held_out"]["map"]
-    assert (fusion["source"] == "learned") == (learned / 2 < preset / 2 - fusion["adoption_margin"])
+    test = fusion["adoption"]
+    assert test["gain"] == pytest.approx((preset - learned) / 2, abs=1e-12)
+    assert (fusion["source"] == "learned") == test["adopted"]
+    assert fusion["preset_comparisons"] == {"gdm": "D1", "ddt": "D1", "spectrum": "D1"}
+    if fusion["source"] == "preset":
+        assert fusion["comparisons"] == fusion["preset_comparisons"]
     weights = fusion["weights"]
     match = verifier.client.post(f"/meshes/{calibrated['biped-0']}/similar", params={"k": 1})
     best = match.json()["matches"][0]

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -213,6 +214,23 @@ def test_calibration_says_what_it_needs_then_draws_the_roc(page, site):
     assert fusion.startswith("Fusion weights: GDM 0, DDT 0.5, SPECTRUM 1 (the preset's).")
     assert "learning needs at least 3 labels" in fusion
     assert page.locator("#calibration-table tbody tr").count() >= 3
+    assert page.locator("#calibration-folds").is_hidden()  # nothing was cross-validated
+    # A third label of three: the gallery learns its fusion, and the page shows the folds.
+    hands = [site.upload(f"hand-{i}", "hand").json()["id"] for i in range(3)]
+    for mesh_id in hands:
+        assert site.wait_mesh(mesh_id)["status"] == "ready"
+    folds = page.locator("#calibration-folds")
+    deadline = time.monotonic() + 60
+    while not folds.is_visible():
+        assert time.monotonic() < deadline, page.locator("#calibration-fusion").inner_text()
+        page.click("#tab-search")
+        page.click("#tab-calibration")
+        page.wait_for_timeout(500)
+    fusion = page.locator("#calibration-fusion").inner_text()
+    assert "held-out EER" in fusion and ("learned" in fusion or "the preset's" in fusion)
+    rows = folds.locator("tbody tr")
+    assert rows.count() >= 3 and rows.last.locator("td").first.inner_text() == "mean"
+    assert rows.last.locator("td").nth(1).inner_text() == "11"  # 4 birds, 4 quadrupeds, 3 hands
     shoot(page, "calibration")
 
 

@@ -14,7 +14,7 @@ from typing import cast
 
 import numpy as np
 
-from .presets import SIZE, Dissimilarity, Preset
+from .presets import REWEIGHTED, SIZE, Comparison, Preset
 
 _TINY = np.finfo(float).tiny
 
@@ -79,23 +79,52 @@ def normalized_euclidean(queries: np.ndarray, gallery: np.ndarray, sigma: np.nda
     return distances
 
 
+def spectrum_weights(length: int) -> np.ndarray:
+    """ShapeDNA's reweighting of a spectrum without its zero eigenvalue: entry ``j``
+    (0-based) is eigenvalue ``j + 2`` in lapy's numbering (the zero one is 1), and
+    ``reweight_ev`` divides eigenvalue ``i`` by ``i``, so the divisors are ``2 .. length + 1``."""
+    return np.arange(2, length + 2, dtype=np.float64)
+
+
+def reweighted_euclidean(queries: np.ndarray, gallery: np.ndarray) -> np.ndarray:
+    """ShapeDNA's comparison of spectra (Reuter et al. 2006; lapy's ``reweight_ev``
+    then ``compute_distance(..., "euc")``): the Euclidean distance of the eigenvalues
+    each divided by its index (:func:`spectrum_weights`), so that the high eigenvalues,
+    which grow linearly (Weyl's law), do not outweigh the low ones.
+
+    Parameters
+    ----------
+    queries : (p, M) float, spectra without the zero eigenvalue.
+    gallery : (q, M) float
+
+    Returns
+    -------
+    (p, q) float
+    """
+    q = np.atleast_2d(np.asarray(queries, dtype=np.float64))
+    g = np.atleast_2d(np.asarray(gallery, dtype=np.float64))
+    w = spectrum_weights(q.shape[1])
+    return normalized_euclidean(q, g, w)
+
+
 def dissimilarity(
     queries: np.ndarray,
     gallery: np.ndarray,
-    kind: Dissimilarity | str,
+    kind: Comparison | str,
     sigma: np.ndarray | None = None,
 ) -> np.ndarray:
-    """The preset's dissimilarity between every query and every gallery descriptor.
+    """One modality's dissimilarity between every query and every gallery descriptor.
 
-    The one place that chooses between eq. (8) and eq. (9): the index, the
-    evaluation and the benchmarks all rank with it.
+    The one place that chooses between eq. (8), eq. (9) and ShapeDNA's comparison: the
+    index, the evaluation and the benchmarks all rank with it.
 
     Parameters
     ----------
     queries : (p, M) float
     gallery : (q, M) float
-    kind : ``"D1"`` (eq. 8, :func:`mean_normalized_manhattan`) or ``"D2"``
-        (eq. 9, :func:`normalized_euclidean`).
+    kind : ``"D1"`` (eq. 8, :func:`mean_normalized_manhattan`), ``"D2"``
+        (eq. 9, :func:`normalized_euclidean`) or ``"reweighted euclidean"``
+        (:func:`reweighted_euclidean`, spectra).
     sigma : (M,) float, D2 only: the sigma_i of eq. (9). Default
         ``gallery_sigma(gallery)``; pass it when the gallery rows given are not the
         whole gallery (a subset, or one kept elsewhere with running sums).
@@ -110,13 +139,15 @@ def dissimilarity(
         return normalized_euclidean(
             queries, gallery, gallery_sigma(gallery) if sigma is None else sigma
         )
-    raise ValueError(f"unknown dissimilarity {kind!r}; use 'D1' or 'D2'")
+    if kind == REWEIGHTED:
+        return reweighted_euclidean(queries, gallery)
+    raise ValueError(f"unknown dissimilarity {kind!r}; use 'D1', 'D2' or {REWEIGHTED!r}")
 
 
 def paired_dissimilarity(
     first: np.ndarray,
     second: np.ndarray,
-    kind: Dissimilarity | str,
+    kind: Comparison | str,
     sigma: np.ndarray | None = None,
 ) -> np.ndarray:
     """The dissimilarity of each row of ``first`` to the same row of ``second``.
@@ -127,7 +158,7 @@ def paired_dissimilarity(
     Parameters
     ----------
     first, second : (p, M) float
-    kind : ``"D1"`` or ``"D2"``.
+    kind : ``"D1"``, ``"D2"`` or ``"reweighted euclidean"``.
     sigma : (M,) float, D2's sigma_i (required for D2).
 
     Returns
@@ -145,7 +176,10 @@ def paired_dissimilarity(
         if sigma is None:
             raise ValueError("D2 between pairs needs the gallery's sigma")
         return np.asarray(np.sqrt((((a - b) / sigma) ** 2).sum(axis=1)))
-    raise ValueError(f"unknown dissimilarity {kind!r}; use 'D1' or 'D2'")
+    if kind == REWEIGHTED:
+        w = spectrum_weights(a.shape[1])
+        return np.asarray(np.sqrt((((a - b) / w) ** 2).sum(axis=1)))
+    raise ValueError(f"unknown dissimilarity {kind!r}; use 'D1', 'D2' or {REWEIGHTED!r}")
 
 
 def size_dissimilarity(
@@ -194,8 +228,9 @@ def preset_dissimilarity(
     sigma: np.ndarray | None = None,
 ) -> np.ndarray:
     """One modality's dissimilarity under a preset: the size's
-    (:func:`size_dissimilarity` at the preset's ``size_tolerance``), or the preset's
-    eq. (8) or (9) (:func:`dissimilarity`, ``sigma`` for D2).
+    (:func:`size_dissimilarity` at the preset's ``size_tolerance``), or the modality's
+    comparison (:meth:`Preset.comparison`: eq. 8, eq. 9 with ``sigma``, or ShapeDNA's;
+    :func:`dissimilarity`).
 
     Returns
     -------
@@ -203,7 +238,7 @@ def preset_dissimilarity(
     """
     if modality == SIZE:
         return size_dissimilarity(queries, gallery, preset.size_tolerance)
-    return dissimilarity(queries, gallery, preset.dissimilarity, sigma)
+    return dissimilarity(queries, gallery, preset.comparison(modality), sigma)
 
 
 def paired_preset_dissimilarity(
@@ -217,7 +252,7 @@ def paired_preset_dissimilarity(
     ``second`` (:func:`paired_dissimilarity`; D2 needs ``sigma``): (p,) float."""
     if modality == SIZE:
         return paired_size_dissimilarity(first, second, preset.size_tolerance)
-    return paired_dissimilarity(first, second, preset.dissimilarity, sigma)
+    return paired_dissimilarity(first, second, preset.comparison(modality), sigma)
 
 
 def sum_fusion(

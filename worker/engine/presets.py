@@ -7,10 +7,22 @@ descriptors must bump ``version``.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Literal
 
 Dissimilarity = Literal["D1", "D2"]
+#: How one modality's flat vectors are compared: eq. (8), eq. (9), or ShapeDNA's
+#: reweighted Euclidean distance (the spectrum only; Reuter et al. 2006, lapy's
+#: ``reweight_ev``: eigenvalue ``i`` divided by ``i``, then the Euclidean distance).
+Comparison = Literal["D1", "D2", "reweighted euclidean"]
+REWEIGHTED: Comparison = "reweighted euclidean"
+#: Each comparison, and the modalities it may compare.
+COMPARISONS: dict[Comparison, tuple[str, ...]] = {
+    "D1": ("gdm", "ddt", "spectrum"),
+    "D2": ("gdm", "ddt", "spectrum"),
+    REWEIGHTED: ("spectrum",),
+}
 Fusion = Literal["sum", "product"]
 Measure = Literal["vertices", "surface"]
 DdtElements = Literal["core", "diagonal", "slice_values"]
@@ -111,7 +123,10 @@ class Preset:
         scale, no surface preprocessing is needed"): the GDM's singular values in the
         file's length unit, the DDT as eq. (4) gives it (the paper's ``A`` and time unit
         make it scale-free by themselves). The "vertices" measure only.
-    dissimilarity : D1 (eq. 8) or D2 (eq. 9).
+    dissimilarity : D1 (eq. 8) or D2 (eq. 9), every modality's comparison unless
+        ``comparisons`` names another.
+    comparisons : modality -> its own comparison (:data:`COMPARISONS`), e.g. a fusion
+        learned on a collection (:func:`with_fusion`). Empty: ``dissimilarity`` for all.
     fusion : sum or product rule over ``fused_modalities``.
     fused_modalities : modalities combined into the final score of a whole query.
     units : the collection's units (:data:`UNITS`): "any", the score is the fused
@@ -156,6 +171,7 @@ class Preset:
     partial_loop: tuple[float, float] = (0.1, 0.3)
     normalize_scale: bool = True
     dissimilarity: Dissimilarity = "D2"
+    comparisons: dict[str, Comparison] = field(default_factory=dict)
     fusion: Fusion = "product"
     fused_modalities: tuple[str, ...] = ("gdm", "ddt")
     units: Units = "any"
@@ -186,6 +202,9 @@ class Preset:
         unknown = set(self.fusion_weights) - {*MODALITIES, SIZE}
         if unknown:
             raise ValueError(f"unknown modalities {sorted(unknown)} in fusion_weights")
+        for modality, kind in self.comparisons.items():
+            if modality not in COMPARISONS.get(kind, ()):
+                raise ValueError(f"{modality} cannot be compared by {kind!r}")
         if self.units not in UNITS:
             raise ValueError(f"unknown units {self.units!r}; use one of {', '.join(UNITS)}")
         if self.units == "metric" and SIZE not in self.fusion_weights:
@@ -229,11 +248,16 @@ class Preset:
         return self.fused_modalities
 
     def comparison(self, modality: str) -> str:
-        """The name of a modality's comparison: the preset's eq. (8) or (9), or for the
-        size eq. (8) at least ``size_tolerance``."""
+        """The name of a modality's comparison: its own (``comparisons``) or the preset's
+        eq. (8) or (9), or for the size eq. (8) at least ``size_tolerance``."""
         if modality == SIZE:
             return f"D1 >= {self.size_tolerance:g}"
-        return self.dissimilarity
+        return self.comparisons.get(modality, self.dissimilarity)
+
+    def uses_sigma(self, modalities: tuple[str, ...] | None = None) -> bool:
+        """Whether any of ``modalities`` (default: the scored ones) is compared by eq. (9),
+        which needs the gallery's sigma."""
+        return any(self.comparison(m) == "D2" for m in modalities or self.scored_modalities)
 
     def modality_sizes(self) -> dict[str, int]:
         """Length of each modality's flat vector (what eqs. 8 and 9 compare): the shape's
@@ -320,6 +344,7 @@ DEFAULT_PRESET = "smeets2010-surface"
 #: Fields that only say how descriptors are compared, not how they are made.
 COMPARISON_FIELDS = (
     "dissimilarity",
+    "comparisons",
     "fusion",
     "fused_modalities",
     "units",
@@ -345,6 +370,29 @@ def with_units(preset: Preset, units: str) -> Preset:
     if units not in UNITS:
         raise ValueError(f"unknown units {units!r}; use one of {', '.join(UNITS)}")
     return replace(preset, units=units)
+
+
+def with_fusion(
+    preset: Preset, weights: Mapping[str, float], comparisons: Mapping[str, str] | None = None
+) -> Preset:
+    """``preset`` fusing with these weights (and these modalities' comparisons, the others
+    kept): a fusion learned or pinned for one collection. The descriptors are the same.
+
+    Raises
+    ------
+    ValueError
+        A comparison a modality cannot take (:data:`COMPARISONS`), or one of an unknown
+        modality.
+    """
+    chosen = dict(preset.comparisons)
+    for modality, kind in (comparisons or {}).items():
+        if modality == SIZE:
+            continue  # the size has its one comparison
+        if kind not in COMPARISONS:
+            raise ValueError(f"unknown comparison {kind!r}; use one of {', '.join(COMPARISONS)}")
+        chosen[modality] = kind
+    own = {m: k for m, k in chosen.items() if k != preset.dissimilarity}
+    return replace(preset, fusion_weights={**preset.fusion_weights, **weights}, comparisons=own)
 
 
 def get_preset(name: str) -> Preset:

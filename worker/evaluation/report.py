@@ -277,15 +277,16 @@ def _learned_markdown(learned: Mapping[str, Any]) -> list[str]:
             f"{_pct(own['map'], 1)} | {_pct(base['eer'], 2)} | {_pct(base['map'], 1)} |"
         )
     own, base = learned["held_out"]["learned"], learned["held_out"]["preset"]
-    chosen = learned["chosen_on_all"]
+    chosen, test = learned["chosen_on_all"], learned["adoption"]
     lines += [
         f"| mean | | | {_pct(own['eer'], 2)} | {_pct(own['map'], 1)} | "
         f"{_pct(base['eer'], 2)} | {_pct(base['map'], 1)} |",
         "",
-        f"Chosen on every mesh: {choice(chosen['weights'], chosen['comparisons'])}; "
-        + ("it beats" if learned["beats_preset"] else "it does not beat")
-        + f" the preset's weights by the margin a gallery adopts it at "
-        f"({100 * learned['adoption_margin']:g} points of the mean of EER and 1 - mAP).",
+        f"Chosen on every mesh: {choice(chosen['weights'], chosen['comparisons'])}. "
+        f"The folds' gain over the preset's weights, {100 * test['gain']:.2f} points of the "
+        f"mean of EER and 1 - mAP, has a corrected resampled t of {test['statistic']:.2f} "
+        f"against {test['critical']:.2f} ({100 * test['confidence']:g}%, one-sided): a "
+        + ("gallery would adopt it." if test["adopted"] else "gallery would keep the preset's."),
     ]
     return lines
 

@@ -16,12 +16,12 @@ import numpy as np
 
 from worker.engine.presets import MODALITIES, SIZE, Preset
 from worker.recognition import metrics
-from worker.recognition.fusion import FOLDS, tune_fusion
+from worker.recognition.fusion import FOLDS, learn_fusion, tune_fusion
 
 from .compute import ComputedSet, compute_descriptors, descriptor_vectors
 from .datasets import RESAMPLINGS, EvaluationError, LabeledMesh, pose_set, read_labels
 from .figures import compute_by_figure
-from .learned import LEARNED, learn_fusion, learned_row
+from .learned import LEARNED, learned_row
 from .partial import PARTIAL_VARIANTS
 from .partiality import partial_row_titles, partiality_scores, parts_matrix
 from .report import (
@@ -116,7 +116,7 @@ def _add_learned(report: dict[str, Any], computed: ComputedSet, preset: Preset) 
     labels = [m.label for m in computed.meshes]
     vectors = descriptor_vectors(computed, size=preset.units == "metric")
     try:
-        tuning = learn_fusion(vectors, labels, preset)
+        tuning = learn_fusion(vectors, np.asarray(labels), preset)
     except ValueError as exc:
         raise EvaluationError(f"cannot learn the fusion on this collection: {exc}") from exc
     gallery_idx, probe_idx = metrics.first_instance_split(names, labels)

@@ -38,9 +38,10 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.stats import t as student_t
 
-from worker.engine.compare import dissimilarity, fuse, preset_dissimilarity
-from worker.engine.presets import Preset
+from worker.engine.compare import dissimilarity, fuse, gallery_sigma, preset_dissimilarity
+from worker.engine.presets import COMPARISONS, SIZE, Preset
 
 from . import metrics
 
@@ -48,9 +49,10 @@ from . import metrics
 GRID = (0.0, 0.125, 0.25, 0.5, 1.0)
 #: Folds of the cross-validation.
 FOLDS = 5
-#: The held-out folds must beat the preset's weights by this much loss (the mean of EER
-#: and 1 - mAP, a fraction: half a point) for a gallery to adopt the learned fusion.
-ADOPTION_MARGIN = 0.005
+#: A gallery adopts the learned fusion when the held-out folds favour it beyond their
+#: noise: the one-sided corrected resampled t-test (:meth:`FusionTuning.adoption`) of the
+#: folds' gains in loss rejects "no gain" at this confidence.
+ADOPTION_CONFIDENCE = 0.95
 #: The name of the comparison each modality's matrix in ``dissimilarities`` was made with
 #: (the preset's), when the caller offers ``alternatives``.
 PRESET_COMPARISON = "preset"
@@ -210,10 +212,59 @@ class FusionTuning:
         same = (labels[i] == labels[j])[tested]
         return score[same], score[~same]
 
-    def beats_preset(self, margin: float) -> bool:
+    def adoption(self, confidence: float = ADOPTION_CONFIDENCE) -> Adoption:
         """Whether the held-out folds favour the learned choice over the preset's weights
-        by more than ``margin`` of loss (the mean of EER and 1 - mAP)."""
-        return self.held_out.loss < self.preset_held_out.loss - margin
+        beyond the folds' own noise.
+
+        Each fold's gain is the preset's held-out loss minus the learned choice's, on
+        the same objects. Their mean is tested against zero by the corrected resampled
+        t-test of Nadeau and Bengio (2003, "Inference for the generalization error"):
+        the folds' training sets overlap, so their gains are correlated and the plain
+        paired t-test's variance ``s^2 / k`` is too small; the corrected one is
+        ``s^2 (1 / k + n_test / n_train)``. Adopted when the gain is positive and its
+        statistic exceeds Student's one-sided quantile at ``confidence`` with ``k - 1``
+        degrees of freedom; a choice that gains the same on every fold (``s = 0``) is
+        adopted when that gain is positive.
+        """
+        gains = np.array([f.preset.loss - f.held_out.loss for f in self.folds])
+        k = len(gains)
+        n = sum(f.held_out_objects for f in self.folds)
+        ratio = float(np.mean([f.held_out_objects / (n - f.held_out_objects) for f in self.folds]))
+        gain = float(gains.mean())
+        spread = float(gains.std(ddof=1)) * np.sqrt(1.0 / k + ratio)
+        if spread > 0:
+            statistic = gain / spread
+        else:
+            statistic = float(np.inf) if gain > 0 else 0.0
+        critical = float(student_t.ppf(confidence, k - 1))
+        return Adoption(
+            gain=gain,
+            statistic=statistic,
+            critical=critical,
+            confidence=confidence,
+            adopted=gain > 0 and statistic > critical,
+        )
+
+
+@dataclass(frozen=True)
+class Adoption:
+    """The test of a learned fusion against the preset's weights on the held-out folds.
+
+    Attributes
+    ----------
+    gain : mean over the folds of the preset's loss minus the learned choice's (a
+        fraction; positive: the learned choice does better).
+    statistic : the corrected resampled t statistic of that gain.
+    critical : Student's one-sided quantile it must exceed.
+    confidence : of that quantile.
+    adopted : the gain is positive and its statistic above the quantile.
+    """
+
+    gain: float
+    statistic: float
+    critical: float
+    confidence: float
+    adopted: bool
 
 
 def fusion_scores(
@@ -442,4 +493,63 @@ def tune_fusion(
         sensitivity=sensitivity,
         held_out_matrix=held_out_matrix,
         fold_of=fold,
+    )
+
+
+def learn_fusion(
+    vectors: Mapping[str, NDArray[np.float64]],
+    labels: ArrayLike,
+    preset: Preset,
+    sigma: Mapping[str, NDArray[np.float64]] | None = None,
+    *,
+    seed: int = 0,
+) -> FusionTuning:
+    """Cross-validate every scored modality's comparison and weight on labelled
+    objects, in ``FOLDS`` folds or the most that can (:func:`feasible_folds`).
+
+    Each fused modality is offered with every comparison it may take
+    (:data:`~worker.engine.presets.COMPARISONS`: D1, D2, and ShapeDNA's reweighted
+    Euclidean distance for the spectrum), its preset's first (preferred on equal
+    losses); the size, with metric units, keeps its own comparison and is weighed first,
+    so that the preset's last fused modality keeps weight 1 and the size's is on the grid.
+
+    Parameters
+    ----------
+    vectors : modality -> (n, M_m) float, of every scored modality.
+    labels : (n,) array_like.
+    preset : the rule, the comparisons to start from and the weights to beat.
+    sigma : modality -> (M_m,), eq. (9)'s sigma_i (a gallery's, of more shapes than
+        these); default over ``vectors``.
+
+    Raises
+    ------
+    ValueError
+        A class of fewer than three objects, or too few objects for two folds.
+    """
+    labels = np.asarray(labels)
+    folds = feasible_folds(labels, seed=seed)
+    metric = SIZE in preset.scored_modalities
+    order = (SIZE, *preset.fused_modalities) if metric else preset.fused_modalities
+
+    def scale(m: str) -> NDArray[np.float64]:
+        return gallery_sigma(vectors[m]) if sigma is None else sigma[m]
+
+    matrices = {m: preset_all_to_all(m, vectors[m], preset, scale(m)) for m in order}
+    alternatives: dict[str, dict[str, NDArray[np.float64]]] = {
+        m: {
+            kind: all_to_all(vectors[m], kind, scale(m))
+            for kind, modalities in COMPARISONS.items()
+            if m in modalities and kind != preset.comparison(m)
+        }
+        for m in preset.fused_modalities
+    }
+    return tune_fusion(
+        matrices,
+        labels,
+        preset.fusion,
+        {m: preset.weight(m) for m in order},
+        folds=folds,
+        seed=seed,
+        comparison={m: preset.comparison(m) for m in order},
+        alternatives=alternatives,
     )
