@@ -7,21 +7,26 @@ Uploads every mesh (with its class label), polls ``GET /meshes`` until all are
 ready or failed, and prints the total wall time (first upload to last ready),
 the upload time, and per-mesh medians of the queue-to-ready time and of the
 worker's descriptor time. Then it runs every mesh's ``/similar`` (top-1
-nearest-neighbour accuracy by class) as a sanity check, and compares
-``GET /calibration``'s EER with the recorded ``shapes evaluate`` report.
+nearest-neighbour accuracy by class) as a sanity check, waits for the fusion the gallery
+learns from the labels, prints it fold by fold, and compares ``GET /calibration``'s EERs
+with the engine's on the same files under the fusion in use.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import time
 from datetime import datetime
+from typing import Any
 
 import httpx
+import numpy as np
 
-from benchmarks.common import REPO, TOSCA, serving, tosca_labels
+from benchmarks.common import TOSCA, serving, tosca_descriptors, tosca_labels
+from worker.engine.compare import fused_dissimilarity, preset_dissimilarity
+from worker.engine.presets import get_preset, with_fusion
+from worker.recognition.metrics import equal_error_rate
 
 
 def run(url: str) -> None:
@@ -74,26 +79,70 @@ def run(url: str) -> None:
     print(f"throughput: {len(ids) / total * 60:.1f} meshes/min")
     print(f"/similar top-1 class accuracy: {correct}/{len(ids)}")
     print(f"/similar search step, median: {statistics.median(search) * 1000:.2f} ms")
-    compare_calibration(client)
+    compare_calibration(client, labels, ids)
 
 
-def compare_calibration(client: httpx.Client) -> None:
-    """``GET /calibration``'s EER beside ``shapes evaluate``'s recorded report for the
-    same preset (issue 11: the live endpoint and the offline report agree)."""
-    live = client.get("/calibration").json()
-    report_path = REPO / "docs" / "evaluation" / live["preset"] / "report.json"
-    if not report_path.is_file():
-        print(f"no recorded report at {report_path}: EER not compared")
-        return
-    rows = json.loads(report_path.read_text())["rows"]
+def compare_calibration(client: httpx.Client, labels: dict[str, str], ids: dict[str, int]) -> None:
+    """Wait for the gallery's fusion fit on every labelled mesh (and the calibration after
+    it), print what it chose and why, and compare ``GET /calibration``'s EERs with the
+    engine's on the same files: each modality by its comparison in use, and the fused
+    score under the fusion in use (:func:`worker.engine.compare.fused_dissimilarity`)."""
+    deadline = time.monotonic() + 600
+    while True:
+        live = client.get("/calibration").json()
+        fusion = live["fusion"]
+        if fusion["labelled_shapes"] == len(ids) and live["fitted_at"] >= fusion["fitted_at"]:
+            break
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"no fusion fit on all {len(ids)} meshes: {fusion['reason']}")
+        time.sleep(1)
+    print_fusion(fusion)
+    preset = with_fusion(get_preset(live["preset"]), fusion["weights"], fusion["comparisons"])
+    descriptors = tosca_descriptors(preset.name)
+    names = sorted(ids)
+    vectors = {
+        m: np.stack([descriptors[n].vector(m) for n in names]) for m in preset.modality_sizes()
+    }
+    classes = [labels[n] for n in names]
+    fused = fused_dissimilarity(vectors, vectors, preset)
+    engine = {live["score"]: equal_error_rate(fused, classes)}
+    for m in live["modalities"]:
+        per = preset_dissimilarity(m, vectors[m], vectors[m], preset)
+        engine[m] = equal_error_rate(per, classes)
     print(f"\n/calibration ({live['genuine_pairs']} genuine, {live['impostor_pairs']} impostor")
-    print(f"pairs) against {report_path.relative_to(REPO)}:\n")
-    print("| score | /calibration EER | report EER | difference (points) |")
-    print("|---|---:|---:|---:|")
+    print("pairs) against the engine's all-to-all scores of the same files:\n")
+    print("| score | comparison | /calibration EER | engine EER | difference (points) |")
+    print("|---|---|---:|---:|---:|")
     live_eers = {live["score"]: live["eer"]} | {m: c["eer"] for m, c in live["modalities"].items()}
     for name, eer in live_eers.items():
-        recorded = rows[name]["eer"]
-        print(f"| {name} | {eer:.2%} | {recorded:.2%} | {100 * (eer - recorded):+.2f} |")
+        how = preset.comparison(name) if name in live["modalities"] else "the fusion in use"
+        print(
+            f"| {name} | {how} | {eer:.2%} | {engine[name]:.2%} | "
+            f"{100 * (eer - engine[name]):+.2f} |"
+        )
+
+
+def print_fusion(fusion: dict[str, Any]) -> None:
+    """The fusion a gallery uses, its test against the preset's, and each fold's choice."""
+
+    def weighed(weights: dict[str, float], comparisons: dict[str, str]) -> str:
+        return ", ".join(f"{m} {w:g} ({comparisons[m]})" for m, w in weights.items())
+
+    print(f"\nfusion: {fusion['source']}: {weighed(fusion['weights'], fusion['comparisons'])}")
+    print(f"why: {fusion['reason']}\n")
+    print("| fold | meshes | weights (comparison) | EER | mAP | preset's EER | preset's mAP |")
+    print("|---|---:|---|---:|---:|---:|---:|")
+    for i, fold in enumerate(fusion["folds"]):
+        own, base = fold["held_out"], fold["preset"]
+        print(
+            f"| {i} | {fold['held_out_shapes']} | {weighed(fold['weights'], fold['comparisons'])}"
+            f" | {own['eer']:.2%} | {own['map']:.1%} | {base['eer']:.2%} | {base['map']:.1%} |"
+        )
+    own, base = fusion["held_out"], fusion["preset_held_out"]
+    print(
+        f"| mean | | | {own['eer']:.2%} | {own['map']:.1%} | {base['eer']:.2%} | "
+        f"{base['map']:.1%} |"
+    )
 
 
 def main() -> None:

@@ -13,9 +13,10 @@ preset's stay, and the answer says why.
 
 Learning needs at least ``MIN_CLASSES`` labels with at least ``MIN_PER_CLASS`` shapes
 each (a fold must leave two of every class to choose on); smaller labels take no part.
-Five folds, or the most that hold a shape each. Its cost is bounded like the calibration's: above
-``max_shapes`` labelled shapes a seeded, class-stratified sample is learned on, so a fit
-takes seconds whatever the gallery's size. It runs in a thread of its own, reading the
+Five folds, or the most that hold a shape each, in ``REPEATS`` rounds. Its cost is bounded
+like the calibration's: above ``max_shapes`` labelled shapes a seeded, class-stratified
+sample is learned on, so a fit takes the same time whatever the gallery's size, and the
+next waits ``IDLE_AFTER_FIT`` times as long. It runs in a thread of its own, reading the
 index only to copy the sampled vectors, so no search waits for it.
 """
 
@@ -30,12 +31,15 @@ from typing import Literal
 import numpy as np
 
 from worker.engine.presets import MODALITIES, SIZE, Preset, with_fusion
-from worker.recognition.fusion import Adoption, FusionTuning, learn_fusion
+from worker.recognition.fusion import REPEATS, Adoption, FusionTuning, learn_fusion
 
 from .index import GalleryIndex
 
 MIN_CLASSES = 3
 MIN_PER_CLASS = 3
+#: After a fit, the next one waits at least this many times its duration: learning keeps
+#: at most about a fifth of a core busy, however often the gallery changes.
+IDLE_AFTER_FIT = 4.0
 
 Source = Literal["preset", "pinned", "learned"]
 
@@ -58,6 +62,7 @@ class GalleryFusion:
     sampled : a sample of the labelled shapes was learned on (above ``max_shapes``).
     version : the gallery's change counter when fitted (-1: never fitted).
     fitted_at : Unix time of the fit.
+    seconds : how long the cross-validation took (0: none ran).
     """
 
     weights: dict[str, float]
@@ -71,6 +76,7 @@ class GalleryFusion:
     sampled: bool = False
     version: int = -1
     fitted_at: float = 0.0
+    seconds: float = 0.0
 
     def applied(self, preset: Preset) -> Preset:
         """``preset`` fusing with these weights and comparisons."""
@@ -150,14 +156,16 @@ def learn_gallery_fusion(
             f"{MIN_PER_CLASS} described shapes each ({classes} labels have)",
             version,
         )
-    tuning = learn_fusion(vectors, names, preset, sigma, seed=seed)
+    started = time.perf_counter()
+    tuning = learn_fusion(vectors, names, preset, sigma, seed=seed, repeats=REPEATS)
     held, base = tuning.held_out, tuning.preset_held_out
     adoption = tuning.adoption()
     measured = (
         f"held-out EER {100 * held.eer:.2f}% and mAP {100 * held.map:.2f}% against the "
         f"preset's {100 * base.eer:.2f}% and {100 * base.map:.2f}% ({len(tuning.folds)} "
-        f"folds, {len(names)} labelled shapes; gain {100 * adoption.gain:.2f} points of "
-        f"loss, t {adoption.statistic:.2f} against {adoption.critical:.2f})"
+        f"folds in {tuning.repeats} rounds, {len(names)} labelled shapes; gain "
+        f"{100 * adoption.gain:.2f} points of loss, t {adoption.statistic:.2f} against "
+        f"{adoption.critical:.2f})"
     )
     chosen = preset_fusion(preset, "") if not adoption.adopted else None
     return GalleryFusion(
@@ -175,6 +183,7 @@ def learn_gallery_fusion(
         sampled=len(names) < described[0],
         version=version,
         fitted_at=time.time(),
+        seconds=time.perf_counter() - started,
     )
 
 

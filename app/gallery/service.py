@@ -29,7 +29,13 @@ from ..meshes import repository as meshes
 from ..metrics import Metrics
 from . import changes
 from .calibration import GalleryCalibration, fit_calibration
-from .fusion import GalleryFusion, learn_gallery_fusion, pinned_fusion, preset_fusion
+from .fusion import (
+    IDLE_AFTER_FIT,
+    GalleryFusion,
+    learn_gallery_fusion,
+    pinned_fusion,
+    preset_fusion,
+)
 from .index import GalleryIndex, Match, SearchStats
 from .persistence import load_index, save_index
 
@@ -260,17 +266,20 @@ class Gallery:
 
     def maybe_refit_fusion(self, read_sessions: sessionmaker[Session], every: float) -> bool:
         """Start learning the fusion weights again in a thread of its own when shapes were
-        added or removed since the last fit, at most every ``every`` seconds (the
-        collector asks each round); True if started."""
+        added or removed since the last fit, at most every ``every`` seconds and
+        ``IDLE_AFTER_FIT`` times the last fit's duration after it (the collector asks each
+        round); True if started."""
         index = self._index
         fusion = self._fusion
         if not self.learn_fusion or index is None or fusion.version == self._version:
             return False
         if self._fusion_thread is not None and self._fusion_thread.is_alive():
             return False
-        # Throttled like the calibration when the last fit learned (seconds of work); a
-        # fit that found too few labels cost nothing and runs again at once.
-        if fusion.tuning is not None and time.time() - fusion.fitted_at < every:
+        # Throttled like the calibration when the last fit learned (seconds of work), and
+        # by its own duration; a fit that found too few labels cost nothing and runs again
+        # at once.
+        pause = max(every, IDLE_AFTER_FIT * fusion.seconds)
+        if fusion.tuning is not None and time.time() - fusion.fitted_at < pause:
             return False
         with read_sessions() as session:
             labels = meshes.labels(session, self.collection_id)

@@ -8,6 +8,7 @@ import pytest
 from worker.engine.compare import fuse
 from worker.engine.presets import DEFAULT_PRESET, REWEIGHTED, get_preset
 from worker.recognition.fusion import (
+    FOLDS,
     GRID,
     PRESET_COMPARISON,
     FoldResult,
@@ -268,3 +269,20 @@ def test_learn_fusion_offers_every_comparison_a_modality_may_take():
     assert set(tuning.comparisons) == set(preset.fused_modalities)
     assert {tuning.comparisons[m] for m in ("gdm", "ddt")} <= {"D1", "D2"}
     assert tuning.held_out.loss < tuning.preset_held_out.loss
+
+
+def test_rounds_of_folds_are_dealt_from_their_own_seeds_and_all_tested():
+    """Three rounds: 3 k folds, each round's objects held out once; the held-out matrix
+    and the fold of each object are the first round's (the single round's own)."""
+    rng = np.random.default_rng(9)
+    mats = {"a": clustered(LABELS, 4.0, rng), "b": clustered(LABELS, 4.0, rng)}
+    one = tune_fusion(mats, LABELS, "product", {"a": 1.0, "b": 1.0})
+    three = tune_fusion(mats, LABELS, "product", {"a": 1.0, "b": 1.0}, repeats=3)
+    assert three.repeats == 3 and len(three.folds) == 3 * FOLDS
+    assert sum(f.held_out_objects for f in three.folds) == 3 * len(LABELS)
+    assert three.folds[:FOLDS] == one.folds
+    np.testing.assert_array_equal(three.held_out_matrix, one.held_out_matrix)
+    np.testing.assert_array_equal(three.fold_of, one.fold_of)
+    second = tune_fusion(mats, LABELS, "product", {"a": 1.0, "b": 1.0}, seed=1)
+    assert three.folds[FOLDS : 2 * FOLDS] == second.folds  # round 1 is seed 1's split
+    assert three.adoption().critical == pytest.approx(1.761310, abs=1e-6)  # 14 d.o.f.

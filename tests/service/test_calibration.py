@@ -11,7 +11,7 @@ import pytest
 from conftest import example
 
 from benchmarks.common import Service
-from worker.recognition.fusion import feasible_folds
+from worker.recognition.fusion import REPEATS, feasible_folds
 
 from .conftest import migrated_service, running
 
@@ -102,8 +102,9 @@ def test_the_fusion_weights_are_learned_from_the_labels_and_ranked_with(
         time.sleep(0.2)
     learned_on = [label for label in LABELLED.values() if label != "bird"]  # in id order
     assert fusion["labels"] == 3 and not fusion["sampled"]
-    assert len(fusion["folds"]) == feasible_folds(learned_on)
-    assert sum(f["held_out_shapes"] for f in fusion["folds"]) == 10
+    folds = feasible_folds(learned_on, repeats=REPEATS)
+    assert len(fusion["folds"]) == folds * REPEATS  # every round's folds
+    assert sum(f["held_out_shapes"] for f in fusion["folds"]) == 10 * REPEATS
     assert fusion["source"] in ("learned", "preset") and fusion["reason"]
     assert fusion["preset_weights"] == {"gdm": 0.0, "ddt": 0.5, "spectrum": 1.0}
     learned = fusion["held_out"]["eer"] + 1 - fusion["held_out"]["map"]

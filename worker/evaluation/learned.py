@@ -26,7 +26,7 @@ import numpy as np
 
 from worker.engine.presets import Preset
 from worker.recognition.calibration import calibrate
-from worker.recognition.fusion import FusionTuning
+from worker.recognition.fusion import REPEATS, Adoption, FusionTuning
 
 from .scoring import FAR_OPERATING_POINTS, ROC_POINTS_STORED, score_dissimilarity
 
@@ -58,13 +58,15 @@ def _fold_verification(tuning: FusionTuning, labels: Sequence[str]) -> dict[str,
 
 def learned_row(
     tuning: FusionTuning,
+    decision: Adoption,
     preset: Preset,
     labels: Sequence[str],
     names: Sequence[str],
     gallery_idx: np.ndarray,
     probe_idx: np.ndarray,
 ) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The report's ``learned`` row and its ``learned_fusion`` section."""
+    """The report's ``learned`` row and its ``learned_fusion`` section (with
+    ``decision``, the adoption test a gallery would make on the collection)."""
     row = {
         "title": "Learned fusion (held-out folds)",
         "members": list(preset.scored_modalities),
@@ -92,6 +94,6 @@ def learned_row(
             "learned": asdict(tuning.held_out),
             "preset": asdict(tuning.preset_held_out),
         },
-        "adoption": asdict(tuning.adoption()),
+        "adoption": {**asdict(decision), "rounds": REPEATS},
     }
     return row, section

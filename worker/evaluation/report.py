@@ -283,10 +283,11 @@ def _learned_markdown(learned: Mapping[str, Any]) -> list[str]:
         f"{_pct(base['eer'], 2)} | {_pct(base['map'], 1)} |",
         "",
         f"Chosen on every mesh: {choice(chosen['weights'], chosen['comparisons'])}. "
-        f"The folds' gain over the preset's weights, {100 * test['gain']:.2f} points of the "
-        f"mean of EER and 1 - mAP, has a corrected resampled t of {test['statistic']:.2f} "
-        f"against {test['critical']:.2f} ({100 * test['confidence']:g}%, one-sided): a "
-        + ("gallery would adopt it." if test["adopted"] else "gallery would keep the preset's."),
+        f"A gallery decides on {test['rounds']} rounds of the folds: their gain over the "
+        f"preset's weights, {100 * test['gain']:.2f} points of the mean of EER and 1 - mAP, "
+        f"has a corrected resampled t of {test['statistic']:.2f} against "
+        f"{test['critical']:.2f} ({100 * test['confidence']:g}%, one-sided), so it "
+        + ("would adopt the learned fusion." if test["adopted"] else "would keep the preset's."),
     ]
     return lines
 

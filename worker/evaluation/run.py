@@ -16,7 +16,7 @@ import numpy as np
 
 from worker.engine.presets import MODALITIES, SIZE, Preset
 from worker.recognition import metrics
-from worker.recognition.fusion import FOLDS, learn_fusion, tune_fusion
+from worker.recognition.fusion import FOLDS, REPEATS, learn_fusion, tune_fusion
 
 from .compute import ComputedSet, compute_descriptors, descriptor_vectors
 from .datasets import RESAMPLINGS, EvaluationError, LabeledMesh, pose_set, read_labels
@@ -117,10 +117,12 @@ def _add_learned(report: dict[str, Any], computed: ComputedSet, preset: Preset) 
     vectors = descriptor_vectors(computed, size=preset.units == "metric")
     try:
         tuning = learn_fusion(vectors, np.asarray(labels), preset)
+        # A gallery decides on REPEATS rounds of the folds (the row: the first round's).
+        decision = learn_fusion(vectors, np.asarray(labels), preset, repeats=REPEATS).adoption()
     except ValueError as exc:
         raise EvaluationError(f"cannot learn the fusion on this collection: {exc}") from exc
     gallery_idx, probe_idx = metrics.first_instance_split(names, labels)
-    row, section = learned_row(tuning, preset, labels, names, gallery_idx, probe_idx)
+    row, section = learned_row(tuning, decision, preset, labels, names, gallery_idx, probe_idx)
     rows = report["rows"]
     baseline = rows.pop(BASELINE)
     rows[LEARNED] = row

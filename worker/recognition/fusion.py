@@ -49,6 +49,11 @@ from . import metrics
 GRID = (0.0, 0.125, 0.25, 0.5, 1.0)
 #: Folds of the cross-validation.
 FOLDS = 5
+#: Repetitions of the folds (each dealt from its own seed) a gallery decides on: one split
+#: of a few dozen objects decides by chance (on TOSCA the adoption test's statistic
+#: ranges from -0.15 to 1.92 over eight seeds), and a decision that flips with the order
+#: the shapes came in would flip the ranking with it.
+REPEATS = 3
 #: A gallery adopts the learned fusion when the held-out folds favour it beyond their
 #: noise: the one-sided corrected resampled t-test (:meth:`FusionTuning.adoption`) of the
 #: folds' gains in loss rejects "no gain" at this confidence.
@@ -174,17 +179,19 @@ class FusionTuning:
     weights : modality -> weight, chosen on every object (what a preset takes).
     comparisons : modality -> comparison, chosen with ``weights``.
     loss : the loss of ``weights`` on every object.
-    folds : each fold's choice and held-out scores.
+    folds : each fold's choice and held-out scores (``repeats`` rounds of the folds, one
+        after the other).
     held_out : the mean over the folds of their chosen weights' held-out scores.
     preset_held_out : the same mean for the preset's own weights, for comparison.
     sensitivity : modality -> (len(grid),) loss on every object with that modality's
         weight at each grid point and the others as chosen (how sharply the set decides;
         every modality but the last).
     held_out_matrix : (n, n), row ``i`` the fused dissimilarity of object ``i`` under
-        the choice of the fold that held it out (not symmetric; rows of different folds
-        are on different scales, so a pair's score is read from the row of the fold it is
-        scored in: :meth:`fold_pairs`).
-    fold_of : (n,) the fold that held each object out.
+        the choice of the fold that held it out, in the first round (not symmetric; rows
+        of different folds are on different scales, so a pair's score is read from the
+        row of the fold it is scored in: :meth:`fold_pairs`).
+    fold_of : (n,) the fold of the first round that held each object out.
+    repeats : rounds of the folds.
     """
 
     rule: str
@@ -198,12 +205,14 @@ class FusionTuning:
     sensitivity: dict[str, tuple[float, ...]]
     held_out_matrix: NDArray[np.float64]
     fold_of: NDArray[np.int64]
+    repeats: int = 1
 
     def fold_pairs(
         self, fold: int, labels: ArrayLike
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The genuine and impostor scores of the pairs that involve an object of
-        ``fold``, under that fold's choice (its held-out verification)."""
+        ``fold`` (of the first round), under that fold's choice (its held-out
+        verification)."""
         labels = np.asarray(labels)
         i, j = np.triu_indices(len(labels), 1)
         first = self.fold_of[i] == fold
@@ -217,14 +226,15 @@ class FusionTuning:
         beyond the folds' own noise.
 
         Each fold's gain is the preset's held-out loss minus the learned choice's, on
-        the same objects. Their mean is tested against zero by the corrected resampled
-        t-test of Nadeau and Bengio (2003, "Inference for the generalization error"):
-        the folds' training sets overlap, so their gains are correlated and the plain
-        paired t-test's variance ``s^2 / k`` is too small; the corrected one is
-        ``s^2 (1 / k + n_test / n_train)``. Adopted when the gain is positive and its
-        statistic exceeds Student's one-sided quantile at ``confidence`` with ``k - 1``
-        degrees of freedom; a choice that gains the same on every fold (``s = 0``) is
-        adopted when that gain is positive.
+        the same objects. Their mean over the ``k`` folds of every round is tested against
+        zero by the corrected resampled t-test of Nadeau and Bengio (2003, "Inference for
+        the generalization error"; over repeated rounds, Bouckaert and Frank's corrected
+        repeated k-fold test, 2004): the folds' training sets overlap, so their gains are
+        correlated and the plain paired t-test's variance ``s^2 / k`` is too small; the
+        corrected one is ``s^2 (1 / k + n_test / n_train)``. Adopted when the gain is
+        positive and its statistic exceeds Student's one-sided quantile at
+        ``confidence`` with ``k - 1`` degrees of freedom; a choice that gains the same on
+        every fold (``s = 0``) is adopted when that gain is positive.
         """
         gains = np.array([f.preset.loss - f.held_out.loss for f in self.folds])
         k = len(gains)
@@ -369,9 +379,10 @@ def _checked_folds(labels: NDArray[Any], folds: int, seed: int) -> NDArray[np.in
     return fold
 
 
-def feasible_folds(labels: ArrayLike, folds: int = FOLDS, seed: int = 0) -> int:
+def feasible_folds(labels: ArrayLike, folds: int = FOLDS, seed: int = 0, repeats: int = 1) -> int:
     """The most folds, at most ``folds``, that cross-validate ``labels`` (every fold holds
-    an object and leaves two of every class to choose on).
+    an object and leaves two of every class to choose on) in each of ``repeats`` rounds
+    (dealt from ``seed``, ``seed + 1``, ...).
 
     Raises
     ------
@@ -381,11 +392,13 @@ def feasible_folds(labels: ArrayLike, folds: int = FOLDS, seed: int = 0) -> int:
     labels = np.asarray(labels)
     for k in range(folds, 2, -1):
         try:
-            _checked_folds(labels, k, seed)
+            for r in range(repeats):
+                _checked_folds(labels, k, seed + r)
         except ValueError:
             continue
         return k
-    _checked_folds(labels, 2, seed)  # raises why not even two folds do
+    for r in range(repeats):
+        _checked_folds(labels, 2, seed + r)  # raises why not even two folds do
     return 2
 
 
@@ -400,6 +413,7 @@ def tune_fusion(
     seed: int = 0,
     comparison: str | Mapping[str, str] = PRESET_COMPARISON,
     alternatives: Mapping[str, Mapping[str, ArrayLike]] | None = None,
+    repeats: int = 1,
 ) -> FusionTuning:
     """Choose one fusion weight (and comparison) per modality by class-stratified
     cross-validation.
@@ -414,11 +428,12 @@ def tune_fusion(
     preset_weights : modality -> the preset's own weight, scored on the same folds.
     folds : number of folds, at least 2.
     grid : the weights tried for every modality but the last.
-    seed : of :func:`stratified_folds`.
+    seed : of :func:`stratified_folds` (round ``r`` deals from ``seed + r``).
     comparison : the name of the comparison ``dissimilarities`` were made with, or
         modality -> its name (modalities compared differently, such as the size).
     alternatives : modality -> comparison name -> (n, n), other comparisons of some
         modalities to choose from (the preset's is preferred on equal losses).
+    repeats : rounds of the folds, each dealt from its own seed.
 
     Returns
     -------
@@ -455,26 +470,31 @@ def tune_fusion(
     }
     if shapes:
         raise ValueError(f"{n} labels need ({n}, {n}) dissimilarities, got {shapes}")
-    fold = _checked_folds(labels, folds, seed)
+    preset_fused = fuse(mats, rule, preset_weights)
     results = []
     held_out_matrix = np.empty((n, n))
-    for f in range(folds):
-        train, held = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
-        training = {
-            m: {c: d[np.ix_(train, train)] for c, d in by.items()} for m, by in candidates.items()
-        }
-        weights, comparisons, _ = choose_fusion(training, labels[train], rule, grid)
-        fused = fuse({m: candidates[m][comparisons[m]] for m in mats}, rule, weights)
-        held_out_matrix[held] = fused[held]
-        results.append(
-            FoldResult(
-                held_out_objects=len(held),
-                weights=weights,
-                comparisons=comparisons,
-                held_out=fusion_scores(fused, labels, held),
-                preset=fusion_scores(fuse(mats, rule, preset_weights), labels, held),
+    first = _checked_folds(labels, folds, seed)
+    for r in range(repeats):
+        fold = first if r == 0 else _checked_folds(labels, folds, seed + r)
+        for f in range(folds):
+            train, held = np.flatnonzero(fold != f), np.flatnonzero(fold == f)
+            training = {
+                m: {c: d[np.ix_(train, train)] for c, d in by.items()}
+                for m, by in candidates.items()
+            }
+            weights, comparisons, _ = choose_fusion(training, labels[train], rule, grid)
+            fused = fuse({m: candidates[m][comparisons[m]] for m in mats}, rule, weights)
+            if r == 0:
+                held_out_matrix[held] = fused[held]
+            results.append(
+                FoldResult(
+                    held_out_objects=len(held),
+                    weights=weights,
+                    comparisons=comparisons,
+                    held_out=fusion_scores(fused, labels, held),
+                    preset=fusion_scores(preset_fused, labels, held),
+                )
             )
-        )
     weights, comparisons, loss = choose_fusion(candidates, labels, rule, grid)
     chosen = {m: candidates[m][comparisons[m]] for m in mats}
     sensitivity = {
@@ -492,7 +512,8 @@ def tune_fusion(
         preset_held_out=FusionScores.mean([r.preset for r in results]),
         sensitivity=sensitivity,
         held_out_matrix=held_out_matrix,
-        fold_of=fold,
+        fold_of=first,
+        repeats=repeats,
     )
 
 
@@ -503,9 +524,11 @@ def learn_fusion(
     sigma: Mapping[str, NDArray[np.float64]] | None = None,
     *,
     seed: int = 0,
+    repeats: int = 1,
 ) -> FusionTuning:
     """Cross-validate every scored modality's comparison and weight on labelled
-    objects, in ``FOLDS`` folds or the most that can (:func:`feasible_folds`).
+    objects, in ``FOLDS`` folds or the most that can (:func:`feasible_folds`), in
+    ``repeats`` rounds.
 
     Each fused modality is offered with every comparison it may take
     (:data:`~worker.engine.presets.COMPARISONS`: D1, D2, and ShapeDNA's reweighted
@@ -527,7 +550,7 @@ def learn_fusion(
         A class of fewer than three objects, or too few objects for two folds.
     """
     labels = np.asarray(labels)
-    folds = feasible_folds(labels, seed=seed)
+    folds = feasible_folds(labels, seed=seed, repeats=repeats)
     metric = SIZE in preset.scored_modalities
     order = (SIZE, *preset.fused_modalities) if metric else preset.fused_modalities
 
@@ -552,4 +575,5 @@ def learn_fusion(
         seed=seed,
         comparison={m: preset.comparison(m) for m in order},
         alternatives=alternatives,
+        repeats=repeats,
     )
