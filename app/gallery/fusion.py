@@ -25,8 +25,8 @@ from __future__ import annotations
 import time
 from collections import Counter
 from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Literal
+from dataclasses import asdict, dataclass
+from typing import Any, Literal
 
 import numpy as np
 
@@ -185,6 +185,55 @@ def learn_gallery_fusion(
         fitted_at=time.time(),
         seconds=time.perf_counter() - started,
     )
+
+
+def saved_fusion(fusion: GalleryFusion) -> dict[str, Any]:
+    """What a restart needs of an adopted fusion (:func:`restored_fusion`): the choice and
+    why, not the cross-validation's folds."""
+    return {
+        "weights": fusion.weights,
+        "comparisons": fusion.comparisons,
+        "reason": fusion.reason,
+        "adoption": None if fusion.adoption is None else asdict(fusion.adoption),
+        "shapes": fusion.shapes,
+        "classes": fusion.classes,
+        "sampled": fusion.sampled,
+        "fitted_at": fusion.fitted_at,
+        "seconds": fusion.seconds,
+    }
+
+
+def restored_fusion(saved: Mapping[str, Any], preset: Preset) -> GalleryFusion:
+    """A learned fusion saved before a restart, for ``preset``: it ranks until the next
+    fit, which starts at once (it has no folds to show).
+
+    Raises
+    ------
+    ValueError
+        Not a saved fusion of this preset's scored modalities.
+    """
+    try:
+        weights = {m: float(w) for m, w in saved["weights"].items()}
+        comparisons = {m: str(c) for m, c in saved["comparisons"].items()}
+        adoption = saved["adoption"]
+        fusion = GalleryFusion(
+            weights=weights,
+            comparisons=comparisons,
+            source="learned",
+            reason=f"learned before the service restarted, refitting now: {saved['reason']}",
+            adoption=None if adoption is None else Adoption(**adoption),
+            shapes=int(saved["shapes"]),
+            classes=int(saved["classes"]),
+            sampled=bool(saved["sampled"]),
+            fitted_at=float(saved["fitted_at"]),
+            seconds=float(saved["seconds"]),
+        )
+    except (KeyError, TypeError, AttributeError) as exc:
+        raise ValueError(f"not a saved fusion: {exc}") from exc
+    if set(weights) != set(preset.scored_modalities):
+        raise ValueError(f"a fusion of {sorted(weights)}, not of {preset.scored_modalities}")
+    fusion.applied(preset)  # raises ValueError for a comparison the preset cannot take
+    return fusion
 
 
 def _sample(names: np.ndarray, max_shapes: int, rng: np.random.Generator) -> np.ndarray:

@@ -162,11 +162,12 @@ class GalleryIndex:
         choose: Callable[[np.ndarray], np.ndarray] | None = None,
     ) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
         """A copy, taken under the lock, of what a fit on the labelled shapes reads:
-        their labels, their vectors and eq. (9)'s sigma over the whole gallery.
-        ``choose`` picks among the labelled shapes (indices, from their labels), so only
-        those are copied."""
+        their labels, their vectors (in the order of their ids, so that a fit's folds
+        depend on the gallery, not on the order its shapes were described in) and eq.
+        (9)'s sigma over the whole gallery. ``choose`` picks among the labelled shapes
+        (indices, from their labels), so only those are copied."""
         with self.lock:
-            ids = self.ids()
+            ids = np.sort(self.ids())
             ids = ids[np.array([int(i) in labels for i in ids], dtype=bool)]
             names = np.array([labels[int(i)] for i in ids])
             if choose is not None:

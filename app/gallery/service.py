@@ -10,6 +10,7 @@ same database changed, :mod:`.changes`), saves it, and publishes its size.
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 import time
@@ -35,6 +36,8 @@ from .fusion import (
     learn_gallery_fusion,
     pinned_fusion,
     preset_fusion,
+    restored_fusion,
+    saved_fusion,
 )
 from .index import GalleryIndex, Match, SearchStats
 from .persistence import load_index, save_index
@@ -303,8 +306,39 @@ class Gallery:
             log.exception("learning the fusion weights failed")
             return
         with self._lock:
-            if self.learn_fusion:  # not pinned while this fit ran
-                self.adopt_fusion(fit)
+            if not self.learn_fusion:  # pinned while this fit ran
+                return
+            self.adopt_fusion(fit)
+        self._keep_fusion(fit)
+
+    @property
+    def fusion_file(self) -> Path:
+        """Where an adopted learned fusion is kept for a restart (beside the saved index,
+        which a save replaces whole)."""
+        return self.directory.with_name(self.directory.name + ".fusion.json")
+
+    def _keep_fusion(self, fusion: GalleryFusion) -> None:
+        """Save a learned fusion for the next start, or forget the last one."""
+        try:
+            if fusion.source == "learned":
+                self.fusion_file.parent.mkdir(parents=True, exist_ok=True)
+                tmp = self.fusion_file.with_suffix(".tmp")
+                tmp.write_text(json.dumps(saved_fusion(fusion)))
+                tmp.replace(self.fusion_file)
+            else:
+                self.fusion_file.unlink(missing_ok=True)
+        except OSError as exc:  # a restart then ranks with the preset's until its first fit
+            log.error("could not keep the learned fusion: %s", exc)
+
+    def _restore_fusion(self) -> None:
+        """Rank with the fusion learned before a restart until the first fit."""
+        if not self.learn_fusion or not self.fusion_file.is_file():
+            return
+        try:
+            saved = json.loads(self.fusion_file.read_text())
+            self.adopt_fusion(restored_fusion(saved, self.base_preset))
+        except (OSError, ValueError) as exc:
+            log.warning("the saved learned fusion is not used (%s): learning again", exc)
 
     def pin_fusion(self, weights: dict[str, float] | None, *, learn: bool, where: str) -> None:
         """Rank with ``weights`` (pinned by ``where``) from now on; None: with the preset's,
@@ -341,8 +375,9 @@ class Gallery:
 
         A missing, corrupt or other-version index is rebuilt from the stored
         descriptors; a stale one gets the missing shapes added and the deleted
-        ones removed.
+        ones removed. A fusion learned before a restart ranks until the first fit.
         """
+        self._restore_fusion()
         preset, directory = self.preset, self.directory
         started = time.perf_counter()
         with read_sessions() as session:

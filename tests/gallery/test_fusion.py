@@ -33,12 +33,12 @@ def _noisy_gdm(n: int, seed: int = 0) -> tuple[dict[str, np.ndarray], dict[int, 
     return gallery, {i: f"class-{c}" for i, c in enumerate(classes)}
 
 
-def _loaded(preset, gallery) -> Gallery:
+def _loaded(preset, gallery, directory: Path = Path("not-saved")) -> Gallery:
     """A gallery whose index holds ``gallery`` (as loading would; nothing saved)."""
     g = Gallery(
         (1, "default"),
         preset,
-        Path("not-saved"),
+        directory,
         refit_fraction=0.05,
         metrics=Metrics(),
         lock=threading.RLock(),
@@ -127,3 +127,35 @@ def test_a_learned_comparison_is_adopted_and_the_index_ranks_with_it():
         float(reweighted_euclidean(spectrum[:1], spectrum[best.id : best.id + 1])[0, 0])
     )
     assert labels[best.id] == labels[0]
+
+
+def test_a_learned_fusion_ranks_again_after_a_restart_until_the_first_fit(tmp_path):
+    """The adopted fusion is kept beside the saved index; a new process's gallery ranks
+    with it (and says so) until it has learned again. A file that is not a saved fusion of
+    the preset is ignored, and a fit that keeps the preset's forgets the saved one."""
+    gallery, labels = _noisy_gdm(96)
+    g = _loaded(EQUAL, gallery, directory=tmp_path / "idx")
+    g.learn_fusion = True
+    g._refit_fusion(g._index, labels, version=0)
+    assert g.fusion.source == "learned" and g.fusion_file.is_file()
+
+    again = _loaded(EQUAL, gallery, directory=tmp_path / "idx")
+    again.learn_fusion = True
+    again._restore_fusion()
+    restored = again.fusion
+    assert restored.source == "learned" and restored.tuning is None
+    assert (restored.weights, restored.comparisons) == (g.fusion.weights, g.fusion.comparisons)
+    assert restored.reason.startswith("learned before the service restarted")
+    assert again.preset == g.preset and again.fusion.version != again._version  # refits
+
+    again.fusion_file.write_text('{"weights": {"colour": 1}}')
+    third = _loaded(EQUAL, gallery, directory=tmp_path / "idx")
+    third.learn_fusion = True
+    third._restore_fusion()
+    assert third.fusion.source == "preset"
+
+    same = replace(EQUAL, fusion_weights={"gdm": 0.0})  # nothing left to learn
+    kept = _loaded(same, gallery, directory=tmp_path / "idx")
+    kept.learn_fusion = True
+    kept._refit_fusion(kept._index, labels, version=0)
+    assert kept.fusion.source == "preset" and not kept.fusion_file.exists()

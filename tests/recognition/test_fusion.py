@@ -186,7 +186,7 @@ def test_the_adoption_test_is_the_corrected_resampled_t_test():
     assert adoption.gain == pytest.approx(np.mean(gains))
     assert adoption.statistic == pytest.approx(expected)
     assert adoption.critical == pytest.approx(2.131847, abs=1e-6)
-    assert adoption.adopted  # consistent gains: t = 5.3
+    assert adoption.adopted is True  # consistent gains: t = 5.3 (a bool, as JSON needs)
     noisy = _folds([0.02, -0.015, 0.01, -0.01, 0.004]).adoption()  # mean > 0, noise
     assert noisy.gain > 0 and not noisy.adopted
     assert _folds([0.003] * 5).adoption().adopted  # the same gain on every fold
