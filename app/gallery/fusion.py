@@ -167,15 +167,21 @@ def learn_gallery_fusion(
         f"{100 * adoption.gain:.2f} points of loss, t {adoption.statistic:.2f} against "
         f"{adoption.critical:.2f})"
     )
-    chosen = preset_fusion(preset, "") if not adoption.adopted else None
+    if adoption.adopted:
+        weights, comparisons = dict(tuning.weights), dict(tuning.comparisons)
+        reason = f"learned: {measured}"
+    else:
+        kept = preset_fusion(preset, "")
+        weights, comparisons = kept.weights, kept.comparisons
+        reason = (
+            "the preset's weights: the learned ones were not better beyond the folds' "
+            f"noise ({measured})"
+        )
     return GalleryFusion(
-        weights=dict(tuning.weights) if chosen is None else chosen.weights,
-        comparisons=dict(tuning.comparisons) if chosen is None else chosen.comparisons,
-        source="learned" if chosen is None else "preset",
-        reason=f"learned: {measured}"
-        if chosen is None
-        else f"the preset's weights: the learned ones were not better beyond the folds' "
-        f"noise ({measured})",
+        weights=weights,
+        comparisons=comparisons,
+        source="learned" if adoption.adopted else "preset",
+        reason=reason,
         tuning=tuning,
         adoption=adoption,
         shapes=len(names),

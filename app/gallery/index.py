@@ -5,10 +5,11 @@ How a search works
 Each modality ``m`` of the gallery is kept twice: the exact vectors (float64,
 for scoring) and a faiss ``IndexFlatL2`` over a transformed vector ``t_m(x)``
 that gives candidates. The final ranking is always the exact fused score of
-the preset: eq. (8) D1 or eq. (9) D2 per modality, then the sum or product
-rule (``worker.engine.compare``).
+the preset: each modality by its comparison (eq. 8 D1, eq. 9 D2, or ShapeDNA's for
+the spectrum; :meth:`~worker.engine.presets.Preset.comparison`), then the sum or
+product rule (``worker.engine.compare``).
 
-* D2 (the default preset): ``t_m(x) = P_m^T (x / sigma_fit_m - mu_m)`` with
+* D2 (the paper's SHREC preset): ``t_m(x) = P_m^T (x / sigma_fit_m - mu_m)`` with
   ``P_m`` orthonormal (PCA of the whitened gallery, at most ``MAX_DIMS``
   columns; the identity for the GDM's 19 and the spectrum's 50 elements).
   faiss returns ``CANDIDATES`` shapes per modality; their union is ranked by a
@@ -28,10 +29,13 @@ rule (``worker.engine.compare``).
   whitened DDT has too much independent per-element variation for the 64-D
   bound to be tight, so certification is rare there, and recall@10 is
   *measured* instead (``benchmarks/index.py``, ``docs/benchmarks.md``).
-* D1 has no cheap bound. Its candidates come from the L2 distance of
-  log-descriptors (eq. 8's terms are ``2 tanh(|log a - log b| / 2)``, close
-  to ``|log a - log b|`` for similar shapes) projected the same way, with
-  ``CANDIDATES`` per modality, all scored exactly.
+* D1 (the default preset) has no cheap bound. Its candidates come from the L2
+  distance of log-descriptors (eq. 8's terms are ``2 tanh(|log a - log b| / 2)``,
+  close to ``|log a - log b|`` for similar shapes) projected the same way, with
+  ``CANDIDATES`` per modality, all scored exactly. So does any mix of comparisons
+  (a learned fusion's): ShapeDNA's comparison is an exact L2 of reweighted spectra,
+  a D2 modality's candidates its whitened L2; the certified search above is taken
+  only when every modality is compared by D2.
 
 D2's sigma
 ----------
