@@ -175,7 +175,7 @@ def learn_gallery_fusion(
         weights, comparisons = kept.weights, kept.comparisons
         reason = (
             "the preset's weights: the learned ones were not better beyond the folds' "
-            f"noise ({measured})"
+            f"noise; {measured}"
         )
     return GalleryFusion(
         weights=weights,
