@@ -330,6 +330,15 @@ def format_matches(body: dict[str, Any]) -> str:
         f"{'+'.join(modalities)}, {body['gallery_size']} enrolled in {body['collection']} "
         "(lower score = more alike)"
     )
+    own = {  # a fusion the collection learned compares these otherwise (the size has its own)
+        m: c
+        for m, c in body.get("comparisons", {}).items()
+        if m != "size" and c != body["dissimilarity"]
+    }
+    if own:
+        title += "\nCompared by the collection's learned fusion: " + ", ".join(
+            f"{m} by {c}" for m, c in own.items()
+        )
     kept = body.get("query", {}).get("kept_area_fraction")
     if _partial(kept):
         title += (

@@ -76,6 +76,11 @@ def test_a_query_of_separate_parts_says_what_was_left_out(service: Service, gall
     assert "Only 80% of the query file's surface was described" in format_matches(body)
     whole = service.query("quadruped-2", k=2).json()
     assert "left out" not in format_matches(whole)
+    # Each modality's comparison: the preset's here; a learned one is named in the table.
+    assert whole["comparisons"] == {"gdm": "D1", "ddt": "D1", "spectrum": "D1"}
+    assert "learned fusion" not in format_matches(whole)
+    learned = {**whole, "comparisons": {**whole["comparisons"], "spectrum": "reweighted euclidean"}}
+    assert "learned fusion: spectrum by reweighted euclidean" in format_matches(learned)
 
 
 def test_a_cut_query_is_ranked_by_its_parts_and_says_so(service: Service, gallery):
