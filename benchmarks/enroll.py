@@ -83,15 +83,17 @@ def run(url: str) -> None:
 
 
 def compare_calibration(client: httpx.Client, labels: dict[str, str], ids: dict[str, int]) -> None:
-    """Wait for the gallery's fusion fit on every labelled mesh (and the calibration after
-    it), print what it chose and why, and compare ``GET /calibration``'s EERs with the
+    """Wait for the gallery's fusion fit and calibration on every labelled mesh, print
+    what the fit chose and why, and compare ``GET /calibration``'s EERs with the
     engine's on the same files: each modality by its comparison in use, and the fused
     score under the fusion in use (:func:`worker.engine.compare.fused_dissimilarity`)."""
     deadline = time.monotonic() + 600
     while True:
         live = client.get("/calibration").json()
         fusion = live["fusion"]
-        if fusion["labelled_shapes"] == len(ids) and live["fitted_at"] >= fusion["fitted_at"]:
+        # The calibration follows an adopted fusion at once; the comparison below shows
+        # which fusion it calibrated.
+        if fusion["labelled_shapes"] == len(ids) == live["labelled_shapes"]:
             break
         if time.monotonic() > deadline:
             raise TimeoutError(f"no fusion fit on all {len(ids)} meshes: {fusion['reason']}")

@@ -181,6 +181,7 @@ def fusion_out(fusion: GalleryFusion, preset: Preset) -> FusionOut:
             )
             for fold in tuning.folds
         ],
+        rounds=0 if tuning is None else tuning.repeats,
         held_out=None if tuning is None else _scores(tuning.held_out),
         preset_held_out=None if tuning is None else _scores(tuning.preset_held_out),
         adoption=None if fusion.adoption is None else AdoptionOut(**asdict(fusion.adoption)),

@@ -65,7 +65,10 @@ class FusionOut(BaseModel):
     labelled_shapes: int = Field(description="labelled shapes learned on (0: none)")
     labels: int
     sampled: bool = Field(description="learned on a stratified sample of the labelled shapes")
-    folds: list[FusionFold] = Field(description="the cross-validation, fold by fold")
+    folds: list[FusionFold] = Field(
+        description="the cross-validation, fold by fold: each round's folds in turn"
+    )
+    rounds: int = Field(description="rounds of the folds, each dealt from its own seed (0: none)")
     held_out: RecognitionScores | None = Field(
         description="the folds' choices on their held-out shapes (mean over the folds)"
     )

@@ -581,11 +581,19 @@ function showFusion(fusion) {
   const folds = $("calibration-folds");
   folds.hidden = fusion.folds.length === 0;
   if (folds.hidden) return;
-  const scores = (s) => [percent(s.eer), percent(s.map)];
-  fillRows(folds, [
-    ...fusion.folds.map((f, i) => [String(i + 1), String(f.held_out_shapes),
-      weighed(f.weights, f.comparisons), ...scores(f.held_out), ...scores(f.preset)]),
-    ["mean", String(fusion.labelled_shapes), "", ...scores(fusion.held_out), ...scores(fusion.preset_held_out)],
+  // Rounds of the folds, each dealt from its own seed: every round holds each mesh out once.
+  const rounds = fusion.rounds;
+  const perRound = fusion.folds.length / rounds;
+  const test = fusion.adoption;
+  folds.querySelector("summary").textContent = `How the fusion was chosen: ${fusion.folds.length} `
+    + `folds in ${rounds} round${rounds > 1 ? "s" : ""}`
+    + (test ? `, a gain of ${(100 * test.gain).toFixed(2)} points over the preset's `
+      + `(${test.adopted ? "beyond" : "within"} the folds' noise)` : "");
+  const scores = (s) => [(100 * s.eer).toFixed(1) + "%", (100 * s.map).toFixed(1) + "%"];
+  fillRows(folds.querySelector("table"), [
+    ...fusion.folds.map((f, i) => [String(Math.floor(i / perRound) + 1), String((i % perRound) + 1),
+      String(f.held_out_shapes), weighed(f.weights, f.comparisons), ...scores(f.held_out), ...scores(f.preset)]),
+    ["mean", "", String(fusion.labelled_shapes), "", ...scores(fusion.held_out), ...scores(fusion.preset_held_out)],
   ]);
 }
 

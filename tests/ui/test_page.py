@@ -228,9 +228,19 @@ def test_calibration_says_what_it_needs_then_draws_the_roc(page, site):
         page.wait_for_timeout(500)
     fusion = page.locator("#calibration-fusion").inner_text()
     assert "held-out EER" in fusion and ("learned" in fusion or "the preset's" in fusion)
+    summary = folds.locator("summary")
+    assert summary.inner_text().startswith("How the fusion was chosen: ")
+    assert " folds in 10 rounds, a gain of " in summary.inner_text()
     rows = folds.locator("tbody tr")
-    assert rows.count() >= 3 and rows.last.locator("td").first.inner_text() == "mean"
-    assert rows.last.locator("td").nth(1).inner_text() == "11"  # 4 birds, 4 quadrupeds, 3 hands
+    assert not rows.first.is_visible()  # folded until asked for
+    summary.click()
+    assert rows.first.is_visible()
+    assert rows.count() >= 3 * 10 + 1 and rows.last.locator("td").first.inner_text() == "mean"
+    assert rows.last.locator("td").nth(2).inner_text() == "11"  # 4 birds, 4 quadrupeds, 3 hands
+    assert [rows.nth(i).locator("td").first.inner_text() for i in (0, rows.count() - 2)] == [
+        "1",
+        "10",
+    ]  # round of the first and the last fold
     shoot(page, "calibration")
 
 
