@@ -171,8 +171,8 @@ def learn_gallery_fusion(
         weights, comparisons = dict(tuning.weights), dict(tuning.comparisons)
         reason = f"learned: {measured}"
     else:
-        kept = preset_fusion(preset, "")
-        weights, comparisons = kept.weights, kept.comparisons
+        weights = {m: preset.weight(m) for m in preset.scored_modalities}
+        comparisons = _comparisons(preset)
         reason = (
             "the preset's weights: the learned ones were not better beyond the folds' "
             f"noise; {measured}"
