@@ -49,12 +49,8 @@ from . import metrics
 GRID = (0.0, 0.125, 0.25, 0.5, 1.0)
 #: Folds of the cross-validation.
 FOLDS = 5
-#: Rounds of the folds (each dealt from its own seed) a gallery decides on. One split of
-#: a few dozen objects decides by chance, and a decision that flips with the split would
-#: flip the ranking with it: on TOSCA (sorted by name) the adoption test's statistic
-#: ranged from -0.15 to 1.92 over eight single rounds and from 0.99 to 2.03 over three
-#: batches of three, but from 2.73 to 5.42 (every one above its 1.68) over three batches
-#: of ten (Bouckaert and Frank 2004 recommend ten rounds for a replicable test).
+#: Rounds of the folds (each dealt from its own seed) a gallery decides on: fewer let the
+#: split decide (docs/decisions.md, "A collection learns each modality's comparison").
 REPEATS = 10
 #: A gallery adopts the learned fusion when the held-out folds favour it beyond their
 #: noise: the one-sided corrected resampled t-test (:meth:`FusionTuning.adoption`) of the
