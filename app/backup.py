@@ -22,12 +22,10 @@ deployments are backed up with ``pg_dump`` instead (docs/deployment.md).
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import shutil
 import sqlite3
-import sys
 import time
 from contextlib import closing
 from pathlib import Path
@@ -178,66 +176,3 @@ def restore(source: Path, settings: Settings) -> dict[str, Any]:
     shutil.copyfile(source / DATABASE, target)  # last: a half restore has no database
     upgrade_head(settings.sqlalchemy_url)  # a backup of an earlier version: its migrations
     return manifest
-
-
-# ----------------------------------------------------------------------------- CLI
-def _settings(args: argparse.Namespace) -> Settings:
-    return Settings(data_dir=Path(args.data_dir)) if args.data_dir else Settings()
-
-
-def _backup(args: argparse.Namespace) -> int:
-    try:
-        manifest = backup(_settings(args), Path(args.dest))
-    except BackupError as exc:
-        print(f"shapes backup: {exc}", file=sys.stderr)
-        return 1
-    size = sum(f["bytes"] for f in manifest["files"].values())
-    print(
-        f"Backed up {manifest['meshes']} meshes ({manifest['descriptors']} descriptors) to "
-        f"{args.dest}: {len(manifest['files'])} files, {size / 1e6:.1f} MB, checksums in "
-        f"{MANIFEST}."
-        + (
-            f" Left out (deleted meanwhile): {manifest['left_out']}."
-            if manifest["left_out"]
-            else ""
-        )
-    )
-    return 0
-
-
-def _restore(args: argparse.Namespace) -> int:
-    settings = _settings(args)
-    try:
-        manifest = restore(Path(args.source), settings)
-    except BackupError as exc:
-        print(f"shapes restore: {exc}", file=sys.stderr)
-        return 1
-    print(
-        f"Restored {manifest['meshes']} meshes (backed up {manifest['created_at']}) into "
-        f"{settings.data_dir}; start the service on it."
-    )
-    return 0
-
-
-def add_subcommands(sub: Any) -> None:
-    """``shapes backup`` and ``shapes restore`` on the CLI's subparsers."""
-    data_dir = "the service's data directory (default: SHAPES_DATA_DIR, else ./data)"
-    command = sub.add_parser(
-        "backup",
-        help="copy a live gallery (database, uploads, index) to a new directory",
-        description="Back up the embedded deployment while it runs: the SQLite database "
-        "(online, SQLite's backup API), the uploaded files, the saved index and a manifest "
-        "with checksums. PostgreSQL: use pg_dump.",
-    )
-    command.add_argument("dest", help="the backup directory to create")
-    command.add_argument("--data-dir", help=data_dir)
-    command.set_defaults(run=_backup)
-    command = sub.add_parser(
-        "restore",
-        help="bring a backup back into an empty data directory",
-        description="Check a backup's checksums and copy it into an empty data directory; "
-        "then start the service on it.",
-    )
-    command.add_argument("source", help="a directory written by shapes backup")
-    command.add_argument("--data-dir", help=data_dir)
-    command.set_defaults(run=_restore)

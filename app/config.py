@@ -8,7 +8,7 @@ from typing import Literal
 
 from pydantic import Field, SecretStr, model_validator
 
-from worker.engine.mesh_io import DEFAULT_MAX_FACES
+from worker.engine.formats import DEFAULT_MAX_FACES
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.jobs.settings import QueueSettings
 

@@ -10,11 +10,11 @@ from fastapi.security import APIKeyHeader
 from pydantic import BeforeValidator
 from sqlalchemy.orm import Session
 
-from .collections.service import NAME_PATTERN
 from .db import unit_of_work
 from .errors import ForbiddenError, InvalidInputError, UnauthorizedError
 from .gallery.service import Gallery
-from .keys.service import Grant
+from .keyring import Grant
+from .links import NAME_PATTERN
 from .models import DEFAULT_COLLECTION, Scope
 from .state import AppState
 from .storage import ReceivedFile
@@ -48,7 +48,7 @@ def get_state(request: Request) -> AppState:
 StateDep = Annotated[AppState, Depends(get_state)]
 
 
-def collection_path(
+def collection_parameter(
     collection: Annotated[
         str, Path(pattern=NAME_PATTERN, description="the collection's name (GET /collections)")
     ],

@@ -17,29 +17,29 @@ from fastapi.staticfiles import StaticFiles
 
 from worker.engine.presets import get_preset
 
-from .calibration.router import router as calibration_router
 from .collections.router import include_scoped, openapi_with_scoped
 from .collections.router import router as collections_router
+from .collector import JobCollector
 from .config import Settings, get_settings
 from .db import DATABASE_ERRORS, make_engine, make_session_factory
 from .deps import document_open_access
 from .errors import install_error_handlers
-from .gallery.fusion import pinned_fusion
-from .gallery.registry import Galleries
-from .jobs.collector import JobCollector
+from .galleries import Galleries
+from .gallery.weights import pinned_fusion
 from .jobs.router import router as jobs_router
+from .keyring import KeyRing
 from .keys.router import router as keys_router
-from .keys.service import KeyRing
 from .meshes.router import router as meshes_router
 from .metrics import Metrics, RequestMetricsMiddleware
 from .migrations import upgrade_head
 from .queue import QUEUE_ERRORS, DescriptorQueue
-from .search.recent import Recent
+from .recent import Recent
 from .search.router import document_limits
 from .search.router import router as search_router
 from .state import AppState
 from .storage import DatabaseStore, DirectoryStore
 from .system.router import router as system_router
+from .verification.router import router as verification_router
 
 log = logging.getLogger("shapes")
 
@@ -131,7 +131,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             allow_methods=["GET", "POST", "DELETE"],
             allow_headers=["X-API-Key", "Content-Type"],
         )
-    scoped = (meshes_router, search_router, calibration_router)
+    scoped = (meshes_router, search_router, verification_router)
     for router in (*scoped, collections_router, keys_router, jobs_router, system_router):
         app.include_router(router)
     include_scoped(app, scoped)

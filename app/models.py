@@ -212,7 +212,7 @@ class QueryPreview(Base):
 class GalleryChange(Base):
     """One shape entering or leaving the gallery, in commit order: every API process
     follows this log to keep its in-memory index equal to the database
-    (``app/gallery/changes.py``)."""
+    (``app/repositories/changes.py``)."""
 
     __tablename__ = "gallery_changes"
     __table_args__ = {"sqlite_autoincrement": True}  # sequence numbers are never reused

@@ -48,7 +48,7 @@ class QueryMeshError(MeshError):
 
 
 class DescriptorQueue:
-    """Enrollments go to one Huey queue (collected by :mod:`app.jobs.collector`),
+    """Enrollments go to one Huey queue (collected by :mod:`app.collector`),
     queries to another with consumers of their own (:func:`describe_now` waits)."""
 
     def __init__(self, settings: Settings) -> None:

@@ -1,5 +1,6 @@
-"""Shared by every resource: the error body, UTC timestamps, and the OpenAPI description
-of a multipart request body."""
+"""Shared by every resource: the error body, UTC timestamps, the OpenAPI description
+of a multipart request body, and the false acceptance rate a search or a verification
+takes (:func:`parse_far`)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,9 @@ from typing import Annotated, Any
 
 from pydantic import AfterValidator, BaseModel, Field
 
-from worker.engine.mesh_io import MESH_FORMATS
+from worker.engine.formats import MESH_FORMATS
+
+from .errors import InvalidInputError
 
 
 def _as_utc(value: datetime) -> datetime:
@@ -122,3 +125,18 @@ def multipart_body(
     if encoding:
         form["encoding"] = encoding
     return {"requestBody": {"required": True, "content": {"multipart/form-data": form}}}
+
+
+def parse_far(text: str | None) -> float | None:
+    """A false acceptance rate: a number strictly between 0 and 1, or nothing."""
+    if text is None:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not 0.0 < value < 1.0:
+        raise InvalidInputError(
+            "far must be a false acceptance rate between 0 and 1, e.g. 0.01.", code="invalid_far"
+        )
+    return value

@@ -11,11 +11,11 @@ from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.presets import Preset
 
 from .config import Settings
-from .gallery.registry import Galleries
-from .keys.service import KeyRing
+from .galleries import Galleries
+from .keyring import KeyRing
 from .metrics import Metrics
 from .queue import DescriptorQueue
-from .search.recent import Recent
+from .recent import Recent
 from .storage import UploadStore
 
 

@@ -19,7 +19,7 @@ from python_multipart.exceptions import MultipartParseError
 from python_multipart.multipart import MultipartParser, parse_options_header
 from starlette.requests import ClientDisconnect, Request
 
-from worker.engine.mesh_io import mesh_format
+from worker.engine.formats import mesh_format
 
 from .errors import InvalidInputError, PayloadTooLargeError, UnsupportedMediaTypeError
 from .storage import ReceivedFile

@@ -6,7 +6,7 @@ a gallery's fusion fit runs, side by side in one process.
 A gallery of ``--shapes`` synthetic descriptors (the default preset's sizes, 40 labelled
 classes) in the service's index (:class:`app.gallery.index.GalleryIndex`); the same
 queries are searched (k = 10) with no fit running, then while
-:func:`app.gallery.fusion.learn_gallery_fusion` runs again and again in a thread (as the
+:func:`app.gallery.weights.learn_gallery_fusion` runs again and again in a thread (as the
 service runs it, beside the searches), then idle again. Prints the median and p95 of each
 phase, their ratio to idle, and the fit's duration.
 """
@@ -20,8 +20,8 @@ import time
 
 import numpy as np
 
-from app.gallery.fusion import learn_gallery_fusion
 from app.gallery.index import GalleryIndex
+from app.gallery.weights import learn_gallery_fusion
 from worker.engine.presets import DEFAULT_PRESET, MODALITIES, get_preset
 
 CLASSES = 40

@@ -19,7 +19,7 @@ faiss); "build s" adds every shape and fits once, "refit s" is one more refit
 (what searches wait for after 5 % churn).
 
 With ``--collections C``, each size is also enrolled spread over C indexes (whole
-classes each: the service keeps one index per collection, ``app.gallery.registry``, and
+classes each: the service keeps one index per collection, ``app.galleries``, and
 a search ranks its own collection only), and every query is searched in its own
 collection's index too, interleaved with the one gallery's query by query, so that the
 machine's load falls on both alike; recall@10 is against the exhaustive ranking of the

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from worker.cli import main
+from app.cli import main
 from worker.engine import presets
 from worker.engine.descriptor import ShapeDescriptor
 

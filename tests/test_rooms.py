@@ -100,6 +100,127 @@ def test_the_service_never_imports_the_evaluation_harness():
     assert importers == set()
 
 
+#: The floors of ``app/``, top to bottom (docs/architecture.md draws the same house): a
+#: package, or a module at app/'s top level, imports only what stands on a floor below
+#: its own, never a neighbour on its floor; the resources (router and service each)
+#: share a floor, so none reaches into another.
+APP_FLOORS = (
+    ("app.__main__", "app.main", "app.cli"),
+    (
+        "app.collections",
+        "app.jobs",
+        "app.keys",
+        "app.meshes",
+        "app.search",
+        "app.system",
+        "app.verification",
+    ),
+    ("app.deps",),
+    ("app.collector",),
+    ("app.descriptors",),
+    ("app.state",),
+    ("app.galleries", "app.keyring"),
+    ("app.gallery",),
+    ("app.backup", "app.uploads"),
+    (
+        "app.client",
+        "app.links",
+        "app.queue",
+        "app.recent",
+        "app.repositories",
+        "app.schemas",
+        "app.storage",
+    ),
+    ("app.models",),
+    ("app.config", "app.db", "app.errors", "app.metrics", "app.migrations"),
+)
+REPO = Path(worker.__file__).parents[1]
+
+
+def _room(module: str) -> str:
+    """The package or top-level module of app/ that ``module`` belongs to."""
+    return ".".join(module.split(".")[:2])
+
+
+def _app_imports() -> dict[str, set[str]]:
+    """room -> the other rooms of app/ its source imports (relative imports resolved)."""
+    arrows: dict[str, set[str]] = {}
+    for path in sorted((REPO / "app").rglob("*.py")):
+        parts = list(path.relative_to(REPO).with_suffix("").parts)
+        package = parts[:-1]
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        room = _room(".".join(parts))
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = package[: len(package) - node.level + 1] if node.level else []
+                module = ".".join([*base, *([node.module] if node.module else [])])
+                names = [module] + [f"{module}.{alias.name}" for alias in node.names]
+            else:
+                continue
+            for name in names:
+                if name.startswith("app.") and _room(name) != room:
+                    arrows.setdefault(room, set()).add(_room(name))
+    return arrows
+
+
+def test_every_room_of_the_service_stands_on_one_floor():
+    floors = [room for floor in APP_FLOORS for room in floor]
+    rooms = {
+        _room(".".join(p.relative_to(REPO).with_suffix("").parts))
+        for p in (REPO / "app").rglob("*.py")
+        if p.name != "__init__.py" or p.parent != REPO / "app"
+    }
+    assert len(floors) == len(set(floors))
+    assert rooms == set(floors)
+
+
+def test_the_service_imports_only_downwards():
+    floor_of = {room: i for i, floor in enumerate(APP_FLOORS) for room in floor}
+    known = set(floor_of)
+    upward = {
+        (room, target)
+        for room, targets in _app_imports().items()
+        for target in targets
+        if target in known and floor_of[target] <= floor_of[room]
+    }
+    assert upward == set()
+    # Submodules named by attribute (``from app import x``) resolve to rooms too.
+    assert {t for targets in _app_imports().values() for t in targets} <= known
+
+
+def test_the_engines_package_never_imports_the_service():
+    importers = {
+        path.relative_to(REPO).as_posix()
+        for path in (REPO / "worker").rglob("*.py")
+        if any(name.split(".")[0] == "app" for name in _top_level_imports(path))
+    }
+    assert importers == set()
+
+
+def test_the_shapes_command_starts_without_the_engine_the_server_or_the_migrations():
+    loaded = modules_loaded_by("import app.cli\napp.cli.build_parser()")
+    heavy = {"scipy", "trimesh", "tensorly", "fastapi", "sqlalchemy", "alembic", "faiss"}
+    assert {m.split(".")[0] for m in loaded} & heavy == set()
+    assert {m for m in loaded if m.startswith(("app.", "worker."))} <= {
+        "app.cli",
+        "app.client",
+        "worker.cli",
+        "worker.engine",
+        "worker.engine.errors",
+        "worker.engine.formats",
+        "worker.engine.presets",
+        "worker.evaluation",
+        "worker.evaluation.datasets",
+        "worker.recognition",
+        "worker.recognition.fusion",
+        "worker.recognition.metrics",
+        "worker.engine.compare",
+    }
+
+
 def test_the_cli_client_loads_nothing_of_the_server():
     loaded = modules_loaded_by("import app.client")
     assert {m.split(".")[0] for m in loaded} & {"fastapi", "sqlalchemy", "faiss", "huey"} == set()

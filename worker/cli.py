@@ -1,6 +1,9 @@
-"""The ``shapes`` command: ``describe``, ``evaluate``, ``robustness``, ``partiality``,
-``tune`` and ``samples`` (the engine and its evaluation harness), ``import`` and ``query`` (the
-service's HTTP client, :mod:`app.client`)."""
+"""The engine's verbs of the ``shapes`` command: ``describe``, ``evaluate``,
+``robustness``, ``partiality``, ``tune`` and ``samples`` (the engine and its evaluation
+harness). :mod:`app.cli` adds the service's verbs and runs the command.
+
+Each verb loads the engine or the harness when it runs, so that the command's help and
+the service's verbs start at once."""
 
 from __future__ import annotations
 
@@ -14,14 +17,15 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from .engine.errors import MeshError
-from .engine.pipeline import describe_file
 from .engine.presets import DEFAULT_PRESET, PRESETS, UNITS, Preset, get_preset, with_units
 from .evaluation.datasets import DEFAULT_CACHE, RESAMPLINGS
 from .recognition.fusion import FOLDS
 
 
 def _describe(args: argparse.Namespace) -> int:
+    from .engine.errors import MeshError
+    from .engine.pipeline import describe_file
+
     preset = get_preset(args.preset)
     failures = 0
     for path in args.meshes:
@@ -313,9 +317,8 @@ def _add_units_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="shapes", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
+def add_subcommands(sub: Any) -> None:
+    """Register the engine's verbs on the ``shapes`` parser's subparsers."""
     describe = sub.add_parser("describe", help="compute GDM/DDT modal descriptors of meshes")
     describe.add_argument(
         "meshes", nargs="+", help="mesh files (.obj .ply .off .stl .glb .gltf, optionally .gz)"
@@ -430,23 +433,3 @@ def build_parser() -> argparse.ArgumentParser:
     )
     samples.add_argument("out_dir", help="directory to write the meshes and labels.csv in")
     samples.set_defaults(run=_samples)
-
-    # The service's HTTP client (httpx only): shapes import, shapes query; and the
-    # embedded deployment's backup and restore.
-    from app import backup, client
-
-    client.add_subcommands(sub)
-    backup.add_subcommands(sub)
-    return parser
-
-
-def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    args = build_parser().parse_args(argv)
-    args.argv = argv
-    code: int = args.run(args)
-    return code
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

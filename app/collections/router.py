@@ -15,13 +15,13 @@ from ..deps import (
     ReadSessionDep,
     SessionDep,
     StateDep,
-    collection_path,
+    collection_parameter,
 )
+from ..links import NAME_PATTERN, SCOPED_PREFIX
 from ..models import Scope, Units
 from ..schemas import ACCESS_RESPONSES, ERROR_RESPONSES
 from . import service
 from .schemas import CollectionIn, CollectionLinks, CollectionList, CollectionOut, FusionPin
-from .service import NAME_PATTERN, SCOPED_PREFIX
 
 router = APIRouter(
     prefix="/collections", tags=["collections"], responses=ERROR_RESPONSES | ACCESS_RESPONSES
@@ -169,7 +169,7 @@ def include_scoped(app: FastAPI, routers: tuple[APIRouter, ...]) -> None:
         app.include_router(
             router,
             prefix=SCOPED_PREFIX,
-            dependencies=[Depends(collection_path)],
+            dependencies=[Depends(collection_parameter)],
             responses=NO_COLLECTION,
         )
 

@@ -8,9 +8,10 @@ from pydantic import BaseModel, ConfigDict, Field, JsonValue
 
 from worker.engine.presets import PRESETS
 
+from ..links import NAME_PATTERN
 from ..models import Units
 from ..schemas import UtcDatetime
-from .service import MAX_WEIGHT, NAME_PATTERN
+from .service import MAX_WEIGHT
 
 PRESET_NAMES: list[JsonValue] = [name for name in sorted(PRESETS)]
 

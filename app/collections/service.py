@@ -13,27 +13,16 @@ from worker.engine.presets import PRESETS
 
 from ..db import after_commit
 from ..errors import ConflictError, InvalidInputError, NotFoundError
-from ..meshes import repository as meshes
+from ..links import NAME_PATTERN
 from ..models import DEFAULT_COLLECTION, UNFINISHED_JOB, Collection, Units
 from ..queue import QUEUE_ERRORS
+from ..repositories import collections, meshes
 from ..state import AppState
-from . import repository as collections
 
 log = logging.getLogger("shapes.collections")
 
 #: The largest fusion weight a collection may pin (an exponent of the product rule).
 MAX_WEIGHT = 100.0
-#: A collection's name: it is a path segment, so letters, digits, "-" and "_".
-NAME_PATTERN = "^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$"
-
-
-#: Where a collection's own resources are: its meshes, searches and calibration.
-SCOPED_PREFIX = "/collections/{collection}"
-
-
-def collection_path(name: str) -> str:
-    """The path prefix of a collection's resources: none for the default collection."""
-    return "" if name == DEFAULT_COLLECTION else f"/collections/{name}"
 
 
 @dataclass
@@ -113,7 +102,7 @@ def pin_fusion(
 ) -> CollectionView:
     """Pin the collection's fusion weights (None: unpin, so that it learns them again, or
     uses the preset's); every API process's gallery follows at its next sync. A modality
-    left out keeps the preset's weight (:func:`~app.gallery.fusion.pinned_fusion`).
+    left out keeps the preset's weight (:func:`~app.gallery.weights.pinned_fusion`).
 
     Raises
     ------

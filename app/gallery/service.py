@@ -1,11 +1,14 @@
 """A collection's gallery: the one owner of its index, and everything the service asks
-of it (every collection has one; :mod:`.registry` holds them).
+of it (every collection has one; :mod:`app.galleries` holds them and feeds them from
+the database).
 
 The collector adds described shapes, the mesh service removes deleted ones, the
 search service searches; all of them through :class:`Gallery`, which also loads
-the index and reconciles it with the database (the source of truth) at start,
-follows the database's change log after that (what other API processes on the
-same database changed, :mod:`.changes`), saves it, and publishes its size.
+the index and reconciles it with the enrolled shapes it is given at start, applies
+the changes it is given after that (what other API processes on the same database
+changed), keeps the labels its calibration and fusion learn from, saves the index,
+and publishes its size. It takes plain values: ids, labels, descriptors; never a
+database session.
 """
 
 from __future__ import annotations
@@ -14,23 +17,23 @@ import json
 import logging
 import threading
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
-from sqlalchemy.orm import Session, sessionmaker
 
 from worker.engine.compare import partiality, query_weights
 from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.parts import compared_profiles
 from worker.engine.presets import PARTS, Preset
 
-from ..errors import UnavailableError
-from ..meshes import repository as meshes
+from ..errors import ConflictError, UnavailableError
 from ..metrics import Metrics
-from . import changes
-from .calibration import GalleryCalibration, fit_calibration
-from .fusion import (
+from .index import GalleryIndex, Match, SearchStats
+from .pairs import GalleryCalibration, NotEnoughPairs, fit_calibration
+from .persistence import load_index, save_index
+from .weights import (
     IDLE_AFTER_FIT,
     GalleryFusion,
     learn_gallery_fusion,
@@ -39,12 +42,8 @@ from .fusion import (
     restored_fusion,
     saved_fusion,
 )
-from .index import GalleryIndex, Match, SearchStats
-from .persistence import load_index, save_index
 
 log = logging.getLogger("shapes.gallery")
-
-FOLLOW_BATCH = 1000  # changes applied per round of following the log
 
 
 def flat_vectors(descriptor: ShapeDescriptor, preset: Preset) -> dict[str, np.ndarray]:
@@ -69,11 +68,20 @@ def descriptor_vectors(descriptor: ShapeDescriptor, preset: Preset) -> dict[str,
     return vectors
 
 
-def _decoded(
-    rows: Iterable[tuple[int, bytes]], preset: Preset
-) -> Iterator[tuple[int, dict[str, np.ndarray]]]:
-    for mesh_id, blob in rows:
-        yield mesh_id, descriptor_vectors(ShapeDescriptor.from_npz_bytes(blob), preset)
+class Shape(NamedTuple):
+    """An enrolled, described shape as a gallery takes it."""
+
+    mesh_id: int
+    label: str | None
+    descriptor: ShapeDescriptor
+
+
+class Change(NamedTuple):
+    """An entry of the change log: its sequence number, ``add`` or ``remove``, the mesh."""
+
+    seq: int
+    action: str
+    mesh_id: int
 
 
 class Gallery:
@@ -125,7 +133,9 @@ class Gallery:
         self._calibration: GalleryCalibration | None = None
         self._calibration_lock = threading.Lock()
         # The position in the change log this index reflects (see follow).
-        self._followed = 0
+        self.followed = 0
+        # mesh id -> label of the shapes in the index that have one.
+        self._labels: dict[int, str] = {}
 
     # ------------------------------------------------------------- state
     @property
@@ -134,6 +144,9 @@ class Gallery:
 
     def __len__(self) -> int:
         return 0 if self._index is None else len(self._index)
+
+    def __contains__(self, mesh_id: int) -> bool:
+        return self._index is not None and mesh_id in self._index
 
     def _ready(self) -> GalleryIndex:
         if self._index is None:
@@ -146,19 +159,30 @@ class Gallery:
         self.metrics.index_size.labels(self.name).set(len(self))
 
     # ----------------------------------------------------------- changes
-    def add(self, mesh_id: int, descriptor: ShapeDescriptor) -> None:
+    def add(self, shape: Shape) -> None:
         """Make a described shape searchable (no-op while the index is not loaded yet:
         loading reconciles with the database)."""
         with self._lock:
             if self._index is not None:
-                self._index.add(mesh_id, descriptor_vectors(descriptor, self.preset))
+                self._add(self._index, shape)
                 self._version += 1
                 self._publish_size()
+
+    def _add(self, index: GalleryIndex, shape: Shape) -> None:
+        index.add(shape.mesh_id, descriptor_vectors(shape.descriptor, self.preset))
+        self._labelled(shape.mesh_id, shape.label)
+
+    def _labelled(self, mesh_id: int, label: str | None) -> None:
+        if label is None:
+            self._labels.pop(mesh_id, None)
+        else:
+            self._labels[mesh_id] = label
 
     def remove(self, mesh_id: int) -> None:
         """Take a shape out of every search from now on."""
         with self._lock:
             if self._index is not None and self._index.remove(mesh_id):
+                self._labels.pop(mesh_id, None)
                 self._version += 1
                 self._publish_size()
 
@@ -229,10 +253,8 @@ class Gallery:
             for j, mesh_id in enumerate(present)
         }
 
-    def calibration(
-        self, session: Session, *, max_pairs: int, refit_seconds: float
-    ) -> GalleryCalibration:
-        """The verification calibration of the labelled shapes (:mod:`.calibration`).
+    def calibration(self, *, max_pairs: int, refit_seconds: float) -> GalleryCalibration:
+        """The verification calibration of the labelled shapes (:mod:`.pairs`).
 
         Refitted when shapes were added or removed since the last fit, at most every
         ``refit_seconds`` (a fit of the default 200,000 pairs takes about a second);
@@ -242,8 +264,8 @@ class Gallery:
         ------
         UnavailableError
             The index is still loading.
-        NotEnoughPairs
-            Too few labelled pairs to calibrate.
+        ConflictError
+            ``not_calibrated``: too few labelled pairs, with the sentence saying how many.
         """
         index = self._ready()
         with self._calibration_lock:
@@ -254,10 +276,14 @@ class Gallery:
                 or (fit.version != version and time.time() - fit.fitted_at >= refit_seconds)
             )
             if due:
-                labels = meshes.labels(session, self.collection_id)
-                fit = fit_calibration(
-                    index, labels, self.preset, max_pairs=max_pairs, version=version
-                )
+                with self._lock:
+                    labels = dict(self._labels)
+                try:
+                    fit = fit_calibration(
+                        index, labels, self.preset, max_pairs=max_pairs, version=version
+                    )
+                except NotEnoughPairs as exc:
+                    raise ConflictError(str(exc), code="not_calibrated") from None
                 self._calibration = fit
             assert fit is not None
             return fit
@@ -267,7 +293,7 @@ class Gallery:
         """The fusion weights in use, where they came from and why (:mod:`.fusion`)."""
         return self._fusion
 
-    def maybe_refit_fusion(self, read_sessions: sessionmaker[Session], every: float) -> bool:
+    def maybe_refit_fusion(self, every: float) -> bool:
         """Start learning the fusion weights again in a thread of its own when shapes were
         added or removed since the last fit, at most every ``every`` seconds and
         ``IDLE_AFTER_FIT`` times the last fit's duration after it (the collector asks each
@@ -284,9 +310,8 @@ class Gallery:
         pause = max(every, IDLE_AFTER_FIT * fusion.seconds)
         if fusion.tuning is not None and time.time() - fusion.fitted_at < pause:
             return False
-        with read_sessions() as session:
-            labels = meshes.labels(session, self.collection_id)
-        version = self._version
+        with self._lock:
+            labels, version = dict(self._labels), self._version
         self._fusion_thread = threading.Thread(
             target=self._refit_fusion, args=(index, labels, version), name="fusion", daemon=True
         )
@@ -370,46 +395,59 @@ class Gallery:
         self._ready()
 
     # ------------------------------------------------------- load / save
-    def load(self, read_sessions: sessionmaker[Session]) -> None:
-        """The saved index brought up to date with the database, or one rebuilt from it.
+    def load(
+        self,
+        enrolled: Mapping[int, str | None],
+        described: Callable[[set[int] | None], Iterable[Shape]],
+        *,
+        followed: int,
+    ) -> None:
+        """The saved index brought up to date with the enrolled shapes, or one rebuilt.
 
-        A missing, corrupt or other-version index is rebuilt from the stored
-        descriptors; a stale one gets the missing shapes added and the deleted
-        ones removed. A fusion learned before a restart ranks until the first fit.
+        ``enrolled`` maps every described shape's id to its label; ``described(ids)``
+        gives the shapes of those ids (None: all of them), read only for what the saved
+        index lacks; ``followed`` is the change log's position they were read at. A
+        missing, corrupt or other-version index is rebuilt; a stale one gets the missing
+        shapes added and the deleted ones removed. A fusion learned before a restart
+        ranks until the first fit.
         """
         self._restore_fusion()
         preset, directory = self.preset, self.directory
         started = time.perf_counter()
-        with read_sessions() as session:
-            # Read first: a change committed while loading is applied again by follow
-            # (adds and removes are idempotent), never missed.
-            followed = changes.latest(session)
-            db_ids = meshes.descriptor_mesh_ids(
-                session, self.collection_id, preset.name, preset.version
+        missing: set[int] | None
+        try:
+            index = load_index(directory, preset, refit_fraction=self.refit_fraction)
+            if index.store.parts_shape != preset.parts_shape():
+                raise ValueError("index made with other parts profiles")
+            how = "loaded"
+            have = {int(i) for i in index.ids()}
+            for stale in have - enrolled.keys():
+                index.remove(stale)
+            missing = enrolled.keys() - have
+        except ValueError as exc:
+            if directory.exists():
+                log.warning(
+                    "index at %s unusable (%s); rebuilding from the database", directory, exc
+                )
+            index = GalleryIndex(
+                preset,
+                preset.modality_sizes(),
+                refit_fraction=self.refit_fraction,
+                parts_shape=preset.parts_shape(),
             )
-            try:
-                index = load_index(directory, preset, refit_fraction=self.refit_fraction)
-                if index.store.parts_shape != preset.parts_shape():
-                    raise ValueError("index made with other parts profiles")
-                how = "loaded"
-            except ValueError as exc:
-                if directory.exists():
-                    log.warning(
-                        "index at %s unusable (%s); rebuilding from the database", directory, exc
-                    )
-                index = GalleryIndex(
-                    preset,
-                    preset.modality_sizes(),
-                    refit_fraction=self.refit_fraction,
-                    parts_shape=preset.parts_shape(),
-                )
-                rows = meshes.iter_descriptors(
-                    session, self.collection_id, preset.name, preset.version
-                )
-                index.add_many(_decoded(rows, preset))
-                how = "rebuilt"
-            else:
-                self._reconcile(index, db_ids, session)
+            how, missing = "rebuilt", None
+        labels = dict(enrolled)
+
+        def vectors(shapes: Iterable[Shape]) -> Iterator[tuple[int, dict[str, np.ndarray]]]:
+            for shape in shapes:  # streamed: a gallery's descriptors need not fit in memory
+                labels[shape.mesh_id] = shape.label
+                yield shape.mesh_id, descriptor_vectors(shape.descriptor, preset)
+
+        if missing is None:
+            index.add_many(vectors(described(None)))  # one fit at the end
+        elif missing:
+            for mesh_id, shape_vectors in vectors(described(missing)):
+                index.add(mesh_id, shape_vectors)
         log.info(
             "index of %s (%s): %d shapes (%s) in %.2fs",
             self.name,
@@ -420,48 +458,29 @@ class Gallery:
         )
         with self._lock:
             self._index = index
-            self._followed = followed
+            self._labels = {i: label for i, label in labels.items() if label and i in index}
+            self.followed = followed
             self._publish_size()
         self.save()
 
-    def follow(self, read_sessions: sessionmaker[Session]) -> int:
-        """Apply the change log's new entries to the index: shapes that another API
-        process on the same database stored or deleted (this process's own are in
-        the index already). Returns how many entries were read."""
-        if self._index is None:
-            return 0
-        with read_sessions() as session:
-            log_rows = changes.since(session, self.collection_id, self._followed, FOLLOW_BATCH)
-            if not log_rows:
-                return 0
-            index = self._index
-            added = {r.mesh_id for r in log_rows if r.action == "add" and r.mesh_id not in index}
-            p = self.preset
-            rows = meshes.iter_descriptors(session, self.collection_id, p.name, p.version, added)
-            stored = dict(_decoded(rows, p))
+    def follow(self, changes: Sequence[Change], added: Iterable[Shape]) -> None:
+        """Apply entries of the change log: shapes that another API process on the same
+        database stored or deleted (this process's own are in the index already);
+        ``added`` are the described shapes of the ``add`` entries the index lacks."""
+        if self._index is None or not changes:
+            return
+        stored = {shape.mesh_id: shape for shape in added}
         with self._lock:
-            for row in log_rows:
-                if row.action == "add" and row.mesh_id in stored:
-                    self._index.add(row.mesh_id, stored.pop(row.mesh_id))
+            for change in changes:
+                if change.action == "add" and change.mesh_id in stored:
+                    self._add(self._index, stored.pop(change.mesh_id))
                     self._version += 1
-                elif row.action == "remove" and self._index.remove(row.mesh_id):
+                elif change.action == "remove" and self._index.remove(change.mesh_id):
+                    self._labels.pop(change.mesh_id, None)
                     self._version += 1
                 # An add whose descriptor is gone was deleted since: its removal follows.
-            self._followed = log_rows[-1].id
+            self.followed = changes[-1].seq
             self._publish_size()
-        return len(log_rows)
-
-    def _reconcile(self, index: GalleryIndex, db_ids: set[int], session: Session) -> None:
-        have = {int(i) for i in index.ids()}
-        for stale in have - db_ids:
-            index.remove(stale)
-        missing = db_ids - have
-        if missing:
-            p = self.preset
-            for mesh_id, vectors in _decoded(
-                meshes.iter_descriptors(session, self.collection_id, p.name, p.version, missing), p
-            ):
-                index.add(mesh_id, vectors)
 
     @property
     def dirty(self) -> bool:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from ..collections.service import collection_path
 from ..deps import GrantDep, RowId, SessionDep, StateDep, check_grant
+from ..links import collection_path
 from ..models import DEFAULT_COLLECTION, JobStatus, Scope
 from ..schemas import ACCESS_RESPONSES, ERROR_RESPONSES
 from . import service

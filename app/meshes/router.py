@@ -8,7 +8,6 @@ from urllib.parse import quote
 from fastapi import APIRouter, Query, Response, status
 from fastapi.responses import FileResponse
 
-from ..collections.service import collection_path
 from ..deps import (
     READ_ACCESS,
     WRITE_ACCESS,
@@ -19,7 +18,9 @@ from ..deps import (
     StateDep,
     require_file,
 )
+from ..descriptors import enrolled_mesh
 from ..errors import InvalidInputError
+from ..links import collection_path
 from ..models import Descriptor, Mesh, MeshStatus
 from ..schemas import (
     ACCESS_RESPONSES,
@@ -219,7 +220,7 @@ def list_meshes(
     responses=ERRORS | {200: {"description": "The mesh", "links": JOB_LINK}},
 )
 def get_mesh(mesh_id: RowId, gallery: GalleryDep, session: SessionDep) -> MeshOut:
-    mesh = service.get(session, gallery, mesh_id)
+    mesh = enrolled_mesh(session, gallery, mesh_id)
     return mesh_out(mesh, service.descriptor_of(session, gallery, mesh), gallery.name)
 
 

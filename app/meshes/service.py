@@ -12,19 +12,17 @@ from typing import Any
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from worker.engine.mesh_io import mesh_format
+from worker.engine.formats import mesh_format
 
 from ..db import after_commit
+from ..descriptors import TRANSIENT_FAILURES, enqueue_soon, enrolled_mesh, lost, new_job
 from ..errors import ConflictError, InvalidInputError, NotFoundError
-from ..gallery import changes
 from ..gallery.service import Gallery
-from ..jobs import repository as jobs
-from ..jobs.service import TRANSIENT_FAILURES, enqueue_soon, lost, new_job
 from ..models import UNFINISHED_JOB, Descriptor, Mesh, MeshStatus, Preview
 from ..queue import QUEUE_ERRORS
+from ..repositories import changes, jobs, meshes
 from ..state import AppState
 from ..storage import ReceivedFile
-from . import repository as meshes
 
 log = logging.getLogger("shapes.meshes")
 
@@ -142,19 +140,11 @@ def _same_format(existing: Mesh, upload: ReceivedFile) -> None:
         )
 
 
-def get(session: Session, gallery: Gallery, mesh_id: int) -> Mesh:
-    """The collection's mesh ``mesh_id`` (another collection's is not found here)."""
-    mesh = meshes.get(session, mesh_id)
-    if mesh is None or mesh.collection_id != gallery.collection_id:
-        raise NotFoundError(f"There is no mesh with id {mesh_id} in collection {gallery.name!r}.")
-    return mesh
-
-
 def original_file(
     session: Session, state: AppState, gallery: Gallery, mesh_id: int
 ) -> tuple[Mesh, Path | bytes]:
     """The mesh and its uploaded file (a local path, or the bytes from the database)."""
-    mesh = get(session, gallery, mesh_id)
+    mesh = enrolled_mesh(session, gallery, mesh_id)
     file = state.store.read(session, mesh.storage_path)
     if file is None:
         raise NotFoundError(
@@ -174,7 +164,7 @@ def preview(session: Session, gallery: Gallery, mesh_id: int) -> Preview:
     ConflictError
         ``mesh_not_ready``: it is queued or being described; the preview comes with it.
     """
-    mesh = get(session, gallery, mesh_id)
+    mesh = enrolled_mesh(session, gallery, mesh_id)
     stored = meshes.get_preview(session, mesh_id)
     if stored is not None:
         return stored
@@ -189,7 +179,7 @@ def preview(session: Session, gallery: Gallery, mesh_id: int) -> Preview:
 def delete(session: Session, state: AppState, gallery: Gallery, mesh_id: int) -> None:
     """Delete a mesh, its descriptors and jobs, and its file unless another collection
     enrolled the same bytes; it leaves the index at once (after commit)."""
-    mesh = get(session, gallery, mesh_id)
+    mesh = enrolled_mesh(session, gallery, mesh_id)
     task_ids = [j.task_id for j in mesh.jobs if j.status in UNFINISHED_JOB]
     if not meshes.storage_shared(session, mesh.storage_path, gallery.collection_id):
         state.store.remove(session, mesh.storage_path)

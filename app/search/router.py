@@ -9,7 +9,6 @@ from fastapi import APIRouter, Depends, Path, Request, Response
 
 from worker.engine.presets import PRESETS
 
-from ..collections.service import SCOPED_PREFIX
 from ..deps import (
     READ_ACCESS,
     GalleryDep,
@@ -21,6 +20,7 @@ from ..deps import (
     require_file,
 )
 from ..errors import InvalidInputError, NotFoundError
+from ..links import SCOPED_PREFIX
 from ..schemas import (
     ACCESS_RESPONSES,
     ERROR_RESPONSES,

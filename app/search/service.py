@@ -8,32 +8,23 @@ results are domain objects the router turns into responses.
 
 from __future__ import annotations
 
-import logging
-import time
-import uuid
 from dataclasses import dataclass, field
-from typing import Literal
 
 from sqlalchemy.orm import Session
 
 from worker.engine.descriptor import ShapeDescriptor
-from worker.engine.mesh_io import mesh_format
 from worker.engine.presets import MODALITIES, PRESETS, Preset
 from worker.recognition.calibration import Calibration
 
-from ..collections.service import collection_path
-from ..db import DATABASE_ERRORS, unit_of_work
+from ..descriptors import DescriptorSource, stored_descriptor, upload_descriptor
 from ..errors import ConflictError, InvalidInputError
-from ..gallery.calibration import GalleryCalibration, NotEnoughPairs
 from ..gallery.service import Gallery
-from ..meshes import repository as meshes
-from ..meshes import service as mesh_service
-from ..models import Mesh, MeshStatus
+from ..links import collection_path
+from ..models import Mesh
+from ..repositories import meshes, query_previews
+from ..schemas import parse_far
 from ..state import AppState
 from ..storage import ReceivedFile
-from . import repository
-
-log = logging.getLogger("shapes.search")
 
 #: The search options a client may send, with ``POST /query``'s file.
 OPTION_NAMES = ("k", "preset", "fusion", "modalities", "far")
@@ -41,9 +32,6 @@ DEFAULT_K = 10
 #: What :func:`parse_modalities` accepts (documented in the schema): blank, or names
 #: separated by commas, spaces and empty items allowed.
 MODALITIES_PATTERN = "^ *$|^[ ,]*(gdm|ddt|spectrum)( *,[ ,]*(gdm|ddt|spectrum))*[ ,]*$"
-
-
-DescriptorSource = Literal["computed", "enrolled", "recent", "stored"]
 
 
 @dataclass(frozen=True)
@@ -169,21 +157,6 @@ def check_k(state: AppState, k: int) -> int:
     return k
 
 
-def parse_far(text: str | None) -> float | None:
-    """A false acceptance rate: a number strictly between 0 and 1, or nothing."""
-    if text is None:
-        return None
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not 0.0 < value < 1.0:
-        raise InvalidInputError(
-            "far must be a false acceptance rate between 0 and 1, e.g. 0.01.", code="invalid_far"
-        )
-    return value
-
-
 def parse_options(
     state: AppState,
     gallery: Gallery,
@@ -218,25 +191,6 @@ def parse_options(
         far=parse_far(_blank_to_none(far)),
     )
     return options
-
-
-def current_calibration(session: Session, state: AppState, gallery: Gallery) -> GalleryCalibration:
-    """The gallery's calibration.
-
-    Raises
-    ------
-    ConflictError
-        ``not_calibrated``: too few labelled pairs, with the sentence saying how many.
-    """
-    settings = state.settings
-    try:
-        return gallery.calibration(
-            session,
-            max_pairs=settings.calibration_max_pairs,
-            refit_seconds=settings.calibration_refit_seconds,
-        )
-    except NotEnoughPairs as exc:
-        raise ConflictError(str(exc), code="not_calibrated") from None
 
 
 def query_facts(descriptor: ShapeDescriptor) -> dict[str, int | float]:
@@ -276,7 +230,7 @@ def rank(
         kept = stats.kept_share * (descriptor.kept_area_fraction or 1.0)
         partial = PartialQuery(stats.partiality, max(0.0, 1.0 - kept))
     # The calibration is of whole queries' scores; a part's are on another scale.
-    calibration = None if partial else _calibration_for(session, state, gallery, options)
+    calibration = None if partial else _calibration_for(state, gallery, options)
     threshold = None
     if options.far is not None and calibration is not None:
         assert calibration is not None  # _calibration_for raised otherwise
@@ -312,12 +266,16 @@ def rank(
 
 
 def _calibration_for(
-    session: Session, state: AppState, gallery: Gallery, options: SearchOptions
+    state: AppState, gallery: Gallery, options: SearchOptions
 ) -> Calibration | None:
     """The calibration of the score the options rank by; None if there is none (too few
     labelled pairs), unless a FAR was asked for (then 409)."""
+    settings = state.settings
     try:
-        fit = current_calibration(session, state, gallery)
+        fit = gallery.calibration(
+            max_pairs=settings.calibration_max_pairs,
+            refit_seconds=settings.calibration_refit_seconds,
+        )
     except ConflictError:
         if options.far is not None:
             raise
@@ -352,7 +310,7 @@ def query_by_upload(
 def _has_preview(session: Session, sha256: str) -> bool:
     """Whether :func:`query_preview` has something for these bytes (no bytes read:
     every search that reuses a descriptor asks)."""
-    if repository.has_query_preview(session, sha256):
+    if query_previews.has_query_preview(session, sha256):
         return True
     return any(meshes.has_preview(session, m.id) for m in meshes.all_by_sha256(session, sha256))
 
@@ -360,78 +318,13 @@ def _has_preview(session: Session, sha256: str) -> bool:
 def query_preview(session: Session, sha256: str) -> bytes | None:
     """The preview (GLB) of recently searched or enrolled bytes (in any collection: the
     same bytes look the same), if one was made."""
-    recent = repository.get_query_preview(session, sha256)
+    recent = query_previews.get_query_preview(session, sha256)
     if recent is not None:
         return recent
     for mesh in meshes.all_by_sha256(session, sha256):
         stored = meshes.get_preview(session, mesh.id)
         if stored is not None:
             return stored.glb
-    return None
-
-
-def _keep_preview(state: AppState, sha256: str, glb: bytes) -> bool:
-    """Store a query's preview where every replica finds it (its own short write, so
-    the search holds no write lock); True once stored. A preview is a convenience:
-    if the database refuses it now, the search still answers."""
-    try:
-        with unit_of_work(state.sessions) as session:
-            repository.put_query_preview(
-                session, sha256, glb, keep=state.settings.query_previews_kept
-            )
-    except DATABASE_ERRORS as exc:
-        log.warning("query preview not stored: %r", exc)
-        return False
-    return True
-
-
-def upload_descriptor(
-    session: Session, state: AppState, upload: ReceivedFile, preset: Preset
-) -> tuple[ShapeDescriptor, DescriptorSource, dict[str, float], bool]:
-    """The descriptor of an uploaded file, where it came from, its timings, and
-    whether a preview of it was stored just now.
-
-    Bytes already described under the preset (an enrolled mesh's file, or a recent
-    query's) answer from that descriptor; others are described by a query worker
-    (blocking, seconds).
-    """
-    started = time.perf_counter()
-    key = (upload.sha256, mesh_format(upload.filename), preset.name, preset.version)
-    source: DescriptorSource = "enrolled"
-    descriptor = _known_descriptor(session, state, upload, preset)
-    if descriptor is None:
-        descriptor, source = state.recent_queries.get(key), "recent"
-    stored_preview = False
-    if descriptor is None:
-        descriptor, preview = state.queue.describe_now(
-            uuid.uuid4().hex, upload.path, upload.filename, preset.name
-        )
-        state.recent_queries.put(key, descriptor)
-        if preview is not None:
-            stored_preview = _keep_preview(state, upload.sha256, preview)
-        source = "computed"
-        timings = dict(descriptor.timings)
-    else:
-        timings = {}
-    timings["describe_wall"] = time.perf_counter() - started
-    return descriptor, source, timings, stored_preview
-
-
-def _known_descriptor(
-    session: Session, state: AppState, upload: ReceivedFile, preset: Preset
-) -> ShapeDescriptor | None:
-    """The stored descriptor of a mesh enrolled (in any collection) with these very bytes,
-    read as the same format (the same bytes named .stl and .obj are different meshes)."""
-    for mesh in meshes.all_by_sha256(session, upload.sha256):
-        if mesh_format(mesh.filename) != mesh_format(upload.filename):
-            continue
-        stored = meshes.get_descriptor(session, mesh.id, preset.name, preset.version)
-        if stored is None:
-            continue
-        descriptor = ShapeDescriptor.from_npz_bytes(stored.data)
-        # One stored before areas were recorded has no size to compare in metric units.
-        if descriptor.area is not None or preset.units != "metric":
-            return descriptor
     return None
 
 
@@ -453,25 +346,3 @@ def similar_to(
     if meshes.has_preview(session, mesh_id):
         result.preview = f"{collection_path(gallery.name)}/meshes/{mesh_id}/preview"
     return result
-
-
-def stored_descriptor(
-    session: Session, gallery: Gallery, mesh_id: int, preset: Preset
-) -> ShapeDescriptor:
-    """A mesh's descriptor under ``preset``, enrolled in ``gallery``'s collection.
-
-    Raises
-    ------
-    NotFoundError
-        No such mesh.
-    ConflictError
-        ``mesh_not_ready``: it has no descriptor yet (queued, processing or failed).
-    """
-    mesh = mesh_service.get(session, gallery, mesh_id)
-    stored = meshes.get_descriptor(session, mesh_id, preset.name, preset.version)
-    if stored is None or mesh.status != MeshStatus.ready.value:
-        raise ConflictError(
-            f"Mesh {mesh_id} is {mesh.status}, not ready; it has no descriptor to compare yet.",
-            code="mesh_not_ready",
-        )
-    return ShapeDescriptor.from_npz_bytes(stored.data)

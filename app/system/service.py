@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from sqlalchemy import text
 
-from ..meshes import repository as meshes
+from ..repositories import meshes
 from ..state import AppState
 
 

@@ -11,6 +11,7 @@ import trimesh
 from conftest import random_rotation
 
 from worker.engine import errors, mesh_io
+from worker.engine.formats import mesh_format
 from worker.engine.mesh_io import (
     CANONICAL_AREA,
     Mesh,
@@ -19,7 +20,6 @@ from worker.engine.mesh_io import (
     clean_surface,
     face_areas,
     load_mesh,
-    mesh_format,
     read_mesh,
     read_numbered_mesh,
 )

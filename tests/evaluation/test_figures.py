@@ -12,7 +12,7 @@ import pytest
 import trimesh
 from conftest import bent_cylinder
 
-from worker.cli import main
+from app.cli import main
 from worker.engine.mesh_io import read_numbered_mesh
 from worker.engine.presets import PRESETS, get_preset
 from worker.engine.resample import carry_resampling, shared_resampling

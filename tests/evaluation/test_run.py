@@ -12,7 +12,7 @@ import pytest
 import trimesh
 from conftest import EXAMPLES, example
 
-from worker.cli import main
+from app.cli import main
 from worker.engine.mesh_io import face_areas, load_mesh
 from worker.engine.presets import PRESETS, SIZE, Preset
 from worker.evaluation import compute

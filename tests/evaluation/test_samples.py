@@ -13,7 +13,7 @@ import trimesh
 from conftest import EXAMPLES, example
 from scipy.spatial import cKDTree
 
-from worker.cli import main
+from app.cli import main
 from worker.engine.compare import dissimilarity, fuse
 from worker.engine.mesh_io import read_mesh
 from worker.engine.presets import DEFAULT_PRESET, get_preset

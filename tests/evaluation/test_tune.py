@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from worker.cli import main
+from app.cli import main
 from worker.engine.presets import PRESETS, Preset
 from worker.evaluation.compute import compute_descriptors, descriptor_vectors
 from worker.evaluation.datasets import read_labels

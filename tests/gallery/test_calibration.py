@@ -8,7 +8,7 @@ from itertools import combinations
 import numpy as np
 import pytest
 
-from app.gallery.calibration import FUSED, fit_calibration
+from app.gallery.pairs import FUSED, fit_calibration
 from worker.engine.compare import dissimilarity, fuse
 from worker.recognition.calibration import calibrate
 

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from app.gallery.fusion import MIN_CLASSES, learn_gallery_fusion, pinned_fusion
 from app.gallery.index import GalleryIndex
 from app.gallery.service import Gallery
+from app.gallery.weights import MIN_CLASSES, learn_gallery_fusion, pinned_fusion
 from app.metrics import Metrics
 from worker.engine.compare import reweighted_euclidean
 from worker.engine.presets import DEFAULT_PRESET, MODALITIES, REWEIGHTED, get_preset

@@ -170,7 +170,7 @@ def test_keys_from_the_command_line(keyed):
     svc, _ = keyed
 
     def shapes(*args: str) -> subprocess.CompletedProcess[str]:
-        command = [sys.executable, "-m", "worker.cli", "keys", *args, "--url", svc.url]
+        command = [sys.executable, "-m", "app.cli", "keys", *args, "--url", svc.url]
         return subprocess.run(
             [*command, "--api-key", ADMIN], cwd=REPO, capture_output=True, text=True, timeout=120
         )

@@ -27,7 +27,7 @@ DURING = {f"{kind}-{pose}": kind for kind in ("bird", "spider") for pose in (0, 
 
 def shapes(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "worker.cli", *args],
+        [sys.executable, "-m", "app.cli", *args],
         cwd=REPO,
         capture_output=True,
         text=True,

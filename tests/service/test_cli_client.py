@@ -26,7 +26,7 @@ def served(tmp_path_factory) -> Iterator[Service]:
 
 def shapes(svc: Service, *args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [sys.executable, "-m", "worker.cli", *args, "--url", svc.url],
+        [sys.executable, "-m", "app.cli", *args, "--url", svc.url],
         cwd=REPO,
         capture_output=True,
         text=True,
@@ -76,7 +76,7 @@ def test_an_interrupted_import_resumes_and_enrolls_nothing_twice(tmp_path_factor
     svc = migrated_service(tmp_path_factory, "interrupt")
     with running(svc, workers=0):
         files = sorted(EXAMPLES.rglob("*.off.gz"))  # the import takes sub-folders too
-        command = [sys.executable, "-m", "worker.cli", "import", str(EXAMPLES), "--url", svc.url]
+        command = [sys.executable, "-m", "app.cli", "import", str(EXAMPLES), "--url", svc.url]
         first = subprocess.Popen(
             [*command, "--concurrency", "1"],
             cwd=REPO,

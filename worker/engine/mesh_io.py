@@ -28,14 +28,11 @@ from .errors import (
     TooFewVerticesError,
     TooManyFacesError,
     UnreadableMeshError,
-    UnsupportedFormatError,
 )
+from .formats import DEFAULT_MAX_DECOMPRESSED_BYTES, DEFAULT_MAX_FACES, mesh_format
 from .tol import TOL
 from .topology import edge_keys, unique_rows, used_vertices
 
-MESH_FORMATS = ("obj", "ply", "off", "stl", "glb", "gltf")
-DEFAULT_MAX_FACES = 2_000_000
-DEFAULT_MAX_DECOMPRESSED_BYTES = 512 * 1024 * 1024
 MIN_VERTICES = 10
 #: Surface area of the canonical frame. fast_simplification collapses, pass after
 #: pass, every edge whose quadric error is below an absolute threshold that grows
@@ -89,23 +86,6 @@ def tiling_edge(area: float, n_vertices: int) -> float:
     """Edge of the equilateral tiling of ``area`` by a closed mesh of ``n_vertices``
     vertices (about ``2 n_vertices`` triangles)."""
     return float(np.sqrt(area / (2 * n_vertices) * 4 / np.sqrt(3)))
-
-
-def mesh_format(filename: str) -> tuple[str, bool]:
-    """Return ``(format, gzipped)`` for a file name, or raise ``UnsupportedFormatError``."""
-    name = Path(filename).name.lower()
-    gzipped = name.endswith(".gz")
-    if gzipped:
-        name = name[: -len(".gz")]
-    ext = name.rsplit(".", 1)[-1] if "." in name else ""
-    if ext not in MESH_FORMATS:
-        shown = f".{ext}" if ext else "no extension"
-        raise UnsupportedFormatError(
-            f"Files with {shown} are not supported; upload one of "
-            + ", ".join(f".{f}" for f in MESH_FORMATS)
-            + " (optionally .gz-compressed)."
-        )
-    return ext, gzipped
 
 
 def _gunzip(data: bytes, limit: int) -> bytes:
@@ -454,7 +434,6 @@ def _read_arrays(
 
 
 __all__ = [
-    "MESH_FORMATS",
     "CleanedMesh",
     "Mesh",
     "MeshError",
@@ -462,7 +441,6 @@ __all__ = [
     "clean_mesh",
     "clean_surface",
     "load_mesh",
-    "mesh_format",
     "read_mesh",
     "read_numbered_mesh",
 ]

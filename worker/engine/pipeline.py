@@ -16,12 +16,12 @@ from .diffusion import (
     normalized_spectrum,
     surface_eigenpairs,
 )
+from .formats import DEFAULT_MAX_FACES
 from .geodesic import farthest_point_samples, geodesic_distance_matrix, sample_distances
 from .holes import boundary_loops, close_small_holes, longest_open_loop
 from .intrinsic import surface_operators
 from .mesh_io import (
     CANONICAL_AREA,
-    DEFAULT_MAX_FACES,
     Mesh,
     canonical_frame,
     face_areas,

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from worker.engine.errors import MeshError
-from worker.engine.mesh_io import mesh_format
+from worker.engine.formats import mesh_format
 from worker.recognition.metrics import natural_sort_key
 
 #: Environment variable naming the directory that holds the shared data sets.

@@ -26,7 +26,7 @@ first object's row) is a held-out one.
 
 Pure numpy on all-to-all dissimilarity matrices: ``shapes tune``, ``shapes evaluate
 --fusion learned`` (a labelled collection described through the evaluation cache) and a
-gallery learning its own fusion (``app/gallery/fusion.py``) weigh with the same code.
+gallery learning its own fusion (``app/gallery/weights.py``) weigh with the same code.
 """
 
 from __future__ import annotations
@@ -38,7 +38,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.stats import t as student_t
 
 from worker.engine.compare import dissimilarity, fuse, gallery_sigma, preset_dissimilarity
 from worker.engine.presets import COMPARISONS, SIZE, Preset
@@ -244,6 +243,10 @@ class FusionTuning:
             statistic = gain / spread
         else:
             statistic = float(np.inf) if gain > 0 else 0.0
+        # Imported here: scipy.stats takes most of a second to load, and the shapes
+        # command (which names FOLDS in its help) must start at once.
+        from scipy.stats import t as student_t
+
         critical = float(student_t.ppf(confidence, k - 1))
         return Adoption(
             gain=gain,

@@ -35,3 +35,7 @@ def mesh_counts(session: Session) -> dict[int, tuple[int, int]]:
 
 def meshes_of(session: Session, collection_id: int) -> Sequence[Mesh]:
     return session.scalars(select(Mesh).where(Mesh.collection_id == collection_id)).all()
+
+
+def get(session: Session, collection_id: int) -> Collection | None:
+    return session.get(Collection, collection_id)

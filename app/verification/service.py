@@ -8,12 +8,11 @@ from sqlalchemy.orm import Session
 
 from worker.recognition.calibration import OPERATING_FARS, Calibration
 
+from ..descriptors import enrolled_mesh, stored_descriptor, upload_descriptor
 from ..errors import InvalidInputError, NotFoundError
-from ..gallery.calibration import FUSED, GalleryCalibration
+from ..gallery.pairs import FUSED, GalleryCalibration
 from ..gallery.service import Gallery
-from ..meshes import repository as meshes
-from ..meshes import service as mesh_service
-from ..search import service as search
+from ..repositories import meshes
 from ..state import AppState
 from ..storage import ReceivedFile
 
@@ -24,9 +23,13 @@ TRUST_RULE = (
 )
 
 
-def calibration(session: Session, state: AppState, gallery: Gallery) -> GalleryCalibration:
+def calibration(state: AppState, gallery: Gallery) -> GalleryCalibration:
     """The gallery's current calibration (``not_calibrated`` 409 with too few pairs)."""
-    return search.current_calibration(session, state, gallery)
+    settings = state.settings
+    return gallery.calibration(
+        max_pairs=settings.calibration_max_pairs,
+        refit_seconds=settings.calibration_refit_seconds,
+    )
 
 
 def operating_points(row: Calibration) -> list[tuple[float, float, float, float]]:
@@ -93,19 +96,19 @@ def verify(
             code="invalid_claim",
         )
     preset = gallery.preset
-    fit = calibration(session, state, gallery)
+    fit = calibration(state, gallery)
     if claim_id is not None:
-        mesh_service.get(session, gallery, claim_id)  # 404 for an unknown id
+        enrolled_mesh(session, gallery, claim_id)  # 404 for an unknown id
         targets = [claim_id]
     else:
         assert claim_label is not None
         targets = meshes.ids_with_label(session, gallery.collection_id, claim_label)
     if upload is not None:
-        descriptor, *_ = search.upload_descriptor(session, state, upload, preset)
+        descriptor, *_ = upload_descriptor(session, state, upload, preset)
         probe = "upload"
     else:
         assert mesh_id is not None
-        descriptor = search.stored_descriptor(session, gallery, mesh_id, preset)
+        descriptor = stored_descriptor(session, gallery, mesh_id, preset)
         probe = f"mesh {mesh_id}"
         targets = [t for t in targets if t != mesh_id]
     scored = gallery.scores(descriptor, targets)

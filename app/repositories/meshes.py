@@ -35,15 +35,6 @@ def storage_shared(session: Session, storage_path: str, collection_id: int) -> b
     return session.scalar(other.limit(1)) is not None
 
 
-def labels(session: Session, collection_id: int) -> dict[int, str]:
-    """mesh id -> label of every mesh of the collection that has one."""
-    query = select(Mesh.id, Mesh.label).where(
-        Mesh.collection_id == collection_id, Mesh.label.is_not(None)
-    )
-    rows = session.execute(query).tuples()
-    return {mesh_id: label for mesh_id, label in rows if label is not None}
-
-
 def ids_with_label(session: Session, collection_id: int, label: str) -> list[int]:
     query = select(Mesh.id).where(Mesh.collection_id == collection_id, Mesh.label == label)
     return list(session.scalars(query.order_by(Mesh.id)))
@@ -133,18 +124,21 @@ def _in_collection(collection_id: int) -> Any:
     return Descriptor.mesh_id.in_(select(Mesh.id).where(Mesh.collection_id == collection_id))
 
 
-def descriptor_mesh_ids(
+def described_labels(
     session: Session, collection_id: int, preset: str, version: int
-) -> set[int]:
-    return set(
-        session.scalars(
-            select(Descriptor.mesh_id).where(
-                _in_collection(collection_id),
-                Descriptor.preset == preset,
-                Descriptor.preset_version == version,
-            )
+) -> dict[int, str | None]:
+    """mesh id -> label (None without one) of a collection's meshes with a descriptor of
+    this preset version."""
+    query = (
+        select(Mesh.id, Mesh.label)
+        .join(Descriptor, Descriptor.mesh_id == Mesh.id)
+        .where(
+            Mesh.collection_id == collection_id,
+            Descriptor.preset == preset,
+            Descriptor.preset_version == version,
         )
     )
+    return dict(session.execute(query).tuples().all())
 
 
 def description_progress(
@@ -175,12 +169,17 @@ def iter_descriptors(
     version: int,
     mesh_ids: set[int] | None = None,
     batch: int = 500,
-) -> Iterator[tuple[int, bytes]]:
-    """(mesh id, npz bytes) of a collection's stored descriptors, streamed in batches."""
-    query = select(Descriptor.mesh_id, Descriptor.data).where(
-        _in_collection(collection_id),
-        Descriptor.preset == preset,
-        Descriptor.preset_version == version,
+) -> Iterator[tuple[int, str | None, bytes]]:
+    """(mesh id, label, npz bytes) of a collection's stored descriptors, streamed in
+    batches."""
+    query = (
+        select(Descriptor.mesh_id, Mesh.label, Descriptor.data)
+        .join(Mesh, Mesh.id == Descriptor.mesh_id)
+        .where(
+            Mesh.collection_id == collection_id,
+            Descriptor.preset == preset,
+            Descriptor.preset_version == version,
+        )
     )
     if mesh_ids is not None:
         ids = sorted(mesh_ids)

@@ -14,7 +14,7 @@ heartbeats of unfinished jobs from the queue's key-value store and
 * every ``sweep_interval_seconds``, enqueues the unfinished jobs the queue does not
   know (accepted while it was down, or lost with its data);
 * after changes, at most every ``calibration_refit_seconds``, starts learning the
-  gallery's fusion weights again (in a thread of its own: :mod:`app.gallery.fusion`).
+  gallery's fusion weights again (in a thread of its own: :mod:`app.gallery.weights`).
 
 Results are read without removing them and deleted only after the commit, so
 a crash in between makes the collector store the same result again (at least
@@ -23,7 +23,7 @@ once, idempotent), never lose it.
 Several API processes on one database each run a collector. They are safe
 together: a round locks the unfinished jobs it reads (``FOR UPDATE SKIP LOCKED``
 on PostgreSQL; SQLite has one writer anyway), so each result is stored by one of
-them, and every stored descriptor and deletion is logged (:mod:`app.gallery.changes`)
+them, and every stored descriptor and deletion is logged (:mod:`app.repositories.changes`)
 for the others' indexes, which each collector applies after its round.
 """
 
@@ -42,14 +42,13 @@ from sqlalchemy.orm import Session
 from worker.engine.descriptor import ShapeDescriptor
 from worker.jobs.queue import descriptor_npz, preview_bytes
 
-from ..db import unit_of_work
-from ..gallery import changes
-from ..meshes import repository as meshes
-from ..models import Descriptor, Job, JobStatus, MeshStatus, utcnow
-from ..queue import QUEUE_ERRORS
-from ..state import AppState
-from . import repository as jobs
-from .service import enqueue_job, enqueue_soon, lost, new_job
+from .db import unit_of_work
+from .descriptors import enqueue_job, enqueue_soon, lost, new_job
+from .gallery.service import Shape
+from .models import Descriptor, Job, JobStatus, MeshStatus, utcnow
+from .queue import QUEUE_ERRORS
+from .repositories import changes, jobs, meshes
+from .state import AppState
 
 log = logging.getLogger("shapes.collector")
 
@@ -156,7 +155,7 @@ class JobCollector:
     def run_once(self) -> int:
         """One pass over unfinished jobs; returns how many changed."""
         state = self.state
-        ready: list[tuple[int, int, ShapeDescriptor]] = []
+        ready: list[tuple[int, Shape]] = []
         finished: list[str] = []
         requeue: list[Job] = []
         changed = 0
@@ -177,16 +176,17 @@ class JobCollector:
                     if result is not None:
                         descriptor = self._finish(session, job, result)
                         if descriptor is not None:
-                            ready.append((job.mesh.collection_id, job.mesh_id, descriptor))
+                            shape = Shape(job.mesh_id, job.mesh.label, descriptor)
+                            ready.append((job.mesh.collection_id, shape))
                         finished.append(job.task_id)
                         changed += 1
                     elif (beat := beats.get(job.task_id)) is not None:
                         changed += self._track(job, beat, requeue)
             # Committed: now the index and the queue may follow.
-            for collection_id, mesh_id, descriptor in ready:
+            for collection_id, shape in ready:
                 gallery = state.galleries.of(collection_id)
                 if gallery is not None:  # else its collection was deleted meanwhile
-                    gallery.add(mesh_id, descriptor)
+                    gallery.add(shape)
         for task_id in finished:
             state.queue.forget(task_id)
         for job in requeue:

@@ -19,21 +19,20 @@ from ..deps import (
     GalleryDep,
     MultipartDep,
     ReadSessionDep,
-    SessionDep,
     StateDep,
     require_file,
 )
 from ..errors import InvalidInputError
-from ..gallery.calibration import FUSED
-from ..gallery.fusion import GalleryFusion
+from ..gallery.pairs import FUSED
+from ..gallery.weights import GalleryFusion
 from ..schemas import (
     ACCESS_RESPONSES,
     ERROR_RESPONSES,
     FILE_RESPONSES,
     MESH_FILE,
     multipart_body,
+    parse_far,
 )
-from ..search.service import parse_far
 from . import service
 from .schemas import (
     AdoptionOut,
@@ -114,8 +113,8 @@ def _operating_points(row: Calibration) -> list[OperatingPoint]:
     ),
     responses=NOT_CALIBRATED,
 )
-def get_calibration(gallery: GalleryDep, session: SessionDep, state: StateDep) -> CalibrationOut:
-    fit = service.calibration(session, state, gallery)
+def get_calibration(gallery: GalleryDep, state: StateDep) -> CalibrationOut:
+    fit = service.calibration(state, gallery)
     row = fit.rows[FUSED]
     keep = np.unique(np.linspace(0, len(row.far) - 1, min(ROC_POINTS, len(row.far))).astype(int))
     preset = gallery.preset

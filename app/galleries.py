@@ -1,5 +1,6 @@
 """Every collection's gallery (:class:`Galleries`): made from the ``collections`` table,
-kept equal to it on every API process.
+kept equal to it on every API process, and fed from the database: each gallery loaded
+from its collection's stored descriptors and labels, then following the change log.
 
 A collection created or deleted through one process reaches the others when their
 collector next syncs (every round), or at once when a request names a collection
@@ -18,17 +19,20 @@ from pathlib import Path
 
 from sqlalchemy.orm import Session, sessionmaker
 
+from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.presets import Preset, get_preset, with_units
 
-from ..collections import repository as collections
-from ..config import Settings
-from ..errors import NotFoundError
-from ..metrics import Metrics
-from ..models import DEFAULT_COLLECTION, Collection
-from .fusion import pinned_fusion
-from .service import Gallery
+from .config import Settings
+from .errors import NotFoundError
+from .gallery.service import Change, Gallery, Shape
+from .gallery.weights import pinned_fusion
+from .metrics import Metrics
+from .models import DEFAULT_COLLECTION, Collection
+from .repositories import changes, collections, meshes
 
 log = logging.getLogger("shapes.gallery")
+
+FOLLOW_BATCH = 1000  # changes applied per round of following the log
 
 #: Where a collection's own pinned weights are set (the reason /calibration shows).
 PINNED_HERE = "PUT /collections/{name}/fusion"
@@ -148,7 +152,7 @@ class Galleries:
             new = [spec for i, spec in specs.items() if i not in self._by_id]
             for spec in new:
                 gallery = self._make(spec)
-                gallery.load(self.read_sessions)
+                self._load(gallery)
                 self._specs[spec.id] = spec
                 self._by_id[spec.id] = gallery
             self._synced = True
@@ -195,14 +199,52 @@ class Galleries:
             fusion_max_shapes=settings.fusion_max_shapes,
         )
 
+    def _described(
+        self, session: Session, gallery: Gallery, mesh_ids: set[int] | None
+    ) -> Iterator[Shape]:
+        """The gallery's stored shapes of ``mesh_ids`` (None: all), decoded."""
+        p = gallery.preset
+        rows = meshes.iter_descriptors(session, gallery.collection_id, p.name, p.version, mesh_ids)
+        for mesh_id, label, blob in rows:
+            yield Shape(mesh_id, label, ShapeDescriptor.from_npz_bytes(blob))
+
+    def _load(self, gallery: Gallery) -> None:
+        """Load a gallery's index: the saved one reconciled with the database, or one
+        rebuilt from it (:meth:`Gallery.load`)."""
+        p = gallery.preset
+        with self.read_sessions() as session:
+            # Read first: a change committed while loading is applied again by follow
+            # (adds and removes are idempotent), never missed.
+            followed = changes.latest(session)
+            enrolled = meshes.described_labels(session, gallery.collection_id, p.name, p.version)
+            gallery.load(
+                enrolled,
+                lambda ids: self._described(session, gallery, ids),
+                followed=followed,
+            )
+
     # --------------------------------------------------------- each round
     def follow(self) -> int:
-        """Apply every collection's change-log entries (:meth:`Gallery.follow`)."""
-        return sum(g.follow(self.read_sessions) for g in self)
+        """Apply every collection's new change-log entries (:meth:`Gallery.follow`);
+        returns how many entries were read."""
+        return sum(self._follow(g) for g in self)
+
+    def _follow(self, gallery: Gallery) -> int:
+        if not gallery.loaded:
+            return 0
+        with self.read_sessions() as session:
+            rows = changes.since(session, gallery.collection_id, gallery.followed, FOLLOW_BATCH)
+            if not rows:
+                return 0
+            log_rows = [Change(r.id, r.action, r.mesh_id) for r in rows]
+            added = {c.mesh_id for c in log_rows if c.action == "add" and c.mesh_id not in gallery}
+            shapes = list(self._described(session, gallery, added)) if added else []
+        gallery.follow(log_rows, shapes)
+        return len(log_rows)
 
     def maybe_refit_fusion(self, every: float) -> None:
         for gallery in self:
-            gallery.maybe_refit_fusion(self.read_sessions, every)
+            gallery.maybe_refit_fusion(every)
 
     @property
     def dirty(self) -> bool:
