@@ -68,6 +68,15 @@ class Settings(QueueSettings):
     max_k: int = Field(default=100, ge=1)
     max_page_size: int = Field(default=200, ge=1)
 
+    # Database
+    database_timeout_seconds: float = Field(
+        default=3.0,
+        gt=0,
+        description="PostgreSQL: a request whose database does not answer within this "
+        "long (connecting, a statement, a commit) answers 503 with Retry-After instead of "
+        "waiting (the migrations at start are not bounded)",
+    )
+
     # Jobs
     query_timeout_seconds: float = Field(default=120.0, gt=0)
     query_cache_size: int = Field(

@@ -83,7 +83,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         await anyio.to_thread.run_sync(upgrade_head, settings.sqlalchemy_url)
         if settings.fusion_weights is not None:  # refused at start, not in the background
             pinned_fusion(preset, settings.fusion_weights)
-        engine = make_engine(settings.sqlalchemy_url)
+        engine = make_engine(
+            settings.sqlalchemy_url, timeout_seconds=settings.database_timeout_seconds
+        )
         read_sessions = make_session_factory(engine, read_only=True)
         state = AppState(
             settings=settings,

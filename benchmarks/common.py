@@ -414,6 +414,29 @@ class Postgres:
         self._run(_postgres_bin("pg_ctl"), "-D", str(self.root / "data"), "-m", "immediate",
                   "stop")  # fmt: skip
 
+    def _processes(self) -> list[int]:
+        """The cluster's processes: the postmaster (its pid file's first line) and its
+        children."""
+        postmaster = int((self.root / "data" / "postmaster.pid").read_text().split()[0])
+        children = []
+        for stat in Path("/proc").glob("[0-9]*/stat"):
+            try:
+                if int(stat.read_text().rsplit(")", 1)[1].split()[1]) == postmaster:
+                    children.append(int(stat.parent.name))
+            except (OSError, ValueError):  # gone meanwhile
+                continue
+        return [postmaster, *children]
+
+    def freeze(self) -> None:
+        """Stop every process of the server (SIGSTOP): connections stay open and
+        nothing answers, as on a hung host; :meth:`thaw` resumes them."""
+        for pid in self._processes():
+            os.kill(pid, signal.SIGSTOP)
+
+    def thaw(self) -> None:
+        for pid in self._processes():
+            os.kill(pid, signal.SIGCONT)
+
     def stop(self) -> None:
         try:
             self.kill()

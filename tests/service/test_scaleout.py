@@ -23,6 +23,7 @@ from app import models  # noqa: F401  (registers the tables on Base.metadata)
 from app.db import Base
 from app.migrations import alembic_config, upgrade_head
 from benchmarks.common import TIMEOUT, Postgres, Redis, Service, describing_children
+from tests.service.conftest import assert_text_refused, nul_refusals
 
 pytestmark = [pytest.mark.scaleout, pytest.mark.service, pytest.mark.slow]
 
@@ -293,6 +294,77 @@ def test_a_database_outage_answers_json_503s_and_loses_nothing(
         after = api.upload("bird-3", "bird")
         assert after.status_code == 202, after.text
         assert api.wait_mesh(after.json()["id"])["status"] == "ready"
+    finally:
+        api.close()
+        workers.close()
+
+
+#: The fault drill's bound on any answer while PostgreSQL is frozen (SIGSTOP).
+FROZEN_ANSWER_SECONDS = 6.0
+
+
+def test_a_frozen_database_answers_503_within_seconds_and_loses_nothing(
+    postgres: Postgres, redis_server: Redis, tmp_path
+):
+    """PostgreSQL stopped with SIGSTOP for 15 s (connections open, nothing answers, as a
+    hung host) during uploads, queries, listings and readiness checks: every request
+    answers within 6 s, a success or 503 + Retry-After naming the database, and every
+    accepted upload is described once it thaws."""
+    api, workers = _scaled_out(postgres, redis_server, tmp_path, "api")
+    try:
+        before = api.upload("hand-3", "hand")
+        assert api.wait_mesh(before.json()["id"])["status"] == "ready"
+        calls = {
+            "upload": lambda: api.upload("bird-3", "bird"),
+            "query": lambda: api.query("hand-3", k=1),
+            "list": lambda: api.client.get("/meshes"),
+            "ready": lambda: api.client.get("/ready"),
+        }
+        answers: list[tuple[str, httpx.Response, float]] = []
+        postgres.freeze()
+        try:
+            frozen = time.monotonic()
+            while time.monotonic() - frozen < 15:
+                for name, call in calls.items():
+                    started = time.monotonic()
+                    answers.append((name, call(), time.monotonic() - started))
+        finally:
+            postgres.thaw()
+        slow = [(n, r.status_code, round(t, 1)) for n, r, t in answers if t > FROZEN_ANSWER_SECONDS]
+        assert slow == []
+        for name, response, _ in answers:
+            if response.status_code in (200, 202):
+                continue
+            if name == "ready":
+                assert response.status_code == 503, response.text
+                assert response.json()["checks"]["database"].startswith("error"), response.text
+            else:
+                _unavailable(response, "database_unavailable")
+        refused = {n for n, r, _ in answers if r.status_code == 503}
+        assert refused == set(calls), answers  # the freeze was felt by every kind of call
+
+        api.wait_ready()
+        accepted = {r.json()["id"] for n, r, _ in answers if n == "upload" and r.status_code < 300}
+        for mesh_id in accepted | {before.json()["id"]}:
+            assert api.wait_mesh(mesh_id)["status"] == "ready"
+        after = api.upload("bird-3", "bird")
+        assert after.status_code in (200, 202), after.text
+        assert api.wait_mesh(after.json()["id"])["status"] == "ready"
+    finally:
+        api.close()
+        workers.close()
+
+
+def test_a_nul_character_is_refused_on_postgresql_and_the_connection_stays_usable(
+    postgres: Postgres, redis_server: Redis, tmp_path
+):
+    """PostgreSQL cannot store NUL (SQLite can): every text field refuses it alike, 422
+    with a sentence, and the client's keep-alive connection serves the next request."""
+    api, workers = _scaled_out(postgres, redis_server, tmp_path, "api")
+    try:
+        assert_text_refused(nul_refusals(api))
+        assert api.client.get("/meshes").status_code == 200  # the same connection
+        assert api.client.get("/meshes").json()["total"] == 0  # nothing was stored
     finally:
         api.close()
         workers.close()
