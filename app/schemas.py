@@ -43,6 +43,27 @@ ERROR_RESPONSES: dict[int | str, dict[str, Any]] = {
 }
 """Responses every router declares, replacing FastAPI's default validation-error schema."""
 
+#: What every text the service keeps (a name, a label) or looks up may hold: any
+#: character but NUL, which PostgreSQL cannot store; the same rule on every database.
+TEXT_PATTERN = "^[^\\x00]*$"
+
+
+def check_text(value: str, what: str) -> str:
+    """``value`` if it follows :data:`TEXT_PATTERN`.
+
+    Raises
+    ------
+    InvalidInputError
+        ``invalid_text``: it holds a NUL character.
+    """
+    if "\x00" in value:
+        raise InvalidInputError(
+            f"The {what} contains a NUL character (U+0000), which no text field may hold.",
+            code="invalid_text",
+        )
+    return value
+
+
 _EXTENSIONS = "|".join(MESH_FORMATS)
 MESH_FILE: dict[str, Any] = {
     "type": "string",

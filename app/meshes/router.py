@@ -27,6 +27,7 @@ from ..schemas import (
     ERROR_RESPONSES,
     FILE_RESPONSES,
     MESH_FILE,
+    TEXT_PATTERN,
     multipart_body,
 )
 from . import service
@@ -75,8 +76,18 @@ MESH_LINKS = {
 UPLOAD_BODY = multipart_body(
     {
         "file": MESH_FILE,
-        "name": {"type": "string", "maxLength": MAX_NAME, "description": "default: the file name"},
-        "label": {"type": "string", "maxLength": MAX_NAME, "description": "class, e.g. 'wolf'"},
+        "name": {
+            "type": "string",
+            "maxLength": MAX_NAME,
+            "pattern": TEXT_PATTERN,
+            "description": "default: the file name",
+        },
+        "label": {
+            "type": "string",
+            "maxLength": MAX_NAME,
+            "pattern": TEXT_PATTERN,
+            "description": "class, e.g. 'wolf'",
+        },
         "metadata": {
             "type": "object",
             "description": "any JSON object, kept with the mesh",
@@ -196,7 +207,11 @@ def list_meshes(
     gallery: GalleryDep,
     session: SessionDep,
     state: StateDep,
-    label: Annotated[str | None, Query(description="only this class")] = None,
+    label: Annotated[
+        str | None,
+        # Documented, and checked by the service with its own sentence (invalid_text).
+        Query(description="only this class", json_schema_extra={"pattern": TEXT_PATTERN}),
+    ] = None,
     status_: Annotated[MeshStatus | None, Query(alias="status")] = None,
     offset: Annotated[int, Query(ge=0, le=2**63 - 1)] = 0,  # SQLite: 64-bit
     limit: Annotated[int, Query(ge=1, le=1000)] = 50,

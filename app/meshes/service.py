@@ -21,6 +21,7 @@ from ..gallery.service import Gallery
 from ..models import UNFINISHED_JOB, Descriptor, Mesh, MeshStatus, Preview
 from ..queue import QUEUE_ERRORS
 from ..repositories import changes, jobs, meshes
+from ..schemas import check_text
 from ..state import AppState
 from ..storage import ReceivedFile
 
@@ -53,7 +54,7 @@ def _text(value: str | None, what: str) -> str | None:
         return None
     if len(value) > MAX_NAME:  # as sent, as the schema's maxLength counts
         raise InvalidInputError(f"The {what} is longer than {MAX_NAME} characters.")
-    return value.strip() or None
+    return check_text(value, what).strip() or None
 
 
 def enroll(
@@ -231,7 +232,7 @@ def list_page(
     rows, total = meshes.list_page(
         session,
         gallery.collection_id,
-        label=label,
+        label=None if label is None else check_text(label, "label"),
         status=status.value if status else None,
         offset=offset,
         limit=limit,

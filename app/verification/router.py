@@ -30,6 +30,7 @@ from ..schemas import (
     ERROR_RESPONSES,
     FILE_RESPONSES,
     MESH_FILE,
+    check_text,
     multipart_body,
     parse_far,
 )
@@ -77,7 +78,8 @@ VERIFY_BODY = multipart_body(
         },
         "claim_label": {
             "type": "string",
-            "pattern": "\\S",  # a blank label says nothing
+            # Not blank (a blank label says nothing), and no NUL (TEXT_PATTERN).
+            "pattern": "^[^\\x00]*[^\\x00\\s][^\\x00]*$",
             "description": "the label it is claimed to have (the closest "
             "enrolled mesh of that label decides)",
         },
@@ -236,7 +238,7 @@ def verify(
             code="unknown_field",
         )
     far = parse_far((fields.get("far") or "").strip() or None)
-    claim_label = (fields.get("claim_label") or "").strip() or None
+    claim_label = check_text(fields.get("claim_label") or "", "claim_label").strip() or None
     result = service.verify(
         session,
         state,

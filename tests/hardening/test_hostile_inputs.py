@@ -18,6 +18,7 @@ import pytest
 
 from app.deps import MAX_ROW_ID
 from benchmarks.common import Service
+from tests.service.conftest import assert_text_refused, nul_refusals
 
 from .conftest import MAX_FACES, db_rows, integrity_check
 from .make_corpus import build_corpus
@@ -222,3 +223,10 @@ def test_a_label_is_measured_as_sent(hardened: Service):
     )
     _error(long, 422, ("invalid_input",))
     assert hardened.client.get("/meshes", params={"label": "x" * 255}).json()["total"] == 0
+
+
+def test_a_nul_character_is_refused_on_sqlite_as_on_postgresql(hardened: Service, enrolled):
+    """One rule for text on both databases (SQLite would store NUL; PostgreSQL cannot)."""
+    before = hardened.client.get("/meshes").json()["total"]
+    assert_text_refused(nul_refusals(hardened))
+    assert hardened.client.get("/meshes").json()["total"] == before

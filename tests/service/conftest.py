@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+import httpx
 import pytest
 
 from app.migrations import upgrade_head
@@ -68,3 +69,29 @@ def gallery(service: Service) -> dict[str, int]:
         body = service.wait_mesh(mesh_id)
         assert body["status"] == "ready", (name, body)
     return ids
+
+
+def nul_refusals(svc: Service) -> list[httpx.Response]:
+    """Every kind of text the service keeps or looks up, sent with a NUL character: a
+    label, a name, a listing's label and a verification's claimed label."""
+    path = svc.meshes / "hand-3.off.gz"
+    named = svc.client.post(
+        "/meshes", files={"file": (path.name, path.read_bytes())}, data={"name": "x\x00y"}
+    )
+    return [
+        svc.upload("hand-3", "a\x00b"),
+        named,
+        svc.client.get("/meshes", params={"label": "a\x00b"}),
+        svc.client.post(
+            "/verify",
+            files={"file": (path.name, path.read_bytes())},
+            data={"claim_label": "a\x00b"},
+        ),
+    ]
+
+
+def assert_text_refused(responses: list[httpx.Response]) -> None:
+    for response in responses:
+        assert response.status_code == 422, response.text
+        assert response.json()["error"] == "invalid_text", response.text
+        assert "NUL" in response.json()["detail"]
