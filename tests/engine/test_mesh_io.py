@@ -47,6 +47,37 @@ def test_reads_every_format_from_bytes_and_path(tmp_path, sphere, fmt, gz):
         assert area == pytest.approx(sphere.area, rel=1e-5)
 
 
+@pytest.mark.parametrize("fmt", ["obj", "ply", "off", "stl"])
+@pytest.mark.parametrize("scale", [1e-30, 1e-6, 1e6, 1e30])
+def test_a_file_in_any_unit_reads_as_the_same_surface(sphere, fmt, scale):
+    """Merging is relative to the model's size: the same sphere in any unit keeps its
+    vertices and faces (text written with every digit; STL holds float32)."""
+    scaled = trimesh.Trimesh(sphere.vertices * scale, sphere.faces, process=False)
+    if fmt in ("obj", "off"):
+        rows = "".join(" ".join(repr(float(c)) for c in v) + "\n" for v in scaled.vertices)
+        data = (
+            (f"OFF\n{len(sphere.vertices)} {len(sphere.faces)} 0\n" + rows)
+            + "".join(f"3 {a} {b} {c}\n" for a, b, c in sphere.faces)
+            if fmt == "off"
+            else "".join(f"v {r}" for r in rows.splitlines(keepends=True))
+            + "".join(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in sphere.faces)
+        ).encode()
+    else:
+        data = scaled.export(file_type=fmt)
+    mesh = load_mesh(data, f"sphere.{fmt}")
+    assert (mesh.n_vertices, mesh.n_faces) == (len(sphere.vertices), len(sphere.faces))
+    rel = 1e-6 if fmt in ("ply", "stl") else 1e-12  # trimesh writes float32 there
+    assert face_areas(mesh.vertices, mesh.faces).sum() == pytest.approx(scaled.area, rel=rel)
+
+
+def test_a_file_whose_vertices_all_coincide_says_why(sphere):
+    """A tiny unit written with a fixed number of decimals (trimesh's OFF: 10) leaves
+    every coordinate 0: refused with the likely cause, not as a small surface."""
+    tiny = trimesh.Trimesh(sphere.vertices * 1e-30, sphere.faces, process=False)
+    with pytest.raises(errors.TooFewVerticesError, match="same point.*more digits"):
+        load_mesh(trimesh.exchange.off.export_off(tiny).encode(), "tiny.off")
+
+
 def test_reads_gltf_with_embedded_buffers(sphere):
     files = trimesh.Scene(sphere).export(file_type="gltf", embed_buffers=True)
     data = files["model.gltf"]

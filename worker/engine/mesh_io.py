@@ -208,9 +208,16 @@ def clean_surface(vertices: np.ndarray, faces: np.ndarray) -> CleanedMesh:
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
 
-    # Merge vertices that coincide up to a tiny fraction of the model size.
-    extent = float(np.linalg.norm(np.ptp(vertices, axis=0))) or 1.0
-    quantum = extent * TOL.merge_fraction
+    # Merge vertices that coincide up to a tiny fraction of the model size (relative:
+    # a model in any unit merges alike).
+    extent = float(np.linalg.norm(np.ptp(vertices, axis=0))) if len(vertices) else 0.0
+    if extent == 0.0 and len(faces):
+        raise TooFewVerticesError(
+            "Every vertex of the file is at the same point. If the model is in a very small "
+            "unit, its coordinates may have been written with too few digits (a text format "
+            "with a fixed number of decimals): export it with more digits or in a larger unit."
+        )
+    quantum = (extent or 1.0) * TOL.merge_fraction
     first, inverse = unique_rows(np.round(vertices / quantum).astype(np.int64))
     faces = inverse[faces]
 
