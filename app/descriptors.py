@@ -21,6 +21,7 @@ from sqlalchemy.orm import Session
 from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.formats import mesh_format
 from worker.engine.presets import Preset
+from worker.jobs.queue import FILE_GONE
 
 from .db import DATABASE_ERRORS, unit_of_work
 from .errors import ConflictError, NotFoundError
@@ -34,8 +35,9 @@ from .storage import ReceivedFile
 log = logging.getLogger("shapes.descriptors")
 
 #: Failures that say nothing about the file (a crash on every try, a worker that kept
-#: dying, a worker on another version): uploading the same bytes again retries them.
-TRANSIENT_FAILURES = frozenset({"describe_crashed", "worker_lost", "preset_mismatch"})
+#: dying, a worker on another version or that did not find the file): uploading the
+#: same bytes again retries them.
+TRANSIENT_FAILURES = frozenset({"describe_crashed", "worker_lost", "preset_mismatch", FILE_GONE})
 
 DescriptorSource = Literal["computed", "enrolled", "recent", "stored"]
 

@@ -12,7 +12,13 @@ import trimesh
 
 from benchmarks.common import free_port
 from worker.engine.descriptor import ShapeDescriptor
-from worker.jobs.queue import descriptor_npz, heartbeat_key, make_huey
+from worker.jobs.queue import (
+    FILE_GONE,
+    FILE_GONE_MESSAGE,
+    descriptor_npz,
+    heartbeat_key,
+    make_huey,
+)
 from worker.jobs.settings import QueueSettings
 from worker.jobs.sources import remove_stale_copies
 
@@ -57,6 +63,14 @@ def test_a_file_in_an_unreachable_database_waits_scheduled_without_a_heartbeat(t
     assert [t.id for t in huey.scheduled()] == [task.id]
     assert huey.get(heartbeat_key(task.id), peek=True) is None
     assert huey.get(task.id, peek=True) is None  # no result, no error: not done
+
+
+def test_a_file_deleted_before_it_was_described_is_an_outcome_not_a_crash(huey, caplog):
+    with caplog.at_level("INFO"):
+        result = huey.describe_upload("gone.off", "gone.off", "smeets2010-shrec", 10_000).get()
+    assert result == {"ok": False, "code": FILE_GONE, "message": FILE_GONE_MESSAGE}
+    assert [r.exc_info for r in caplog.records] == [None] * len(caplog.records)
+    assert any("deleted before it was described" in r.getMessage() for r in caplog.records)
 
 
 def test_copies_left_by_killed_workers_are_removed_and_running_ones_kept(tmp_path):

@@ -40,7 +40,7 @@ from huey.exceptions import RetryTask
 
 from .limits import describe_limited, start_fork_server
 from .settings import Queue, QueueSettings
-from .sources import SourceUnavailableError, local_file, remove_stale_copies
+from .sources import SourceGoneError, SourceUnavailableError, local_file, remove_stale_copies
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +50,12 @@ TASK_RETRY_DELAY_SECONDS = 1
 #: A task whose file is in an unreachable database waits this long and tries again,
 #: as often as it takes (these tries do not count against ``TASK_RETRIES``).
 SOURCE_RETRY_SECONDS = 3
+#: The outcome of a task whose file is gone (its mesh deleted while queued).
+FILE_GONE = "file_missing"
+FILE_GONE_MESSAGE = (
+    "The uploaded file was gone when a worker came to describe it: the mesh was deleted "
+    "first (or the worker does not see the service's uploads)."
+)
 QUEUE_FILE = "queue.sqlite3"
 
 
@@ -164,6 +170,9 @@ def make_huey(settings: QueueSettings, queue: Queue = "enroll") -> Huey:
             huey.delete(key)
             log.warning("task %s: %s; trying again in %d s", task.id, exc, SOURCE_RETRY_SECONDS)
             raise RetryTask(delay=SOURCE_RETRY_SECONDS) from exc
+        except SourceGoneError as exc:  # nothing to describe: an outcome, not a crash
+            log.info("task %s: %s; its mesh was deleted before it was described", task.id, exc)
+            return {"ok": False, "code": FILE_GONE, "message": FILE_GONE_MESSAGE}
         if outcome.descriptor is None:  # refused or over a limit: deterministic, no retry
             return {"ok": False, "code": outcome.code, "message": outcome.message}
         return {

@@ -35,6 +35,11 @@ class SourceUnavailableError(Exception):
     is not at fault)."""
 
 
+class SourceGoneError(Exception):
+    """The task's file is not where the service put it: its mesh was deleted since the
+    task was queued (or this worker does not see the service's uploads)."""
+
+
 def database_source(sha256: str) -> str:
     """The task source of an upload kept in the database."""
     return f"{DATABASE_PREFIX}{sha256}"
@@ -53,8 +58,9 @@ def local_file(
 
     Raises
     ------
-    FileNotFoundError
-        The upload is not in the database (deleted since the task was queued).
+    SourceGoneError
+        The upload is not in its directory or the database (deleted since the task was
+        queued).
     RuntimeError
         A database source, and no database URL to read it with.
     SourceUnavailableError
@@ -62,7 +68,10 @@ def local_file(
     """
     if data is None and not source.startswith(DATABASE_PREFIX):
         path = Path(source)
-        yield path if path.is_absolute() else data_dir / path
+        path = path if path.is_absolute() else data_dir / path
+        if not path.is_file():
+            raise SourceGoneError(f"no upload at {path}")
+        yield path
         return
     if data is None:
         if database_url is None:
@@ -76,7 +85,7 @@ def local_file(
         except (OperationalError, InterfaceError) as exc:
             raise SourceUnavailableError(f"the database is unreachable: {exc}") from exc
         if data is None:
-            raise FileNotFoundError(f"no upload {sha256} in the database")
+            raise SourceGoneError(f"no upload {sha256} in the database")
     scratch = data_dir / "tmp"
     scratch.mkdir(parents=True, exist_ok=True)
     with tempfile.NamedTemporaryFile(dir=scratch, prefix=COPY_PREFIX) as copy:
