@@ -18,6 +18,8 @@ import sys
 import time
 from types import FrameType
 
+from pydantic import ValidationError
+
 from .config import Settings, access_notice
 from .migrations import upgrade_head
 
@@ -147,7 +149,13 @@ def main(argv: list[str] | None = None) -> int:
         if v is not None
     }
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(levelname)s %(message)s")
-    return serve(Settings(**overrides))
+    try:
+        settings = Settings(**overrides)
+    except ValidationError as refused:  # a setting out of its range: say which, and stop
+        for error in refused.errors():
+            log.error("%s", str(error["msg"]).removeprefix("Value error, "))
+        return 2
+    return serve(settings)
 
 
 if __name__ == "__main__":

@@ -6,11 +6,14 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, SecretStr, model_validator
+from pydantic import Field, SecretStr, field_validator, model_validator
 
 from worker.engine.formats import DEFAULT_MAX_FACES
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.jobs.settings import QueueSettings
+
+#: The shortest admin key accepted (the keys the service makes are 32 random bytes).
+MIN_API_KEY_LENGTH = 16
 
 
 class Settings(QueueSettings):
@@ -137,6 +140,17 @@ class Settings(QueueSettings):
         description="where this API process saves its index; default <data_dir>/index "
         "(API replicas sharing a data directory each need their own)",
     )
+
+    @field_validator("api_key")
+    @classmethod
+    def _a_key_worth_the_name(cls, key: SecretStr | None) -> SecretStr | None:
+        if key is not None and len(key.get_secret_value()) < MIN_API_KEY_LENGTH:
+            raise ValueError(
+                f"SHAPES_API_KEY must be at least {MIN_API_KEY_LENGTH} characters (a key "
+                "anyone can guess protects nothing; e.g. `openssl rand -hex 16`); unset it "
+                "to serve openly on this machine"
+            )
+        return key
 
     @model_validator(mode="after")
     def _weights_of_the_preset(self) -> Settings:

@@ -139,19 +139,26 @@ def stored_descriptor(
 
 # ---------------------------------------------------------------------------- uploads
 def upload_descriptor(
-    session: Session, state: AppState, upload: ReceivedFile, preset: Preset
+    session: Session, state: AppState, gallery: Gallery, upload: ReceivedFile, preset: Preset
 ) -> tuple[ShapeDescriptor, DescriptorSource, dict[str, float], bool]:
-    """The descriptor of an uploaded file, where it came from, its timings, and
-    whether a preview of it was stored just now.
+    """The descriptor of a file uploaded to ``gallery``'s collection, where it came from,
+    its timings, and whether a preview of it was stored just now.
 
-    Bytes already described under the preset (an enrolled mesh's file, or a recent
-    query's) answer from that descriptor; others are described by a query worker
-    (blocking, seconds).
+    Bytes already described under the preset in this collection (an enrolled mesh's
+    file, or a recent query's) answer from that descriptor; others are described by a
+    query worker (blocking, seconds). Nothing of another collection is reused: what a
+    query answers, and how fast, never tells whether other collections hold its bytes.
     """
     started = time.perf_counter()
-    key = (upload.sha256, mesh_format(upload.filename), preset.name, preset.version)
+    key = (
+        gallery.collection_id,
+        upload.sha256,
+        mesh_format(upload.filename),
+        preset.name,
+        preset.version,
+    )
     source: DescriptorSource = "enrolled"
-    descriptor = _known_descriptor(session, upload, preset)
+    descriptor = _known_descriptor(session, gallery, upload, preset)
     if descriptor is None:
         descriptor, source = state.recent_queries.get(key), "recent"
     stored_preview = False
@@ -161,7 +168,7 @@ def upload_descriptor(
         )
         state.recent_queries.put(key, descriptor)
         if preview is not None:
-            stored_preview = _keep_preview(state, upload.sha256, preview)
+            stored_preview = _keep_preview(state, gallery, upload.sha256, preview)
         source = "computed"
         timings = dict(descriptor.timings)
     else:
@@ -171,31 +178,33 @@ def upload_descriptor(
 
 
 def _known_descriptor(
-    session: Session, upload: ReceivedFile, preset: Preset
+    session: Session, gallery: Gallery, upload: ReceivedFile, preset: Preset
 ) -> ShapeDescriptor | None:
-    """The stored descriptor of a mesh enrolled (in any collection) with these very bytes,
-    read as the same format (the same bytes named .stl and .obj are different meshes)."""
-    for mesh in meshes.all_by_sha256(session, upload.sha256):
-        if mesh_format(mesh.filename) != mesh_format(upload.filename):
-            continue
-        stored = meshes.get_descriptor(session, mesh.id, preset.name, preset.version)
-        if stored is None:
-            continue
-        descriptor = ShapeDescriptor.from_npz_bytes(stored.data)
-        # One stored before areas were recorded has no size to compare in metric units.
-        if descriptor.area is not None or preset.units != "metric":
-            return descriptor
-    return None
+    """The stored descriptor of the collection's mesh of these very bytes, read as the
+    same format (the same bytes named .stl and .obj are different meshes)."""
+    mesh = meshes.get_by_sha256(session, gallery.collection_id, upload.sha256)
+    if mesh is None or mesh_format(mesh.filename) != mesh_format(upload.filename):
+        return None
+    stored = meshes.get_descriptor(session, mesh.id, preset.name, preset.version)
+    if stored is None:
+        return None
+    descriptor = ShapeDescriptor.from_npz_bytes(stored.data)
+    # One stored before areas were recorded has no size to compare in metric units.
+    return descriptor if descriptor.area is not None or preset.units != "metric" else None
 
 
-def _keep_preview(state: AppState, sha256: str, glb: bytes) -> bool:
-    """Store a query's preview where every replica finds it (its own short write, so
-    the search holds no write lock); True once stored. A preview is a convenience:
-    if the database refuses it now, the search still answers."""
+def _keep_preview(state: AppState, gallery: Gallery, sha256: str, glb: bytes) -> bool:
+    """Store a query's preview, the collection's own, where every replica finds it (its
+    own short write, so the search holds no write lock); True once stored. A preview is
+    a convenience: if the database refuses it now, the search still answers."""
     try:
         with unit_of_work(state.sessions) as session:
             query_previews.put_query_preview(
-                session, sha256, glb, keep=state.settings.query_previews_kept
+                session,
+                gallery.collection_id,
+                sha256,
+                glb,
+                keep=state.settings.query_previews_kept,
             )
     except DATABASE_ERRORS as exc:
         log.warning("query preview not stored: %r", exc)

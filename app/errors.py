@@ -115,6 +115,11 @@ _HTTP_CODES = {
 }
 
 
+#: What FastAPI's 400 says of a body it could not read.
+FASTAPI_BODY_ERROR = "There was an error parsing the body"
+INVALID_JSON = "The request body is not valid JSON (UTF-8 text holding one JSON object)."
+
+
 def _validation_sentence(exc: RequestValidationError) -> str:
     parts = []
     for err in exc.errors()[:3]:
@@ -189,10 +194,16 @@ def install_error_handlers(
 
     @app.exception_handler(RequestValidationError)
     async def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
+        if any(err.get("type") == "json_invalid" for err in exc.errors()):
+            return JSONResponse(_body("invalid_json", INVALID_JSON), status_code=422)
         return JSONResponse(_body("invalid_input", _validation_sentence(exc)), status_code=422)
 
     @app.exception_handler(StarletteHTTPException)
     async def _http(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        if exc.status_code == 400 and exc.detail == FASTAPI_BODY_ERROR:
+            # A JSON body FastAPI could not even decode (bytes that are not UTF-8): the
+            # same answer as one that is not JSON (json_invalid), as the schema says.
+            return JSONResponse(_body("invalid_json", INVALID_JSON), status_code=422)
         code = _HTTP_CODES.get(exc.status_code, "error")
         detail = exc.detail if isinstance(exc.detail, str) else "The request failed."
         if exc.status_code == 404 and detail == "Not Found":

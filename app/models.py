@@ -198,12 +198,16 @@ class Preview(Base):
 
 
 class QueryPreview(Base):
-    """The preview (GLB) of a recently searched file, by its content: in the database
-    so that the link in a ``/query`` answer works on every API replica. Only the most
-    recent ``query_previews_kept`` are kept (:mod:`app.search.repository`)."""
+    """The preview (GLB) of a file recently searched with in a collection, by its
+    content: in the database so that the link in a ``/query`` answer works on every API
+    replica, and per collection so that only the collection searched serves it. Only the
+    most recent ``query_previews_kept`` are kept (:mod:`app.repositories.query_previews`)."""
 
     __tablename__ = "query_previews"
 
+    collection_id: Mapped[int] = mapped_column(
+        ForeignKey("collections.id", ondelete="CASCADE"), primary_key=True
+    )
     sha256: Mapped[str] = mapped_column(String(64), primary_key=True)
     glb: Mapped[bytes] = mapped_column(LargeBinary)
     created_at: Mapped[datetime] = mapped_column(default=utcnow, index=True)

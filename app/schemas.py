@@ -4,6 +4,7 @@ takes (:func:`parse_far`)."""
 
 from __future__ import annotations
 
+import math
 from datetime import UTC, datetime
 from typing import Annotated, Any
 
@@ -64,6 +65,21 @@ def check_text(value: str, what: str) -> str:
     return value
 
 
+def threshold_out(threshold: float) -> float | None:
+    """A score threshold as the answers give it: None when it accepts nothing (-inf: at
+    that FAR even the closest impostor pair is too close to accept any score), which JSON
+    cannot write as a number."""
+    return threshold if math.isfinite(threshold) else None
+
+
+THRESHOLD_DESCRIPTION = (
+    "accept a pair whose score is at most this; null: nothing is accepted at this FAR "
+    "(even the closest impostor pair is too close)"
+)
+
+
+#: The longest file name an upload may carry (as the names and labels it may take).
+MAX_FILENAME = 255
 _EXTENSIONS = "|".join(MESH_FORMATS)
 MESH_FILE: dict[str, Any] = {
     "type": "string",
@@ -71,6 +87,7 @@ MESH_FILE: dict[str, Any] = {
     # formats are annotations: a client or fuzzer that knows it generates real meshes).
     "contentMediaType": "application/octet-stream",
     "format": "mesh",
+    "minLength": 1,  # an empty file is 422 empty_mesh
     "description": "a triangle mesh file: "
     + " ".join(f".{f}" for f in MESH_FORMATS)
     + ", optionally .gz-compressed, told by the file name's extension (any other is "
@@ -86,7 +103,9 @@ MESH_FILE_ENCODING: dict[str, Any] = {
             "description": "the file name's extension tells the format",
             "schema": {
                 "type": "string",
-                "pattern": rf'filename="[^"]*\.({_EXTENSIONS})(\.gz)?"',
+                # At most MAX_FILENAME characters (filename_too_long beyond).
+                "pattern": rf'filename="(?=[^"]{{1,{MAX_FILENAME}}}")'
+                rf'[^"]*\.({_EXTENSIONS})(\.gz)?"',
                 "example": 'form-data; name="file"; filename="wolf0.off"',
             },
         }
@@ -118,6 +137,20 @@ ACCESS_RESPONSES: dict[int | str, dict[str, Any]] = {
 """Declared by every route that needs a key when the service sets one."""
 
 
+def or_blank(schema: dict[str, Any]) -> dict[str, Any]:
+    """A form field's schema: the field's, or blank (the default), as an HTML form sends
+    a field left empty."""
+    value = {k: v for k, v in schema.items() if k != "description"}
+    return {
+        "anyOf": [value, {"type": "string", "maxLength": 0}],
+        "description": schema["description"] + " (blank: the default)",
+    }
+
+
+def _is_object(schema: dict[str, Any]) -> bool:
+    return any(s.get("type") == "object" for s in [schema, *schema.get("anyOf", [])])
+
+
 def multipart_body(
     properties: dict[str, Any],
     *,
@@ -141,7 +174,7 @@ def multipart_body(
     encoding |= {  # objects travel as JSON text
         name: {"contentType": "application/json"}
         for name, value in properties.items()
-        if value.get("type") == "object"
+        if _is_object(value)
     }
     if encoding:
         form["encoding"] = encoding

@@ -22,6 +22,7 @@ from starlette.requests import ClientDisconnect, Request
 from worker.engine.formats import mesh_format
 
 from .errors import InvalidInputError, PayloadTooLargeError, UnsupportedMediaTypeError
+from .schemas import MAX_FILENAME
 from .storage import ReceivedFile
 
 if TYPE_CHECKING:  # defined for type checkers only
@@ -42,9 +43,21 @@ class MultipartUpload:
 
 
 def safe_filename(raw: str) -> str:
-    """The last path component of a client-supplied name, for display and format only."""
+    """The last path component of a client-supplied name, for display and format only.
+
+    Raises
+    ------
+    InvalidInputError
+        ``filename_too_long``: over ``MAX_FILENAME`` characters.
+    """
     name = PureWindowsPath(PurePosixPath(raw).name).name.strip().replace("\x00", "")
-    return name[-255:]
+    if len(name) > MAX_FILENAME:
+        raise InvalidInputError(
+            f"The file name is longer than {MAX_FILENAME} characters; send the file under a "
+            "shorter name (its extension tells the format).",
+            code="filename_too_long",
+        )
+    return name
 
 
 def _mb(n: int) -> str:
@@ -227,6 +240,12 @@ async def receive_multipart(
         parser.finalize()
     except MultipartParseError as exc:
         receiver.cleanup()
+        if "header size" in str(exc):  # a part's header line over the parser's 4 kB
+            raise InvalidInputError(
+                "A form part's header is longer than 4 kB: a file name may have at most "
+                f"{MAX_FILENAME} characters.",
+                code="filename_too_long",
+            ) from None
         raise InvalidInputError(
             "The multipart body is malformed.", code="malformed_multipart"
         ) from exc

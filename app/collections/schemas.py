@@ -34,7 +34,8 @@ class CollectionIn(BaseModel):
 
 
 Modality = Literal["gdm", "ddt", "spectrum", "size"]
-Weight = Annotated[float, Field(ge=0, le=MAX_WEIGHT)]
+# Strict: a JSON number (an integer too), never true or false read as 1 or 0.
+Weight = Annotated[float, Field(ge=0, le=MAX_WEIGHT, strict=True)]
 
 
 class FusionPin(BaseModel):

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from fastapi import APIRouter
 
-from ..deps import GrantDep, RowId, SessionDep, StateDep, check_grant
+from ..deps import GrantDep, RowId, SessionDep, StateDep
 from ..links import collection_path
-from ..models import DEFAULT_COLLECTION, JobStatus, Scope
+from ..models import DEFAULT_COLLECTION, JobStatus
 from ..schemas import ACCESS_RESPONSES, ERROR_RESPONSES
 from . import service
 from .schemas import JobOut
@@ -22,10 +22,8 @@ router = APIRouter(prefix="/jobs", tags=["jobs"], responses=ERROR_RESPONSES | AC
     responses={404: {"description": "Unknown id"}},
 )
 def get_job(job_id: RowId, session: SessionDep, state: StateDep, grant: GrantDep) -> JobOut:
-    job = service.get(session, job_id)
-    collection_id = job.mesh.collection_id
-    check_grant(grant, collection_id, Scope.read, "read this job's collection")
-    gallery = state.galleries.of(collection_id)
+    job = service.get(session, job_id, grant)
+    gallery = state.galleries.of(job.mesh.collection_id)
     base = collection_path(DEFAULT_COLLECTION if gallery is None else gallery.name)
     return JobOut(
         id=job.id,

@@ -29,6 +29,7 @@ from ..schemas import (
     MESH_FILE,
     TEXT_PATTERN,
     multipart_body,
+    or_blank,
 )
 from . import service
 from .schemas import DescriptorInfo, Links, MeshOut, MeshPage
@@ -88,11 +89,13 @@ UPLOAD_BODY = multipart_body(
             "pattern": TEXT_PATTERN,
             "description": "class, e.g. 'wolf'",
         },
-        "metadata": {
-            "type": "object",
-            "description": "any JSON object, kept with the mesh",
-            "example": {"source": "TOSCA"},
-        },
+        "metadata": or_blank(
+            {
+                "type": "object",
+                "description": "any JSON object, kept with the mesh",
+                "example": {"source": "TOSCA"},
+            }
+        ),
     },
     required=("file",),
 )

@@ -22,11 +22,6 @@ def get_by_sha256(session: Session, collection_id: int, sha256: str) -> Mesh | N
     )
 
 
-def all_by_sha256(session: Session, sha256: str) -> list[Mesh]:
-    """Every collection's meshes of these bytes, oldest first."""
-    return list(session.scalars(select(Mesh).where(Mesh.sha256 == sha256).order_by(Mesh.id)))
-
-
 def storage_shared(session: Session, storage_path: str, collection_id: int) -> bool:
     """Whether a mesh outside ``collection_id`` keeps its bytes at ``storage_path``."""
     other = select(Mesh.id).where(

@@ -27,6 +27,8 @@ from ..schemas import (
     FILE_RESPONSES,
     MESH_FILE,
     multipart_body,
+    or_blank,
+    threshold_out,
 )
 from . import service
 from .schemas import MatchOut, PartialOut, QueryOut
@@ -72,18 +74,8 @@ OPTION_SCHEMAS: dict[str, dict[str, Any]] = {
 }
 
 
-def _or_blank(schema: dict[str, Any]) -> dict[str, Any]:
-    """A form field's schema: the option's, or blank (the default), as an HTML form sends
-    a field left empty."""
-    value = {k: v for k, v in schema.items() if k != "description"}
-    return {
-        "anyOf": [value, {"type": "string", "maxLength": 0}],
-        "description": schema["description"] + " (blank: the default)",
-    }
-
-
 QUERY_BODY = multipart_body(
-    {"file": MESH_FILE} | {name: _or_blank(schema) for name, schema in OPTION_SCHEMAS.items()},
+    {"file": MESH_FILE} | {name: or_blank(schema) for name, schema in OPTION_SCHEMAS.items()},
     required=("file",),
 )
 
@@ -166,7 +158,7 @@ def query_out(result: service.SearchResult) -> QueryOut:
             for m in result.matches
         ],
         far=options.far,
-        threshold=result.threshold,
+        threshold=None if result.threshold is None else threshold_out(result.threshold),
         timings=result.timings,
         query=result.query,
         descriptor_source=result.descriptor_source,
@@ -265,13 +257,16 @@ def similar(
     },
 )
 def query_preview(
-    sha256: Annotated[str, Path(pattern="^[0-9a-f]{64}$")], session: SessionDep, state: StateDep
+    sha256: Annotated[str, Path(pattern="^[0-9a-f]{64}$")],
+    gallery: GalleryDep,
+    session: SessionDep,
 ) -> Response:
-    glb = service.query_preview(session, sha256)
+    glb = service.query_preview(session, gallery, sha256)
     if glb is None:
         raise NotFoundError(
-            "There is no preview of these bytes: they were not searched with recently "
-            "(the service keeps the last SHAPES_QUERY_PREVIEWS_KEPT) nor enrolled.",
+            "There is no preview of these bytes in this collection: they were not searched "
+            "with here recently (the service keeps the last SHAPES_QUERY_PREVIEWS_KEPT) nor "
+            "enrolled here.",
             code="no_preview",
         )
     return Response(glb, media_type="model/gltf-binary")

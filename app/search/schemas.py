@@ -112,7 +112,9 @@ class QueryOut(BaseModel):
     )
     far: float | None = Field(None, description="the false acceptance rate asked for")
     threshold: float | None = Field(
-        None, description="with far: the score threshold at that FAR (accepted: score <= it)"
+        None,
+        description="with far: the score threshold at that FAR (accepted: score <= it); "
+        "null without far, or when nothing is accepted at that FAR",
     )
     descriptor_source: Literal["computed", "enrolled", "recent", "stored"] = Field(
         description="where the query's descriptor came from: computed now by a query worker, "

@@ -292,7 +292,9 @@ def query_by_upload(
 ) -> SearchResult:
     """Rank the gallery against an uploaded mesh (:func:`upload_descriptor`)."""
     gallery.check_ready()  # before the worker spends seconds on the query
-    descriptor, source, timings, preview = upload_descriptor(session, state, upload, options.preset)
+    descriptor, source, timings, preview = upload_descriptor(
+        session, state, gallery, upload, options.preset
+    )
     result = rank(
         session,
         state,
@@ -302,30 +304,29 @@ def query_by_upload(
         timings=timings,
         descriptor_source=source,
     )
-    if preview or _has_preview(session, upload.sha256):
-        result.preview = f"/previews/{upload.sha256}"
+    if preview or _has_preview(session, gallery, upload.sha256):
+        result.preview = f"{collection_path(gallery.name)}/previews/{upload.sha256}"
     return result
 
 
-def _has_preview(session: Session, sha256: str) -> bool:
-    """Whether :func:`query_preview` has something for these bytes (no bytes read:
-    every search that reuses a descriptor asks)."""
-    if query_previews.has_query_preview(session, sha256):
+def _has_preview(session: Session, gallery: Gallery, sha256: str) -> bool:
+    """Whether :func:`query_preview` has something for these bytes in the collection (no
+    bytes read: every search that reuses a descriptor asks)."""
+    if query_previews.has_query_preview(session, gallery.collection_id, sha256):
         return True
-    return any(meshes.has_preview(session, m.id) for m in meshes.all_by_sha256(session, sha256))
+    mesh = meshes.get_by_sha256(session, gallery.collection_id, sha256)
+    return mesh is not None and meshes.has_preview(session, mesh.id)
 
 
-def query_preview(session: Session, sha256: str) -> bytes | None:
-    """The preview (GLB) of recently searched or enrolled bytes (in any collection: the
-    same bytes look the same), if one was made."""
-    recent = query_previews.get_query_preview(session, sha256)
+def query_preview(session: Session, gallery: Gallery, sha256: str) -> bytes | None:
+    """The preview (GLB) of bytes recently searched with in, or enrolled in, ``gallery``'s
+    collection, if one was made (another collection's are never served here)."""
+    recent = query_previews.get_query_preview(session, gallery.collection_id, sha256)
     if recent is not None:
         return recent
-    for mesh in meshes.all_by_sha256(session, sha256):
-        stored = meshes.get_preview(session, mesh.id)
-        if stored is not None:
-            return stored.glb
-    return None
+    mesh = meshes.get_by_sha256(session, gallery.collection_id, sha256)
+    stored = None if mesh is None else meshes.get_preview(session, mesh.id)
+    return None if stored is None else stored.glb
 
 
 def similar_to(

@@ -33,6 +33,7 @@ from ..schemas import (
     check_text,
     multipart_body,
     parse_far,
+    threshold_out,
 )
 from . import service
 from .schemas import (
@@ -97,7 +98,7 @@ VERIFY_BODY = multipart_body(
 
 def _operating_points(row: Calibration) -> list[OperatingPoint]:
     return [
-        OperatingPoint(far=far, threshold=t, estimated_far=f, estimated_frr=r)
+        OperatingPoint(far=far, threshold=threshold_out(t), estimated_far=f, estimated_frr=r)
         for far, t, f, r in service.operating_points(row)
     ]
 
@@ -253,7 +254,7 @@ def verify(
         same=result.same,
         score=result.score,
         scores=result.scores,
-        threshold=result.threshold,
+        threshold=threshold_out(result.threshold),
         far=result.far,
         estimated_far=result.estimated_far,
         estimated_frr=result.estimated_frr,

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 from pydantic import BaseModel, Field
 
+from ..schemas import THRESHOLD_DESCRIPTION
+
 
 class OperatingPoint(BaseModel):
     far: float = Field(description="the false acceptance rate asked for")
-    threshold: float = Field(description="accept a pair whose score is at most this")
+    threshold: float | None = Field(description=THRESHOLD_DESCRIPTION)
     estimated_far: float = Field(description="FAR at that threshold on the labelled pairs")
     estimated_frr: float = Field(description="false rejection rate there")
 
@@ -106,7 +108,7 @@ class VerificationOut(BaseModel):
     same: bool = Field(description="the score is within the threshold at the FAR asked for")
     score: float = Field(description="the preset's fused dissimilarity to the claim")
     scores: dict[str, float] = Field(description="per-modality dissimilarities")
-    threshold: float
+    threshold: float | None = Field(description=THRESHOLD_DESCRIPTION)
     far: float = Field(description="the false acceptance rate asked for")
     estimated_far: float = Field(description="FAR at the threshold, on the labelled pairs")
     estimated_frr: float = Field(description="FRR at the threshold, on the labelled pairs")

@@ -104,7 +104,7 @@ def verify(
         assert claim_label is not None
         targets = meshes.ids_with_label(session, gallery.collection_id, claim_label)
     if upload is not None:
-        descriptor, *_ = upload_descriptor(session, state, upload, preset)
+        descriptor, *_ = upload_descriptor(session, state, gallery, upload, preset)
         probe = "upload"
     else:
         assert mesh_id is not None

@@ -230,3 +230,30 @@ def test_a_nul_character_is_refused_on_sqlite_as_on_postgresql(hardened: Service
     before = hardened.client.get("/meshes").json()["total"]
     assert_text_refused(nul_refusals(hardened))
     assert hardened.client.get("/meshes").json()["total"] == before
+
+
+def test_the_schema_and_the_service_agree_on_what_schemathesis_found(hardened: Service):
+    """Each finding of a schemathesis run (seed 20261126): the schema said one thing and
+    the service did another."""
+    schema = hardened.client.get("/openapi.json").json()
+    # An empty file: refused, and the schema says a file holds at least one byte.
+    body = schema["paths"]["/meshes"]["post"]["requestBody"]["content"]["multipart/form-data"]
+    assert body["schema"]["properties"]["file"]["minLength"] == 1
+    _error(hardened.client.post("/meshes", files={"file": ("a.off", b"")}), 422, ("empty_mesh",))
+    # A JSON body that is not even text: 422 as documented, not an undocumented 400.
+    for raw in (b"\xff\xfe{", b"{not json"):
+        sent = hardened.client.post(
+            "/collections", content=raw, headers={"content-type": "application/json"}
+        )
+        _error(sent, 422, ("invalid_json",))
+    # false is not a weight.
+    pinned = hardened.client.put("/collections/default/fusion", json={"weights": {"gdm": False}})
+    _error(pinned, 422, ("invalid_input",))
+    # A threshold that accepts nothing is null, and the schema says it may be.
+    point = schema["components"]["schemas"]["OperatingPoint"]["properties"]["threshold"]
+    assert {"type": "null"} in point["anyOf"]
+    # A file name over 255 characters, or past the parser's 4 kB header: said so.
+    for length in (300, 5000):
+        named = hardened.client.post("/meshes", files={"file": ("a" * length + ".off", b"OFF")})
+        assert _error(named, 422, ("filename_too_long",))["detail"].count("255") == 1
+    _still_up(hardened)

@@ -4,6 +4,7 @@ every API process within a second; no key is stored in plain text."""
 
 from __future__ import annotations
 
+import os
 import sqlite3
 import subprocess
 import sys
@@ -12,6 +13,7 @@ from collections.abc import Iterator
 
 import pytest
 from conftest import example
+from pydantic import ValidationError
 
 from app.config import Settings, access_notice
 from benchmarks.common import REPO, Service
@@ -163,7 +165,24 @@ def test_without_a_key_the_service_serves_on_loopback_only():
     with pytest.raises(ValueError, match="refusing to serve on 0.0.0.0 without an API key"):
         access_notice(Settings(host="0.0.0.0"))
     assert "SHAPES_OPEN_ACCESS" in access_notice(Settings(host="0.0.0.0", open_access=True))
-    assert "API keys required" in access_notice(Settings(host="0.0.0.0", api_key="k"))
+    assert "API keys required" in access_notice(Settings(host="0.0.0.0", api_key=ADMIN))
+
+
+@pytest.mark.parametrize("key", ["", "k", "fifteen-chars-k"])
+def test_an_admin_key_too_short_to_protect_anything_is_refused_at_start(key, tmp_path):
+    with pytest.raises(ValidationError, match="SHAPES_API_KEY must be at least 16 characters"):
+        Settings(api_key=key)
+    served = subprocess.run(
+        [sys.executable, "-m", "app", "--data-dir", str(tmp_path)],
+        env={**os.environ, "SHAPES_API_KEY": key},
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=REPO,
+    )
+    assert served.returncode == 2
+    assert "SHAPES_API_KEY must be at least 16 characters" in served.stderr
+    assert "Traceback" not in served.stderr
 
 
 def test_keys_from_the_command_line(keyed):

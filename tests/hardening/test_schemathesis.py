@@ -13,6 +13,7 @@ from the other hardening tests because generated DELETEs may hit any id.
 from __future__ import annotations
 
 import os
+import re
 import time
 from collections import Counter
 from collections.abc import Iterator
@@ -24,6 +25,7 @@ from hypothesis import HealthCheck, Phase, given, seed, settings
 from hypothesis import strategies as st
 from hypothesis.errors import FlakyStrategyDefinition
 from schemathesis import Case, Response
+from schemathesis.core.failures import AcceptedNegativeData, FailureGroup
 from schemathesis.core.parameters import ParameterLocation
 
 from benchmarks.common import Service
@@ -60,29 +62,68 @@ schemathesis.openapi.format(
 
 
 # With the key set, schemathesis also checks that writes without it (or with a wrong one)
-# are refused.
-KEY = "fuzzing-key"
+# are refused; open (no key), that the schema asks for none.
+KEY = "fuzzing-key-of-the-tests"
 
 
-def key_unless_left_out(case: Case) -> dict[str, str]:
-    """The key's header, unless the case's headers break the schema on purpose (a missing
-    or malformed key: the service must refuse it, so it is sent as generated)."""
+def key_unless_left_out(case: Case, keyed: bool) -> dict[str, str]:
+    """The key's header for a keyed service, unless the case's headers break the schema on
+    purpose (a missing or malformed key: the service must refuse it, so it is sent as
+    generated)."""
     headers = None if case.meta is None else case.meta.components.get(ParameterLocation.HEADER)
-    if headers is not None and headers.mode.is_negative:
+    if not keyed or (headers is not None and headers.mode.is_negative):
         return {}
     return {"X-API-Key": KEY}
 
 
-@pytest.fixture(scope="session")
-def fuzzed(tmp_path_factory) -> Iterator[Service]:
+#: False positives of schemathesis's negative_data_rejection on multipart bodies, where
+#: the request it sends is not invalid at all:
+#: * a text field mutated to another JSON type (an integer, a number, a boolean, null) is
+#:   sent as text, where "4954289617627" is a valid name; its changelog calls such
+#:   wire-identical mutations false positives and fixed them for form-urlencoded and XML
+#:   bodies (pull request 3761), not yet for multipart fields;
+#: * a name or label "violating" its pattern, TEXT_PATTERN (no NUL): the service refuses
+#:   every NUL there (tests/service/conftest.py nul_refusals), so one it accepted carried
+#:   none, the mutation lost on the way (seen with seed 8: "became <the same text>*").
+NOT_A_VIOLATION = re.compile(
+    r"violates `type` at /properties/\w+ \(was string, became (integer|number|boolean|null)\)"
+    r"|violates `pattern` at /properties/(name|label) "
+)
+
+
+def validate_but_not_a_violation(case: Case, validate) -> None:
+    """Run ``validate``; re-raise what it found but those false positives."""
+    try:
+        validate()
+    except FailureGroup as found:
+        if case.media_type != "multipart/form-data":
+            raise
+        rest = [
+            failure
+            for failure in found.exceptions
+            if not isinstance(failure, AcceptedNegativeData)
+            or not NOT_A_VIOLATION.search(failure.message)
+        ]
+        if rest:
+            raise FailureGroup(rest) from found
+
+
+@pytest.fixture(scope="session", params=["keyed", "open"])
+def fuzzed(request, tmp_path_factory) -> Iterator[Service]:
+    keyed = request.param == "keyed"
     svc = make_service(
-        tmp_path_factory, "fuzzed", SHAPES_QUERY_TIMEOUT_SECONDS="20", SHAPES_API_KEY=KEY
+        tmp_path_factory,
+        f"fuzzed-{request.param}",
+        SHAPES_QUERY_TIMEOUT_SECONDS="20",
+        **({"SHAPES_API_KEY": KEY} if keyed else {}),
     )
+    svc.keyed = keyed  # type: ignore[attr-defined]
     try:
         svc.start_worker()
         svc.start_worker("query")
         svc.start_api()
-        svc.client.headers["X-API-Key"] = KEY
+        if keyed:
+            svc.client.headers["X-API-Key"] = KEY
         created = svc.upload("quadruped-0", "quadruped")
         assert svc.wait_mesh(created.json()["id"])["status"] == "ready"
         yield svc
@@ -92,6 +133,7 @@ def fuzzed(tmp_path_factory) -> Iterator[Service]:
 
 def test_no_server_error_and_responses_match_the_schema(fuzzed: Service):
     schema = schemathesis.openapi.from_url(f"{fuzzed.url}/openapi.json")
+    keyed = fuzzed.keyed  # type: ignore[attr-defined]
     failures: dict[str, str] = {}
     operations = [result.ok() for result in schema.get_all_operations()]
     assert len(operations) >= 10
@@ -108,7 +150,10 @@ def test_no_server_error_and_responses_match_the_schema(fuzzed: Service):
             phases=[Phase.explicit, Phase.generate],  # no shrinking: report, keep going
         )
         def check(case) -> None:
-            case.call_and_validate(timeout=60, headers=key_unless_left_out(case))
+            headers = key_unless_left_out(case, keyed)
+            validate_but_not_a_violation(
+                case, lambda: case.call_and_validate(timeout=60, headers=headers)
+            )
 
         try:
             check()
@@ -126,6 +171,7 @@ def test_stateful_sequences_follow_the_links_without_errors(fuzzed: Service):
     schema = schemathesis.openapi.from_url(f"{fuzzed.url}/openapi.json").exclude(
         path_regex="^/collections/\\{collection\\}/|^/keys"
     )
+    keyed = fuzzed.keyed  # type: ignore[attr-defined]
     links = schema.statistic.transitions.total
     assert links >= 10, "POST /meshes (200, 202) must link to the mesh operations and its job"
     enrolled = fuzzed.upload("quadruped-1", "quadruped")  # more than one to list, search, delete
@@ -139,7 +185,11 @@ def test_stateful_sequences_follow_the_links_without_errors(fuzzed: Service):
             answered[(case.operation.label, response.status_code)] += 1
 
         def get_call_kwargs(self, case: Case) -> dict:
-            return {"headers": key_unless_left_out(case), "timeout": 60}
+            return {"headers": key_unless_left_out(case, keyed), "timeout": 60}
+
+        def validate_response(self, response: Response, case: Case, **kwargs) -> None:
+            validate = super().validate_response
+            validate_but_not_a_violation(case, lambda: validate(response, case, **kwargs))
 
     deadline = time.monotonic() + STATEFUL_SECONDS
     for suite in range(SUITES):

@@ -24,6 +24,9 @@ from app.db import Base
 from app.migrations import alembic_config, upgrade_head
 from benchmarks.common import TIMEOUT, Postgres, Redis, Service, describing_children
 from tests.service.conftest import assert_text_refused, nul_refusals
+from worker.jobs.queue import FILE_GONE, make_huey
+from worker.jobs.settings import QueueSettings
+from worker.jobs.sources import database_source
 
 pytestmark = [pytest.mark.scaleout, pytest.mark.service, pytest.mark.slow]
 
@@ -228,11 +231,13 @@ def _unavailable(response: httpx.Response, code: str) -> None:
     assert int(response.headers["retry-after"]) > 0
 
 
-def _scaled_out(postgres: Postgres, redis_server: Redis, root, *replicas: str) -> list[Service]:
+def _scaled_out(
+    postgres: Postgres, redis_server: Redis, root, *replicas: str, **env: str
+) -> list[Service]:
     """API replicas and one process each for the two queues' workers, all sharing
-    nothing but the servers; the last one returned runs the workers."""
+    nothing but the servers (and ``env``); the last one returned runs the workers."""
     upgrade_head(postgres.url)
-    shared = {
+    shared = env | {
         "SHAPES_DATABASE_URL": postgres.url,
         "SHAPES_REDIS_URL": redis_server.url,
         "SHAPES_UPLOADS": "database",
@@ -362,9 +367,105 @@ def test_a_nul_character_is_refused_on_postgresql_and_the_connection_stays_usabl
     with a sentence, and the client's keep-alive connection serves the next request."""
     api, workers = _scaled_out(postgres, redis_server, tmp_path, "api")
     try:
+        before = api.client.get("/meshes").json()["total"]
         assert_text_refused(nul_refusals(api))
-        assert api.client.get("/meshes").status_code == 200  # the same connection
-        assert api.client.get("/meshes").json()["total"] == 0  # nothing was stored
+        listed = api.client.get("/meshes")  # on the same keep-alive connection
+        assert listed.status_code == 200 and listed.json()["total"] == before
+    finally:
+        api.close()
+        workers.close()
+
+
+ADMIN = "admin-key-of-the-scale-out-tests"
+
+
+def _keyed(api: Service, key: str) -> httpx.Client:
+    return httpx.Client(base_url=api.url, timeout=TIMEOUT, headers={"X-API-Key": key})
+
+
+def _post_mesh(client: httpx.Client, path: str, name: str, **data: str) -> httpx.Response:
+    mesh = example(name)
+    return client.post(path, files={"file": (mesh.name, mesh.read_bytes())}, data=data)
+
+
+def test_a_collections_links_serve_its_own_key_and_nothing_of_it_reaches_another(
+    postgres: Postgres, redis_server: Redis, tmp_path
+):
+    """Every link an answer in collection c1 gives works with the c1 key that got it and
+    is refused to a c2 key; through c2 nothing of c1 is readable or detectable: a c1
+    preview's sha256, a c1 job's id or c1's bytes as a query answer in c2 exactly as
+    bytes and ids that exist nowhere do."""
+    api, workers = _scaled_out(postgres, redis_server, tmp_path, "api", SHAPES_API_KEY=ADMIN)
+    admin = _keyed(api, ADMIN)
+    try:
+        keys = {}
+        for name in ("c1", "c2"):
+            assert admin.post("/collections", json={"name": name}).status_code == 201
+            made = admin.post("/keys", json={"collection": name, "scope": "write"})
+            keys[name] = _keyed(api, made.json()["key"])
+        c1, c2 = keys["c1"], keys["c2"]
+
+        enrolled = _post_mesh(c1, "/collections/c1/meshes", "hand-0", label="hand")
+        assert enrolled.status_code == 202, enrolled.text
+        mesh = enrolled.json()
+        deadline = time.monotonic() + 3 * TIMEOUT
+        while c1.get(mesh["links"]["self"]).json()["status"] != "ready":
+            assert time.monotonic() < deadline
+            time.sleep(0.2)
+        links = [link for link in mesh["links"].values() if link]
+        for name in ("hand-0", PARTIAL):  # enrolled bytes, and bytes a worker describes
+            answer = _post_mesh(c1, "/collections/c1/query", name, k="1")
+            assert answer.status_code == 200, answer.text
+            links.append(answer.json()["preview"])
+        similar = c1.post(f"{mesh['links']['self']}/similar", params={"k": "1"})
+        links.append(similar.json()["preview"])
+        job = c1.get(mesh["links"]["job"]).json()
+        links += list(job["links"].values())
+
+        for link in links:
+            method = "POST" if link.endswith("/similar") else "GET"  # the one POST link
+            assert c1.request(method, link).status_code == 200, link
+            assert c2.request(method, link).status_code in (403, 404), link
+
+        # Through c2: c1's previews, job and bytes answer as if they did not exist.
+        nowhere = "0" * 64
+        missing = c2.get(f"/collections/c2/previews/{nowhere}")
+        assert missing.status_code == 404
+        for link in links:
+            if "/previews/" in link:
+                sha = link.rsplit("/", 1)[1]
+                probed = c2.get(f"/collections/c2/previews/{sha}")
+                assert (probed.status_code, probed.json()) == (404, missing.json())
+        job_probe, no_job = c2.get(f"/jobs/{job['id']}"), c2.get("/jobs/999999")
+        assert job_probe.status_code == no_job.status_code == 404
+        assert job_probe.json()["error"] == no_job.json()["error"]
+        asked = _post_mesh(c2, "/collections/c2/query", "hand-0", k="1").json()
+        never = _post_mesh(c2, "/collections/c2/query", "hand-1", k="1").json()
+        assert asked["descriptor_source"] == never["descriptor_source"] == "computed"
+    finally:
+        admin.close()
+        api.close()
+        workers.close()
+
+
+def test_a_mesh_deleted_before_a_worker_read_it_is_a_plain_outcome_in_the_log(
+    postgres: Postgres, redis_server: Redis, tmp_path
+):
+    """Uploads in the database, a task whose upload row is gone by the time a worker
+    reads it (its mesh deleted after the worker took the task, too late to revoke it):
+    the worker answers that outcome, says so in one line, no traceback."""
+    api, workers = _scaled_out(postgres, redis_server, tmp_path, "api")
+    try:
+        settings = QueueSettings(
+            data_dir=tmp_path, redis_url=redis_server.url, database_url=postgres.url
+        )
+        task = make_huey(settings).describe_upload(
+            database_source("0" * 64), "gone.off.gz", "smeets2010-surface", 10_000
+        )
+        assert task.get(blocking=True, timeout=TIMEOUT)["code"] == FILE_GONE
+        logs = workers.logs()
+        assert "its mesh was deleted before it was described" in logs, logs
+        assert "Traceback" not in logs, logs
     finally:
         api.close()
         workers.close()
