@@ -133,6 +133,7 @@ class JobCollector:
                 galleries.sync()  # collections other API processes created or deleted
                 galleries.follow()
                 galleries.maybe_refit_fusion(settings.calibration_refit_seconds)
+                galleries.maybe_refit_references(settings.calibration_refit_seconds)
                 self._maybe_save()
                 if time.monotonic() - last_sweep > settings.sweep_interval_seconds:
                     last_sweep = time.monotonic()

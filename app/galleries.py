@@ -246,6 +246,12 @@ class Galleries:
         for gallery in self:
             gallery.maybe_refit_fusion(every)
 
+    def maybe_refit_references(self, every: float) -> None:
+        """Each gallery's yardstick of closeness, refitted after changes (seconds of
+        work at most, in the collector's thread: searches never wait for it)."""
+        for gallery in self:
+            gallery.maybe_refit_reference(every)
+
     @property
     def dirty(self) -> bool:
         return any(g.dirty for g in self)

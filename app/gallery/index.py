@@ -67,12 +67,17 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import faiss
 import numpy as np
 
-from worker.engine.compare import fuse, normalized_euclidean, preset_dissimilarity
+from worker.engine.compare import (
+    fuse,
+    normalized_euclidean,
+    paired_preset_dissimilarity,
+    preset_dissimilarity,
+)
 from worker.engine.parts import PartsMatch, best_scale, coarse, scale_scores
 from worker.engine.presets import PARTS, Preset
 
@@ -113,6 +118,10 @@ class SearchStats:
     seconds: float = 0.0
     partiality: float = 0.0  # how partial the query looks (0: ranked as a whole)
     kept_share: float | None = None  # share of its whole the query seems to have
+    # The share's bounds: the parts' scale is measured on a grid (worker.engine.parts).
+    kept_range: tuple[float, float] | None = None
+    # The weight each modality's score carried in the fused score of this search.
+    weights: dict[str, float] = field(default_factory=dict)
 
 
 class GalleryIndex:
@@ -316,6 +325,28 @@ class GalleryIndex:
             per[m] = preset_dissimilarity(m, q, g, preset, scale)[0]
         weights = {m: self.preset.weight(m) for m in modalities}
         return np.asarray(fuse(per, rule, weights), dtype=np.float64), per
+
+    def pair_scores(self, first: np.ndarray, second: np.ndarray) -> dict[str, np.ndarray]:
+        """Each flat modality's dissimilarity of the pairs of shapes ``first[i]``,
+        ``second[i]`` (ids), as a search scores them (the parts are a query's, not a
+        whole's: :meth:`parts_scores`)."""
+        preset = self.preset
+        with self.lock:
+            a, b = self.store.positions(first), self.store.positions(second)
+            sigma = self.sigma()
+            return {
+                m: paired_preset_dissimilarity(
+                    m, self.store.vectors[m][a], self.store.vectors[m][b], preset, sigma[m]
+                )
+                for m in self.modalities
+            }
+
+    def parts_scores(self, profiles: np.ndarray, reach: np.ndarray, ids: np.ndarray) -> np.ndarray:
+        """The parts dissimilarity of a query (its profiles and reach) to shapes ``ids``,
+        every sample compared at the query's best scale, as a partial search's exact pass."""
+        with self.lock:
+            gallery = self.store.parts[self.store.positions(ids)]
+            return self._parts_scores(profiles, reach, gallery).dissimilarity
 
     def search(
         self,

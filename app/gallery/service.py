@@ -25,7 +25,7 @@ import numpy as np
 
 from worker.engine.compare import partiality, query_weights
 from worker.engine.descriptor import ShapeDescriptor
-from worker.engine.parts import compared_profiles
+from worker.engine.parts import GRID_STEPS_PER_OCTAVE, compared_profiles
 from worker.engine.presets import PARTS, Preset
 
 from ..errors import ConflictError, UnavailableError
@@ -33,6 +33,7 @@ from ..metrics import Metrics
 from .index import GalleryIndex, Match, SearchStats
 from .pairs import GalleryCalibration, NotEnoughPairs, fit_calibration
 from .persistence import load_index, save_index
+from .reference import PARTS_QUERIES, PartsQuery, Reference, fit_reference
 from .weights import (
     IDLE_AFTER_FIT,
     GalleryFusion,
@@ -136,6 +137,12 @@ class Gallery:
         self.followed = 0
         # mesh id -> label of the shapes in the index that have one.
         self._labels: dict[int, str] = {}
+        # How far apart its different objects are (.reference), and the whole shapes
+        # whose own samples score the parts modality's pairs (a reservoir sample).
+        self._reference: Reference | None = None
+        self._parts_queries: list[PartsQuery] = []
+        self._parts_seen = 0
+        self._rng = np.random.default_rng(0)
 
     # ------------------------------------------------------------- state
     @property
@@ -171,6 +178,20 @@ class Gallery:
     def _add(self, index: GalleryIndex, shape: Shape) -> None:
         index.add(shape.mesh_id, descriptor_vectors(shape.descriptor, self.preset))
         self._labelled(shape.mesh_id, shape.label)
+        self._keep_parts_query(shape)
+
+    def _keep_parts_query(self, shape: Shape) -> None:
+        """Reservoir sampling (Vitter's algorithm R) of the shapes whose own samples score
+        the parts modality's reference pairs."""
+        parts = shape.descriptor.parts
+        if self.preset.parts_shape() is None or not parts.size:
+            return
+        query = PartsQuery(shape.mesh_id, parts.astype(np.float64), shape.descriptor.parts_reach)
+        self._parts_seen += 1
+        if len(self._parts_queries) < PARTS_QUERIES:
+            self._parts_queries.append(query)
+        elif (slot := int(self._rng.integers(0, self._parts_seen))) < PARTS_QUERIES:
+            self._parts_queries[slot] = query
 
     def _labelled(self, mesh_id: int, label: str | None) -> None:
         if label is None:
@@ -223,11 +244,16 @@ class Gallery:
                 exclude=exclude,
                 stats=stats,
             )
+            # The parts' scale is one of a grid: the share lies between its neighbours'.
+            half_step = 2.0 ** (0.5 / GRID_STEPS_PER_OCTAVE)
             stats.partiality, stats.kept_share = share, 1.0 / scale**2
+            stats.kept_range = (1.0 / (scale * half_step) ** 2, min(1.0, (half_step / scale) ** 2))
+            stats.weights = {m: w for m, w in weights.items() if w > 0}
         else:
             matches = index.search(
                 vectors, k, fusion=fusion, modalities=modalities, exclude=exclude, stats=stats
             )
+            stats.weights = {m: preset.weight(m) for m in modalities}
         self.metrics.search_seconds.observe(stats.seconds)
         return matches, stats
 
@@ -287,6 +313,27 @@ class Gallery:
                 self._calibration = fit
             assert fit is not None
             return fit
+
+    @property
+    def reference(self) -> Reference | None:
+        """How far apart the gallery's different objects are (:mod:`.reference`), as last
+        fitted; None before the first fit."""
+        return self._reference
+
+    def maybe_refit_reference(self, every: float) -> bool:
+        """Fit the reference again when shapes were added or removed since the last fit,
+        at most every ``every`` seconds (the collector asks each round; searches read the
+        last fit and never wait for one); True if refitted."""
+        index, fit = self._index, self._reference
+        if index is None or (fit is not None and fit.version == self._version):
+            return False
+        if fit is not None and time.time() - fit.fitted_at < every:
+            return False
+        with self._lock:
+            labels, version = dict(self._labels), self._version
+            queries = list(self._parts_queries)
+        self._reference = fit_reference(index, labels, queries, version=version)
+        return True
 
     @property
     def fusion(self) -> GalleryFusion:
@@ -441,6 +488,7 @@ class Gallery:
         def vectors(shapes: Iterable[Shape]) -> Iterator[tuple[int, dict[str, np.ndarray]]]:
             for shape in shapes:  # streamed: a gallery's descriptors need not fit in memory
                 labels[shape.mesh_id] = shape.label
+                self._keep_parts_query(shape)
                 yield shape.mesh_id, descriptor_vectors(shape.descriptor, preset)
 
         if missing is None:
@@ -448,6 +496,15 @@ class Gallery:
         elif missing:
             for mesh_id, shape_vectors in vectors(described(missing)):
                 index.add(mesh_id, shape_vectors)
+        # The saved index holds no samples: a few whole shapes are read for the parts'
+        # reference (all of a small gallery's, else a seeded sample).
+        if preset.parts_shape() is not None and len(self._parts_queries) < PARTS_QUERIES:
+            have = {q.mesh_id for q in self._parts_queries}
+            ids = [int(i) for i in index.ids() if int(i) not in have]
+            chosen = self._rng.permutation(ids)[: PARTS_QUERIES - len(self._parts_queries)]
+            if len(chosen):
+                for shape in described({int(i) for i in chosen}):
+                    self._keep_parts_query(shape)
         log.info(
             "index of %s (%s): %d shapes (%s) in %.2fs",
             self.name,
