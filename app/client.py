@@ -308,9 +308,9 @@ def aligned(rows: Sequence[Sequence[str]]) -> list[str]:
 
 def format_matches(body: dict[str, Any]) -> str:
     """The ranked matches as an aligned text table."""
-    # A partial query is ranked by the modalities it was weighed with (the parts among them).
+    # The modalities that ranked (a weight above 0; a partial query's parts among them).
     matches = body["matches"]
-    modalities = list(matches[0]["scores"]) if matches else list(body["modalities"])
+    modalities = list(body["modalities"])
     header = ["rank", "name", "label", "score", *modalities, "confidence"]
     rows = [
         [
@@ -332,7 +332,7 @@ def format_matches(body: dict[str, Any]) -> str:
     own = {  # a fusion the collection learned compares these otherwise (the size has its own)
         m: c
         for m, c in body.get("comparisons", {}).items()
-        if m != "size" and c != body["dissimilarity"]
+        if m not in ("size", "parts") and c != body["dissimilarity"]
     }
     if own:
         title += "\nCompared by the collection's learned fusion: " + ", ".join(

@@ -85,6 +85,25 @@ class GalleryCalibration:
                 self._fusions[key] = known
             return known
 
+    def histogram(self, bins: int = 24) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(edges, genuine, impostor)``: the fused score's pairs counted over ``bins``
+        shared bins, even on a log scale (the product rule's scores span decades)."""
+        preset = self.preset
+        scored = preset.scored_modalities
+        weights = {m: preset.weight(m) for m in scored}
+        scores = np.asarray(
+            fuse({m: self.pair_scores[m] for m in scored}, preset.fusion, weights),
+            dtype=np.float64,
+        )
+        positive = scores[scores > 0]
+        low = float(positive.min()) if len(positive) else 1.0
+        high = max(float(scores.max()), low * 1.001)
+        edges = np.geomspace(low, high, bins + 1)
+        clipped = np.clip(scores, low, high)
+        genuine = np.histogram(clipped[self.genuine], edges)[0]
+        impostor = np.histogram(clipped[~self.genuine], edges)[0]
+        return edges, genuine, impostor
+
 
 class NotEnoughPairs(ValueError):
     """Too few genuine or impostor pairs among the labelled shapes; the message says so."""

@@ -22,6 +22,7 @@ from ..descriptors import enrolled_mesh
 from ..errors import InvalidInputError
 from ..links import collection_path
 from ..models import Descriptor, Mesh, MeshStatus
+from ..repositories.meshes import Order
 from ..schemas import (
     ACCESS_RESPONSES,
     ERROR_RESPONSES,
@@ -218,9 +219,20 @@ def list_meshes(
     status_: Annotated[MeshStatus | None, Query(alias="status")] = None,
     offset: Annotated[int, Query(ge=0, le=2**63 - 1)] = 0,  # SQLite: 64-bit
     limit: Annotated[int, Query(ge=1, le=1000)] = 50,
+    sort: Annotated[
+        Order,
+        Query(description="the order: enrollment (oldest or newest first), name, label, status"),
+    ] = "oldest",
 ) -> MeshPage:
     page = service.list_page(
-        session, state, gallery, label=label, status=status_, offset=offset, limit=limit
+        session,
+        state,
+        gallery,
+        label=label,
+        status=status_,
+        offset=offset,
+        limit=limit,
+        order=sort,
     )
     return MeshPage(
         items=[mesh_out(m, d, gallery.name) for m, d in page.items],

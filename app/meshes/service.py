@@ -225,9 +225,10 @@ def list_page(
     status: MeshStatus | None,
     offset: int,
     limit: int,
+    order: meshes.Order = "oldest",
 ) -> MeshPage:
-    """A collection's meshes in id order, filtered by label and status; ``limit`` capped
-    by the settings."""
+    """A collection's meshes in ``order`` (:data:`~app.repositories.meshes.ORDERS`),
+    filtered by label and status; ``limit`` capped by the settings."""
     limit = min(limit, state.settings.max_page_size)
     rows, total = meshes.list_page(
         session,
@@ -236,6 +237,7 @@ def list_page(
         status=status.value if status else None,
         offset=offset,
         limit=limit,
+        order=order,
     )
     preset = gallery.base_preset
     descriptors = meshes.descriptors_for(session, [m.id for m in rows], preset.name, preset.version)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import Any
+from typing import Any, Literal
 
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, selectinload
@@ -46,6 +46,17 @@ def delete(session: Session, mesh: Mesh) -> None:
     session.flush()
 
 
+Order = Literal["oldest", "newest", "name", "label", "status"]
+#: The orders a listing can be sorted in (each ends on the id, so pages never overlap).
+ORDERS: dict[Order, tuple[Any, ...]] = {
+    "oldest": (Mesh.id,),
+    "newest": (Mesh.id.desc(),),
+    "name": (Mesh.name, Mesh.id),
+    "label": (Mesh.label, Mesh.name, Mesh.id),
+    "status": (Mesh.status, Mesh.id),
+}
+
+
 def list_page(
     session: Session,
     collection_id: int,
@@ -54,6 +65,7 @@ def list_page(
     status: str | None,
     offset: int,
     limit: int,
+    order: Order = "oldest",
 ) -> tuple[list[Mesh], int]:
     query = select(Mesh).where(Mesh.collection_id == collection_id)
     if label is not None:
@@ -62,7 +74,7 @@ def list_page(
         query = query.where(Mesh.status == status)
     total = session.scalar(select(func.count()).select_from(query.subquery())) or 0
     rows = session.scalars(
-        query.order_by(Mesh.id).offset(offset).limit(limit).options(selectinload(Mesh.jobs))
+        query.order_by(*ORDERS[order]).offset(offset).limit(limit).options(selectinload(Mesh.jobs))
     ).all()
     return list(rows), total
 

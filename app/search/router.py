@@ -7,7 +7,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Depends, Path, Request, Response
 
-from worker.engine.presets import PRESETS
+from worker.engine.presets import PARTS, PRESETS
 
 from ..deps import (
     READ_ACCESS,
@@ -32,6 +32,10 @@ from ..schemas import (
 )
 from . import service
 from .schemas import MatchOut, PartialOut, QueryOut
+
+#: How the parts modality compares (worker.engine.parts): each query sample's profile
+#: with the nearest of the whole's, at the query's best scale.
+PARTS_COMPARISON = "nearest profiles"
 
 router = APIRouter(
     tags=["search"], dependencies=READ_ACCESS, responses=ERROR_RESPONSES | ACCESS_RESPONSES
@@ -138,9 +142,13 @@ def query_out(result: service.SearchResult) -> QueryOut:
         preset=options.preset.name,
         preset_version=options.preset.version,
         dissimilarity=options.preset.dissimilarity,
-        comparisons={m: options.preset.comparison(m) for m in options.modalities},
+        comparisons={
+            m: PARTS_COMPARISON if m == PARTS else options.preset.comparison(m)
+            for m in result.weights
+        },
         fusion=result.fusion,
-        modalities=list(options.modalities),
+        modalities=[m for m, w in result.weights.items() if w > 0],
+        weights=result.weights,
         k=options.k,
         collection=result.collection,
         gallery_size=result.gallery_size,
@@ -154,6 +162,7 @@ def query_out(result: service.SearchResult) -> QueryOut:
                 scores=m.scores,
                 confidence=m.confidence,
                 accepted=m.accepted,
+                closeness=m.closeness,
             )
             for m in result.matches
         ],
@@ -167,6 +176,7 @@ def query_out(result: service.SearchResult) -> QueryOut:
         else PartialOut(
             partiality=result.partial.partiality,
             missing_share=result.partial.missing_share,
+            missing_share_range=result.partial.missing_range,
             note=result.partial.note,
         ),
         preview=result.preview,

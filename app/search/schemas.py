@@ -26,6 +26,13 @@ class MatchOut(BaseModel):
     accepted: bool | None = Field(
         None, description="with far: whether the score is within the threshold at that FAR"
     )
+    closeness: dict[str, float] = Field(
+        default_factory=dict,
+        description="per modality: the share of the collection's pairs of different objects "
+        "that are farther apart than this match (1: closer than all of them); the same "
+        "scale in every collection and for every query; empty until the collection has "
+        "two shapes",
+    )
 
 
 class PartialOut(BaseModel):
@@ -35,7 +42,11 @@ class PartialOut(BaseModel):
     )
     missing_share: float = Field(
         description="the share of its whole's surface the query seems to miss, from the scale "
-        "at which its parts matched best (and the parts of its file left out)"
+        "at which its parts matched best (and the parts of its file left out), rounded to "
+        "0.01: an estimate within missing_share_range"
+    )
+    missing_share_range: tuple[float, float] = Field(
+        description="its bounds: the scale is measured on a grid of steps of 2^(1/8)"
     )
     note: str = Field(description="the same, as a sentence for the user")
 
@@ -86,7 +97,14 @@ class QueryOut(BaseModel):
         "the size's in metric units"
     )
     fusion: str
-    modalities: list[str]
+    modalities: list[str] = Field(
+        description="the modalities the matches were ranked by: the fused ones with a weight "
+        "above 0 (for a partial query, 'parts' and any the ramp still mixes in)"
+    )
+    weights: dict[str, float] = Field(
+        default_factory=dict,
+        description="the weight each ranked modality's score carried in the fused score",
+    )
     k: int
     collection: str = Field(description="the collection searched")
     gallery_size: int

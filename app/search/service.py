@@ -58,26 +58,33 @@ class RankedMatch:
     confidence: float | None = None
     #: Accepted at the options' FAR (None without one).
     accepted: bool | None = None
+    #: Per modality: the share of the gallery's pairs of different objects farther apart
+    #: (:mod:`app.gallery.reference`); empty before the gallery's first reference fit.
+    closeness: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
 class PartialQuery:
     """A query ranked as a part: how partial it looks and how much of its whole it seems
-    to miss."""
+    to miss (an estimate and its bounds: the parts' scale is measured on a grid)."""
 
     partiality: float
     missing_share: float
+    missing_range: tuple[float, float]
 
     @property
     def note(self) -> str:
-        if self.missing_share >= 0.05:
+        low, high = (round(100 * v) for v in self.missing_range)
+        if high >= 10:
             return (
-                f"About {round(100 * self.missing_share)}% of the surface seems missing; "
-                "matches are ranked by the parts that are there."
+                f"Between {low}% and {high}% of the surface seems missing (its parts' best "
+                "match, measured to that resolution); matches are ranked by the parts that are "
+                "there, so they have no confidence."
             )
         return (
-            "The surface looks open (cut, holed or scanned from one side); matches are "
-            "ranked by the parts that are there."
+            "The surface looks open (cut, holed or scanned from one side), with little of it "
+            "missing; matches are ranked by the parts that are there, so they have no "
+            "confidence."
         )
 
 
@@ -100,6 +107,9 @@ class SearchResult:
     preview: str | None = None
     #: How partial the query looks, when it was ranked as a part (None: as a whole).
     partial: PartialQuery | None = None
+    #: The weight each modality's score carried in the fused score (a weight of 0: shown
+    #: for information only).
+    weights: dict[str, float] = field(default_factory=dict)
 
     @property
     def fusion(self) -> str:
@@ -226,9 +236,13 @@ def rank(
     )
     rows = meshes.by_ids(session, [m.id for m in matches])
     partial = None
-    if stats.kept_share is not None:
-        kept = stats.kept_share * (descriptor.kept_area_fraction or 1.0)
-        partial = PartialQuery(stats.partiality, max(0.0, 1.0 - kept))
+    if stats.kept_share is not None and stats.kept_range is not None:
+        file_share = descriptor.kept_area_fraction or 1.0
+        kept = stats.kept_share * file_share
+        # Rounded: the grid's resolution is some hundredths, not sixteen digits.
+        low, high = (round(max(0.0, 1.0 - k * file_share), 2) for k in reversed(stats.kept_range))
+        partial = PartialQuery(stats.partiality, round(max(0.0, 1.0 - kept), 2), (low, high))
+    reference = gallery.reference
     # The calibration is of whole queries' scores; a part's are on another scale.
     calibration = None if partial else _calibration_for(state, gallery, options)
     threshold = None
@@ -250,6 +264,13 @@ def rank(
                 if calibration is None
                 else float(calibration.confidence(match.score)),
                 accepted=None if threshold is None else bool(match.score <= threshold),
+                closeness={}
+                if reference is None
+                else {
+                    m: c
+                    for m, v in match.scores.items()
+                    if (c := reference.closeness(m, v)) is not None
+                },
             )
         )
     return SearchResult(
@@ -262,6 +283,7 @@ def rank(
         descriptor_source=descriptor_source,
         threshold=threshold,
         partial=partial,
+        weights=stats.weights,
     )
 
 

@@ -3,6 +3,7 @@
 import * as THREE from "three";
 import { GLTFLoader } from "three/addons/loaders/GLTFLoader.js";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
+import { bestTurn } from "/static/align.js";
 
 const $ = (id) => document.getElementById(id);
 
@@ -117,9 +118,15 @@ class Viewer {
     this.camera.position.set(1.9, 1.0, 2.4); // three-quarter view, 3.2 from the centre
     this.controls = new OrbitControls(this.camera, canvas);
     this.controls.addEventListener("change", () => this.render());
-    this.model = null;
-    this.partner = null;
+    this.models = [];
     new ResizeObserver(() => this.resize()).observe(canvas);
+  }
+
+  // A front view (y up) wide enough for `count` shapes side by side.
+  frontView(count) {
+    this.camera.position.set(0, 0.45, 1.7 + 1.4 * count);
+    this.controls.target.set(0, 0, 0);
+    this.controls.update();
   }
 
   resize() {
@@ -131,43 +138,32 @@ class Viewer {
     this.render();
   }
 
-  async show(url) {
+  // The previews at `urls`, side by side in one frame, each within the unit sphere.
+  async show(...urls) {
     loader.setRequestHeader(keyHeaders());
-    const gltf = await loader.loadAsync(url);
-    if (this.model) this.scene.remove(this.model);
-    this.model = gltf.scene;
-    // Previews are in the engine's canonical frame (largest spread across, least towards
-    // the viewer), so a query and its match are drawn alike whatever their files' axes.
-    // One made before that is in its file's own axes: z up (TOSCA, scans) turned to y.
-    if (!this.model.getObjectByName(CANONICAL_NODE)) this.model.rotation.x = -Math.PI / 2;
-    this.model.traverse((node) => {
-      if (node.isMesh) {
-        node.material = new THREE.MeshStandardMaterial({
-          color: 0x8ca8cc, roughness: 0.6, side: THREE.DoubleSide,
-        });
-        node.geometry.computeVertexNormals();
-      }
-    });
-    this.scene.add(this.model);
-    this.resize();
-  }
-
-  // Two viewers turn together: each copies the other's camera when it moves.
-  link(other) {
-    this.partner = other;
-    other.partner = this;
-    for (const [a, b] of [[this, other], [other, this]]) {
-      a.controls.addEventListener("change", () => {
-        if (a.syncing) return;
-        b.syncing = true;
-        b.camera.position.copy(a.camera.position);
-        b.camera.quaternion.copy(a.camera.quaternion);
-        b.controls.target.copy(a.controls.target);
-        b.controls.update();
-        b.render();
-        b.syncing = false;
+    const loaded = await Promise.all(urls.map((url) => loader.loadAsync(url)));
+    for (const model of this.models) this.scene.remove(model);
+    this.models = loaded.map((gltf, i) => {
+      const model = new THREE.Group();
+      model.add(gltf.scene);
+      // Previews are in the engine's canonical frame (largest spread across, least
+      // towards the viewer, limbs down). One made before that is in its file's own
+      // axes: z up (TOSCA, scans) turned to y.
+      if (!gltf.scene.getObjectByName(CANONICAL_NODE)) gltf.scene.rotation.x = -Math.PI / 2;
+      gltf.scene.traverse((node) => {
+        if (node.isMesh) {
+          node.material = new THREE.MeshStandardMaterial({
+            color: i === 0 ? 0x8ca8cc : 0xb7a07a, roughness: 0.6, side: THREE.DoubleSide,
+          });
+          node.geometry.computeVertexNormals();
+        }
       });
-    }
+      model.position.x = 1.15 * (2 * i - (urls.length - 1));
+      this.scene.add(model);
+      return model;
+    });
+    this.resize();
+    return loaded.map((gltf) => points(gltf.scene));
   }
 
   render() {
@@ -178,12 +174,27 @@ class Viewer {
 // The glTF node of a preview in the canonical frame (worker/jobs/previews.py).
 const CANONICAL_NODE = "canonical-frame";
 
-let queryViewer, matchViewer, detailViewer;
+// A model's vertices as [x, y, z], in its scene's frame (the canonical node's transform
+// applied).
+function points(scene) {
+  scene.updateMatrixWorld(true);
+  const out = [];
+  const v = new THREE.Vector3();
+  scene.traverse((node) => {
+    if (!node.isMesh) return;
+    const position = node.geometry.attributes.position;
+    for (let i = 0; i < position.count; i++) {
+      v.fromBufferAttribute(position, i).applyMatrix4(node.matrixWorld);
+      out.push([v.x, v.y, v.z]);
+    }
+  });
+  return out;
+}
+
+let compareViewer, detailViewer;
 function viewers() {
-  if (!queryViewer) {
-    queryViewer = new Viewer($("view-query"));
-    matchViewer = new Viewer($("view-match"));
-    queryViewer.link(matchViewer);
+  if (!compareViewer) {
+    compareViewer = new Viewer($("view-compare"));
     detailViewer = new Viewer($("view-detail"));
   }
 }
@@ -201,8 +212,12 @@ function percent(value) {
   return `${(100 * value).toFixed(value < 0.1 ? 1 : 0)}%`;
 }
 
-function thumbnail(id, name, ready) {
-  if (!ready) return placeholder("not described yet");
+// What stands in a card for a mesh without a thumbnail yet (or ever).
+const NO_THUMBNAIL = { queued: "queued", processing: "being described" };
+
+function thumbnail(id, name, status, error) {
+  if (status === "failed") return placeholder(`failed: ${error || "not described"}`);
+  if (status !== "ready") return placeholder(NO_THUMBNAIL[status] || status);
   const img = document.createElement("img");
   const path = `${base()}/meshes/${id}/thumbnail`;
   img.alt = `Thumbnail of ${name}`;
@@ -232,7 +247,7 @@ function matchCard(match, result) {
   card.tabIndex = 0;
   card.setAttribute("role", "button");
   card.dataset.meshId = match.mesh_id;
-  card.append(thumbnail(match.mesh_id, match.name, true));
+  card.append(thumbnail(match.mesh_id, match.name, "ready"));
   const title = document.createElement("div");
   title.className = "title";
   title.textContent = `${match.rank}. ${match.name}`;
@@ -243,6 +258,7 @@ function matchCard(match, result) {
   score.className = "meta";
   score.textContent = `score ${match.score.toPrecision(3)}`;
   if (match.confidence !== null) score.textContent += `, confidence ${percent(match.confidence)}`;
+  else if (result.partial) score.textContent += ", no confidence (ranked by its parts)";
   card.append(title, meta, score);
   if (match.accepted !== null) {
     const verdict = document.createElement("div");
@@ -250,18 +266,30 @@ function matchCard(match, result) {
     verdict.textContent = match.accepted ? "accepted" : "not the same object";
     card.append(verdict);
   }
-  // Why it matched: each modality's dissimilarity, against the worst of the results.
+  // Why it matched: for each modality that ranked (a weight above 0), how close the
+  // match is on one scale for every query and collection: the share of the collection's
+  // pairs of different objects that are farther apart (a full bar: closer than all).
   const bars = document.createElement("div");
   bars.className = "bars";
-  for (const [modality, value] of Object.entries(match.scores)) {
-    const worst = Math.max(...result.matches.map((m) => m.scores[modality]), 1e-12);
+  for (const modality of result.modalities) {
+    const value = match.scores[modality];
+    const closeness = match.closeness ? match.closeness[modality] : undefined;
     const name = document.createElement("span");
     name.textContent = modality.toUpperCase();
     const bar = document.createElement("div");
     bar.className = "bar";
-    bar.title = `${modality} dissimilarity ${value.toPrecision(3)} (shorter is closer)`;
+    bar.dataset.modality = modality;
     const fill = document.createElement("span");
-    fill.style.width = `${Math.max(2, (100 * value) / worst)}%`;
+    if (closeness === undefined) {
+      bar.title = `${modality} dissimilarity ${value.toPrecision(3)}; the collection has no `
+        + "pairs to compare it with yet";
+      fill.style.width = "0%";
+    } else {
+      bar.dataset.closeness = String(closeness);
+      bar.title = `${modality}: closer than ${percent(closeness)} of the collection's pairs `
+        + `of different objects (dissimilarity ${value.toPrecision(3)})`;
+      fill.style.width = `${Math.max(2, 100 * closeness)}%`;
+    }
     bar.append(fill);
     bars.append(name, bar);
   }
@@ -293,6 +321,8 @@ function forgetMesh(id) {
   }
 }
 
+// The query (left) and the match (right) in one 3D view, the match turned to face as
+// the query does (align.js).
 async function compare(match, result, card) {
   for (const other of document.querySelectorAll(".card.selected")) other.classList.remove("selected");
   card.classList.add("selected");
@@ -300,10 +330,18 @@ async function compare(match, result, card) {
   $("compare").hidden = false;
   $("caption-query").textContent = result.queryName ? `Query: ${result.queryName}` : "Query";
   $("caption-match").textContent = `Match ${match.rank}: ${match.name} (${match.label || "no label"})`;
+  const canvas = $("view-compare");
   try {
-    const jobs = [matchViewer.show(`${base()}/meshes/${match.mesh_id}/preview`)];
-    if (result.preview) jobs.push(queryViewer.show(result.preview));
-    await Promise.all(jobs);
+    const urls = [result.preview, `${base()}/meshes/${match.mesh_id}/preview`].filter(Boolean);
+    const shapes = await compareViewer.show(...urls);
+    let turn = [1, 1, 1];
+    if (shapes.length === 2) {
+      turn = bestTurn(shapes[0], shapes[1]).turn;
+      compareViewer.models[1].scale.set(...turn);
+    }
+    canvas.dataset.models = String(shapes.length);
+    canvas.dataset.turn = turn.join(",");
+    compareViewer.frontView(shapes.length);
   } catch (err) {
     showError(err);
   }
@@ -410,7 +448,9 @@ async function follow(meshId, cell) {
 let galleryOffset = 0;
 
 async function loadGallery() {
-  const params = new URLSearchParams({ offset: galleryOffset, limit: PAGE });
+  const params = new URLSearchParams({
+    offset: galleryOffset, limit: PAGE, sort: $("gallery-sort").value,
+  });
   if ($("gallery-label").value.trim()) params.set("label", $("gallery-label").value.trim());
   if ($("gallery-status").value) params.set("status", $("gallery-status").value);
   try {
@@ -432,7 +472,8 @@ function galleryCard(mesh) {
   card.className = "card";
   card.tabIndex = 0;
   card.setAttribute("role", "button");
-  card.append(thumbnail(mesh.id, mesh.name, mesh.status === "ready"));
+  card.dataset.meshId = mesh.id;
+  card.append(thumbnail(mesh.id, mesh.name, mesh.status, mesh.error));
   const title = document.createElement("div");
   title.className = "title";
   title.textContent = mesh.name;
@@ -455,7 +496,10 @@ async function openDetail(mesh) {
     label: mesh.label || "(none)",
     status: mesh.status === "failed" ? `failed: ${mesh.detail}` : mesh.status,
     file: `${mesh.filename} (${(mesh.size_bytes / 1024).toFixed(0)} kB)`,
-    vertices: mesh.descriptor ? `${mesh.descriptor.input_vertices} (described at ${mesh.descriptor.vertices})` : "-",
+    vertices: mesh.descriptor
+      ? `${mesh.descriptor.input_vertices.toLocaleString("en")} in the file; the descriptor `
+        + `resampled it to ${mesh.descriptor.vertices.toLocaleString("en")}`
+      : "-",
     surface: mesh.descriptor && mesh.descriptor.kept_area_fraction != null
       ? `${percent(mesh.descriptor.kept_area_fraction)} described`
         + (partial(mesh.descriptor.kept_area_fraction)
@@ -513,6 +557,10 @@ $("detail-delete").addEventListener("click", async () => {
   }
 });
 
+$("gallery-sort").addEventListener("change", () => {
+  galleryOffset = 0;
+  loadGallery();
+});
 $("gallery-filter").addEventListener("submit", (e) => {
   e.preventDefault();
   galleryOffset = 0;
@@ -538,18 +586,43 @@ async function loadCalibration() {
       + (c.trusted
         ? "Enough pairs to trust these rates."
         : `Few pairs, so these are rough estimates; trusted rates need ${c.trust_rule.split(";")[0]}.`);
-    drawRoc(c.roc, c.eer);
+    // With no error at any threshold the ROC lies on its axes and says nothing: the
+    // scores' spread shows how wide the gap between the two kinds of pairs is.
+    const separated = c.eer === 0;
+    $("calibration-roc").toggleAttribute("hidden", separated); // an SVG element has no .hidden
+    if (!separated) drawRoc(c.roc, c.eer);
+    drawHistogram(c.histogram);
+    const separation = $("calibration-separation");
+    separation.hidden = !separated;
+    if (separated) {
+      const gap = gapOf(c.histogram);
+      separation.textContent = "No error at any threshold: every pair of meshes with the same "
+        + "label scores below every pair with different labels"
+        + (gap ? ` (the closest pair of different labels scores ${gap.toFixed(1)} times the `
+          + "farthest pair of the same label, at the histogram's resolution)" : "")
+        + ". The ROC is flat on its axes; the scores' spread is drawn instead.";
+    }
     fillRows($("calibration-table"), c.operating_points.map((p) =>
-      [percent(p.far), p.threshold.toPrecision(3), percent(p.estimated_far), percent(p.estimated_frr)]));
+      [percent(p.far), p.threshold === null ? "accepts nothing" : p.threshold.toPrecision(3),
+        percent(p.estimated_far), percent(p.estimated_frr)]));
     $("calibration-table").hidden = false;
     showFusion(c.fusion);
   } catch (err) {
     summary.textContent = err.message;
-    $("calibration-roc").toggleAttribute("hidden", true); // an SVG element has no .hidden
-    $("calibration-table").hidden = true;
-    $("calibration-fusion").hidden = true;
-    $("calibration-folds").hidden = true;
+    for (const id of ["calibration-roc", "calibration-histogram"]) $(id).toggleAttribute("hidden", true);
+    for (const id of ["calibration-table", "calibration-fusion", "calibration-fusion-numbers",
+      "calibration-folds", "calibration-separation"]) $(id).hidden = true;
   }
+}
+
+// How far apart the two kinds of pairs lie, in bins of the histogram: the ratio of the
+// lowest impostor bin's lower edge to the highest genuine bin's upper edge (null when
+// they overlap).
+function gapOf({ edges, genuine, impostor }) {
+  const lastGenuine = genuine.reduce((last, n, i) => (n ? i : last), -1);
+  const firstImpostor = impostor.findIndex((n) => n > 0);
+  if (lastGenuine < 0 || firstImpostor <= lastGenuine) return null;
+  return edges[firstImpostor] / edges[lastGenuine + 1];
 }
 
 // One row of cells per list of texts, in the table's body.
@@ -575,9 +648,20 @@ function showFusion(fusion) {
     .join(", ");
   const source = { learned: "learned on this gallery", preset: "the preset's", pinned: "pinned by the operator" };
   $("calibration-fusion").textContent = `Fusion weights: ${weighed(fusion.weights, fusion.comparisons)} `
-    + `(${source[fusion.source] || fusion.source}). `
-    + `${fusion.reason.charAt(0).toUpperCase()}${fusion.reason.slice(1)}.`;
+    + `(${source[fusion.source] || fusion.source}). ${fusionSentence(fusion)}`;
   $("calibration-fusion").hidden = false;
+  // The cross-validation's figures, for whoever wants them, folded under the sentence.
+  const numbers = $("calibration-fusion-numbers");
+  numbers.hidden = !fusion.adoption;
+  if (fusion.adoption) {
+    const a = fusion.adoption;
+    numbers.querySelector("p").textContent = `Held out, the learned weights scored EER `
+      + `${percent(fusion.held_out.eer)} and mAP ${percent(fusion.held_out.map)}; the preset's `
+      + `${percent(fusion.preset_held_out.eer)} and ${percent(fusion.preset_held_out.map)}. `
+      + `Gain ${(100 * a.gain).toFixed(2)} points of the loss (the mean of EER and 1 - mAP); `
+      + `corrected resampled t ${a.statistic.toFixed(2)} against ${a.critical.toFixed(2)} `
+      + `(one-sided, 95%): ${a.adopted ? "adopted" : "not adopted"}.`;
+  }
   const folds = $("calibration-folds");
   folds.hidden = fusion.folds.length === 0;
   if (folds.hidden) return;
@@ -595,6 +679,45 @@ function showFusion(fusion) {
       String(f.held_out_shapes), weighed(f.weights, f.comparisons), ...scores(f.held_out), ...scores(f.preset)]),
     ["mean", "", String(fusion.labelled_shapes), "", ...scores(fusion.held_out), ...scores(fusion.preset_held_out)],
   ]);
+}
+
+// Why the weights are these, as a person would say it (the figures are folded below).
+function fusionSentence(fusion) {
+  const a = fusion.adoption;
+  const shapes = `${fusion.labelled_shapes} labelled meshes`;
+  if (fusion.source === "learned" && a) {
+    return `Weights learned on this collection's ${shapes} ranked better in cross-validation `
+      + "than the preset's, by more than the folds disagree, so they are used.";
+  }
+  if (fusion.source === "preset" && a) {
+    return `Weights learned on this collection's ${shapes} did not rank better in `
+      + "cross-validation than the preset's by more than the folds disagree, so the "
+      + "preset's stay.";
+  }
+  return `${fusion.reason.charAt(0).toUpperCase()}${fusion.reason.slice(1)}.`;
+}
+
+// The fused scores of pairs of the same label (genuine) and of different labels
+// (impostor), counted per bin on a log axis.
+function drawHistogram({ edges, genuine, impostor }) {
+  const svg = $("calibration-histogram");
+  const [x0, y0, w, h] = [40, 20, 360, 220];
+  const bins = genuine.length;
+  const top = Math.max(...genuine, ...impostor, 1);
+  const bar = (counts, colour, offset) => counts.map((n, i) => {
+    const height = (h * n) / top;
+    const x = x0 + (w * i) / bins + offset;
+    return `<rect x="${x.toFixed(1)}" y="${(y0 + h - height).toFixed(1)}" width="${(w / bins / 2).toFixed(1)}" height="${height.toFixed(1)}" fill="${colour}"/>`;
+  }).join("");
+  const tick = (i) => `<text x="${(x0 + (w * i) / bins).toFixed(1)}" y="${y0 + h + 16}" text-anchor="middle">${edges[i].toPrecision(2)}</text>`;
+  svg.innerHTML = `
+    <rect x="${x0}" y="${y0}" width="${w}" height="${h}" fill="#fff" stroke="#d5dbe3"/>
+    ${bar(genuine, "#2e7d4f", 0)}${bar(impostor, "#a33a2f", w / bins / 2)}
+    ${tick(0)}${tick(Math.floor(bins / 2))}${tick(bins)}
+    <text x="${x0 + w / 2 - 70}" y="${y0 + h + 32}">fused score (log)</text>
+    <text x="${x0 + 6}" y="${y0 + 14}" style="fill:#2e7d4f">same label: ${genuine.reduce((a, b) => a + b, 0)} pairs</text>
+    <text x="${x0 + 6}" y="${y0 + 28}" style="fill:#a33a2f">different labels: ${impostor.reduce((a, b) => a + b, 0)} pairs</text>`;
+  svg.toggleAttribute("hidden", false);
 }
 
 function drawRoc(roc, eer) {

@@ -41,6 +41,7 @@ from .schemas import (
     CalibrationOut,
     FusionFold,
     FusionOut,
+    HistogramOut,
     OperatingPoint,
     RecognitionScores,
     RocOut,
@@ -121,6 +122,7 @@ def get_calibration(gallery: GalleryDep, state: StateDep) -> CalibrationOut:
     row = fit.rows[FUSED]
     keep = np.unique(np.linspace(0, len(row.far) - 1, min(ROC_POINTS, len(row.far))).astype(int))
     preset = gallery.preset
+    edges, genuine, impostor = fit.histogram()
     return CalibrationOut(
         collection=gallery.name,
         preset=preset.name,
@@ -146,6 +148,9 @@ def get_calibration(gallery: GalleryDep, state: StateDep) -> CalibrationOut:
         },
         fitted_at=fit.fitted_at,
         fusion=fusion_out(gallery.fusion, gallery.base_preset),
+        histogram=HistogramOut(
+            edges=edges.tolist(), genuine=genuine.tolist(), impostor=impostor.tolist()
+        ),
     )
 
 

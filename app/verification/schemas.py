@@ -83,6 +83,12 @@ class FusionOut(BaseModel):
     fitted_at: float
 
 
+class HistogramOut(BaseModel):
+    edges: list[float] = Field(description="bin edges of the fused score, even on a log scale")
+    genuine: list[int] = Field(description="pairs of the same label in each bin")
+    impostor: list[int] = Field(description="pairs of different labels in each bin")
+
+
 class CalibrationOut(BaseModel):
     collection: str = Field(description="the collection whose pairs are calibrated")
     preset: str
@@ -102,6 +108,10 @@ class CalibrationOut(BaseModel):
     modalities: dict[str, ScoreCalibration] = Field(description="each modality on its own")
     fitted_at: float = Field(description="Unix time of the fit (refitted after changes)")
     fusion: FusionOut = Field(description="the fusion weights the fused score uses, and why")
+    histogram: HistogramOut = Field(
+        description="how the genuine and the impostor pairs' fused scores spread: where the "
+        "ROC says little (no error at any threshold), the gap between them still shows"
+    )
 
 
 class VerificationOut(BaseModel):

@@ -235,12 +235,14 @@ def test_a_metric_collection_tells_sizes_apart(two):
         ).json()
         found[units] = query
     metric = found["metric"]
-    assert metric["modalities"] == ["gdm", "ddt", "spectrum", "size"]
+    # Ranked by the modalities of a weight above 0 (the default's GDM is weighed 0).
+    assert metric["modalities"] == ["ddt", "spectrum", "size"]
+    assert list(metric["weights"]) == ["gdm", "ddt", "spectrum", "size"]
     assert [m["name"] for m in metric["matches"]] == ["hand-0-large", "hand-0"]
     large, small = (m["scores"]["size"] for m in metric["matches"])
     assert large < 0.1 < 0.5 < small  # 2x apart: eq. (8) of the sizes is 2/3
     scale_free = found["any"]
-    assert scale_free["modalities"] == ["gdm", "ddt", "spectrum"]
+    assert scale_free["modalities"] == ["ddt", "spectrum"]
     assert all("size" not in m["scores"] for m in scale_free["matches"])
     # Scale-free, the two enrolled files are the same shape: their scores barely differ.
     first, second = (m["score"] for m in scale_free["matches"])
