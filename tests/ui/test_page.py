@@ -69,9 +69,14 @@ def page(site):
 
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS, headless=True)
-        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page = browser.new_page(viewport={"width": 1280, "height": 900})
         errors: list[str] = []
         page.on("pageerror", lambda e: errors.append(str(e)))
+        # Nothing the page asks for is missing (the favicon included).
+        page.on(
+            "response",
+            lambda r: r.status == 404 and errors.append(f"404 {r.url}"),
+        )
         page.goto(site.url + "/")
         yield page
         browser.close()
@@ -105,6 +110,7 @@ def test_enroll_three_meshes_through_the_page(page, site):
         assert status.inner_text() == "ready"
     listed = site.client.get("/meshes", params={"status": "ready"}).json()
     assert {(m["name"], m["label"]) for m in listed["items"]} == set(ENROLL.items())
+    shoot(page, "enroll")
 
 
 def test_search_with_another_pose_shows_the_right_object_in_3d(page):
@@ -115,13 +121,14 @@ def test_search_with_another_pose_shows_the_right_object_in_3d(page):
     assert cards.count() == len(ENROLL)
     assert cards.first.locator(".label").inner_text() == "quadruped"
     assert cards.first.locator("img").evaluate("img => img.complete && img.naturalWidth") == 256
-    # The best match opens beside the query at once; both views draw their mesh.
+    # The best match opens beside the query at once, both in one view.
     page.locator("#compare").wait_for(state="visible")
-    for view in ("view-query", "view-match"):
-        page.wait_for_function(f"() => ({DRAWN_PIXELS})('{view}') > 2000", timeout=60_000)
+    page.wait_for_function(
+        "() => document.getElementById('view-compare').dataset.models === '2'", timeout=60_000
+    )
+    page.wait_for_function(f"() => ({DRAWN_PIXELS})('view-compare') > 4000", timeout=60_000)
     assert page.locator("#caption-match").inner_text().startswith("Match 1: quadruped-0")
     assert "3 shapes" in page.locator("#service-status").inner_text()
-    shoot(page, "search")
     cards.nth(1).click()  # another card replaces the match
     page.wait_for_function(
         "() => document.getElementById('caption-match').textContent.startsWith('Match 2')"
@@ -140,6 +147,7 @@ def test_the_gallery_lists_and_opens_a_mesh_in_3d(page):
     page.wait_for_function(f"() => ({DRAWN_PIXELS})('view-detail') > 2000", timeout=60_000)
     facts = page.locator("#detail-meta").inner_text()
     assert "ready" in facts and "100% described" in facts
+    assert "in the file; the descriptor resampled it to" in facts
     shoot(page, "gallery")
 
 
@@ -174,7 +182,27 @@ def test_a_partial_scan_is_ranked_by_its_parts_and_the_page_says_so(page):
     cards = page.locator("#search-results .card")
     assert cards.first.locator(".label").inner_text() == "quadruped"
     assert "PARTS" in cards.first.locator(".bars").inner_text()
+    # No confidence, and the card says why rather than leaving it out.
+    assert "no confidence (ranked by its parts)" in cards.first.inner_text()
     shoot(page, "partial")
+
+
+def test_a_partial_answer_says_what_ranked_it_and_what_was_measured(site):
+    """The answer names the modalities that ranked it (not the whole ones it did not use),
+    and the missing share as what it is: an estimate on the parts' scale grid, rounded,
+    with its bounds."""
+    data = (EXAMPLES / PARTIAL_SAMPLE).read_bytes()
+    body = site.client.post(
+        "/query", files={"file": (Path(PARTIAL_SAMPLE).name, data)}, data={"k": "3"}
+    ).json()
+    assert "parts" in body["modalities"]
+    assert body["modalities"] == [m for m, w in body["weights"].items() if w > 0]
+    assert set(body["modalities"]) <= set(body["matches"][0]["scores"])
+    partial = body["partial"]
+    low, high = partial["missing_share_range"]
+    assert low <= partial["missing_share"] <= high
+    assert partial["missing_share"] == round(partial["missing_share"], 2)
+    assert f"Between {round(100 * low)}% and {round(100 * high)}%" in partial["note"]
 
 
 def test_an_error_shows_the_services_sentence(page, tmp_path):
@@ -206,8 +234,10 @@ def test_calibration_says_what_it_needs_then_draws_the_roc(page, site):
         assert site.wait_mesh(mesh_id)["status"] == "ready"
     page.click("#tab-search")
     page.click("#tab-calibration")
-    page.locator("#calibration-roc").wait_for(state="visible", timeout=60_000)
+    page.locator("#calibration-histogram").wait_for(state="visible", timeout=60_000)
     assert "Equal error rate" in summary.inner_text()
+    eer = site.client.get("/calibration").json()["eer"]
+    assert page.locator("#calibration-roc").is_visible() == (eer > 0)
     # Next to the ROC, the fusion's weights and why (two labels of three or more: the
     # preset's, and the sentence says what learning needs).
     fusion = page.locator("#calibration-fusion").inner_text()
@@ -226,8 +256,14 @@ def test_calibration_says_what_it_needs_then_draws_the_roc(page, site):
         page.click("#tab-search")
         page.click("#tab-calibration")
         page.wait_for_timeout(500)
+    # A sentence a person reads, the cross-validation's figures folded under it.
     fusion = page.locator("#calibration-fusion").inner_text()
-    assert "held-out EER" in fusion and ("learned" in fusion or "the preset's" in fusion)
+    assert "cross-validation" in fusion and ("learned" in fusion or "the preset's" in fusion)
+    assert " t " not in fusion and "points of loss" not in fusion
+    numbers = page.locator("#calibration-fusion-numbers")
+    assert not numbers.locator("p").is_visible()  # folded until asked for
+    numbers.locator("summary").click()
+    assert "corrected resampled t" in numbers.locator("p").inner_text()
     summary = folds.locator("summary")
     assert summary.inner_text().startswith("How the fusion was chosen: ")
     assert " folds in 10 rounds, a gain of " in summary.inner_text()
@@ -241,7 +277,128 @@ def test_calibration_says_what_it_needs_then_draws_the_roc(page, site):
         "1",
         "10",
     ]  # round of the first and the last fold
+
+
+def test_the_comparison_stays_in_view_in_one_frame_and_one_orientation(page, site):
+    """At 1280 x 900 with the default 8 matches, the query and the best match are drawn
+    in one 3D view above the cards, in view without scrolling, the match turned (a half
+    turn, never a mirror image) to face as the query does."""
+    assert site.client.get("/meshes").json()["total"] >= 8
+    _wait_for_the_reference(site)
+    page.click("#tab-search")
+    page.set_input_files("#file-search", str(example("quadruped-3")))
+    cards = page.locator("#search-results .card")
+    page.wait_for_function(
+        "() => document.querySelectorAll('#search-results .card').length === 8", timeout=180_000
+    )
+    canvas = page.locator("#view-compare")
+    page.wait_for_function(
+        "() => document.getElementById('view-compare').dataset.models === '2'", timeout=60_000
+    )
+    box = canvas.bounding_box()
+    assert page.evaluate("() => window.scrollY") == 0
+    assert 0 <= box["y"] and box["y"] + box["height"] <= 900, box
+    assert box["y"] < cards.first.bounding_box()["y"]  # above the cards
+    turns = ["1,1,1", "-1,-1,1", "-1,1,-1", "1,-1,-1"]
+    assert canvas.get_attribute("data-turn") in turns
+    # The turn chosen undoes a shape's half turn, whichever it is (align.js on a figure
+    # with no symmetry).
+    undone = page.evaluate(
+        """async () => {
+        const { bestTurn, TURNS } = await import('/static/align.js');
+        const figure = [];
+        for (let i = 0; i < 300; i++) {
+          const t = i / 300;
+          figure.push([Math.cos(7 * t) + t, 0.5 * Math.sin(5 * t) + t * t, t * t * t - 0.3]);
+        }
+        return TURNS.map(([a, b, c]) =>
+          bestTurn(figure, figure.map(([x, y, z]) => [a * x, b * y, c * z])).turn.join(','));
+      }"""
+    )
+    assert undone == turns
+    page.wait_for_function(f"() => ({DRAWN_PIXELS})('view-compare') > 4000", timeout=60_000)
+    shoot(page, "search")
+
+
+def _wait_for_the_reference(site) -> None:
+    """Until the collector has fitted the gallery's yardstick of closeness (each round
+    after changes)."""
+    deadline = time.monotonic() + 60
+    while not site.query("quadruped-3", k=1).json()["matches"][0]["closeness"]:
+        assert time.monotonic() < deadline, "no closeness in the answers"
+        time.sleep(0.5)
+
+
+def test_score_bars_mean_the_same_everywhere_and_only_modalities_that_count(page, site):
+    """Each bar is the match's closeness on the collection's scale (the share of its pairs
+    of different objects farther apart), as the answer gives it, for each modality with a
+    weight: the GDM, weighed 0 by the default fusion, has none."""
+    body = site.query("quadruped-3", k=8).json()  # the search the page made, as JSON
+    assert body["weights"]["gdm"] == 0 and "gdm" not in body["modalities"]
+    cards = page.locator("#search-results .card")
+    assert cards.count() == len(body["matches"])
+    for i, match in enumerate(body["matches"]):
+        bars = cards.nth(i).locator(".bar")
+        shown = [bars.nth(j).get_attribute("data-modality") for j in range(bars.count())]
+        assert shown == body["modalities"]
+        for j, modality in enumerate(shown):
+            closeness = float(bars.nth(j).get_attribute("data-closeness"))
+            assert closeness == pytest.approx(match["closeness"][modality])
+            width = bars.nth(j).locator("span").evaluate("(e) => e.style.width")
+            assert float(width.removesuffix("%")) == pytest.approx(max(2, 100 * closeness))
+    # The best match, another pose of the same figure, is closer than most pairs of
+    # different objects in every modality that ranked it.
+    assert min(body["matches"][0]["closeness"][m] for m in body["modalities"]) > 0.5
+
+
+def test_the_gallery_sorts_and_says_which_meshes_failed(page, site):
+    broken = b"OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 1 9\n"
+    failed = site.client.post("/meshes", files={"file": ("broken-one.off", broken)}).json()
+    assert site.wait_mesh(failed["id"])["status"] == "failed"
+    page.click("#tab-gallery")
+    page.fill("#gallery-label", "")
+    page.select_option("#gallery-status", "")
+    page.select_option("#gallery-sort", "name")
+    sorted_by_name = """() => {
+      const titles = [...document.querySelectorAll('#gallery-grid .card .title')]
+        .map((t) => t.textContent);
+      return titles.length > 1 && titles.every((t, i) => i === 0 || titles[i - 1] <= t);
+    }"""
+    page.wait_for_function(sorted_by_name)  # the service sorts; this checks it did
+    card = page.locator(f'#gallery-grid .card[data-mesh-id="{failed["id"]}"]')
+    assert "failed: " in card.inner_text() and "not described yet" not in card.inner_text()
+    page.select_option("#gallery-sort", "newest")
+    page.wait_for_function(
+        "(id) => document.querySelector('#gallery-grid .card').dataset.meshId === String(id)",
+        arg=failed["id"],
+    )
+
+
+def test_a_perfectly_separated_calibration_shows_the_gap_not_an_empty_box(page, site):
+    """Birds against hands: every pair of the same label scores below every pair of
+    different labels, so the ROC lies on its axes; the page says so and draws how far
+    apart the two kinds of pairs' scores lie."""
+    assert site.client.post("/collections", json={"name": "apart"}).status_code == 201
+    ids = [
+        site.upload(f"{kind}-{i}", kind, collection="apart").json()["id"]
+        for kind in ("bird", "hand")
+        for i in range(4)
+    ]
+    for mesh_id in ids:
+        assert site.wait_mesh(mesh_id, collection="apart")["status"] == "ready"
+    assert site.client.get("/collections/apart/calibration").json()["eer"] == 0
+    page.reload()
+    page.locator('#collection option[value="apart"]').wait_for(state="attached")
+    page.select_option("#collection", "apart")
+    page.click("#tab-calibration")
+    page.locator("#calibration-histogram").wait_for(state="visible", timeout=60_000)
+    assert page.locator("#calibration-roc").is_hidden()
+    separation = page.locator("#calibration-separation").inner_text()
+    assert separation.startswith("No error at any threshold")
+    bars = page.locator("#calibration-histogram rect").count()
+    assert bars > 2  # the frame and the bins of both kinds of pairs
     shoot(page, "calibration")
+    page.select_option("#collection", "default")
 
 
 def test_deleting_the_match_shown_leaves_no_stale_view(page, site):
@@ -252,7 +409,7 @@ def test_deleting_the_match_shown_leaves_no_stale_view(page, site):
     page.locator("#compare").wait_for(state="visible")
     assert best.locator(".label").inner_text() == "biped"  # the only biped enrolled
     mesh_id = best.get_attribute("data-mesh-id")
-    enrolled = site.client.get("/meshes").json()["total"]
+    indexed = site.index_size()  # every collection's, as the header counts them
     page.click("#tab-gallery")
     page.fill("#gallery-label", "biped")
     page.click("#gallery-filter button[type=submit]")
@@ -267,7 +424,7 @@ def test_deleting_the_match_shown_leaves_no_stale_view(page, site):
     page.click("#detail-delete")
     page.locator("#detail").wait_for(state="hidden")
     assert site.client.get(f"/meshes/{mesh_id}").status_code == 404
-    shapes = f"{enrolled - 1} shapes"
+    shapes = f"{indexed - 1} shapes"
     page.wait_for_function(
         f"() => document.getElementById('service-status').textContent.includes('{shapes}')"
     )
