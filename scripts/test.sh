@@ -4,11 +4,8 @@
 # is the fast loop; no arguments run everything (what CI runs).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-if [ ! -x .venv/bin/python ]; then
-    python3 -m venv .venv
-fi
-.venv/bin/python -m pip install --quiet --upgrade pip
-.venv/bin/python -m pip install --quiet -e ".[test]"
+. scripts/venv.sh
+ensure_venv test
 # Servers some tests run for real, from Debian's packages (Playwright's own browser
 # download is not reachable from every machine): Chromium for the web page's tests,
 # PostgreSQL and Redis for the scale-out tests, docker-compose to validate the compose
