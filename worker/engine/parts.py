@@ -226,25 +226,31 @@ def scale_scores(
     boundary). Candidates can be scored in blocks and the blocks' columns joined
     before :func:`best_scale` chooses. Parameters as :func:`part_dissimilarity`."""
     radii = grid_radii(preset)
-    count, prior = preset.parts_radii, preset.parts_scale_prior
+    prior = preset.parts_scale_prior
     whole = np.ascontiguousarray(gallery, dtype=np.float64)
     n, per_shape = whole.shape[:2]
+    rows = _GalleryRows(whole.reshape(n * per_shape, -1))
     tried = range(preset.parts_scales) if scales is None else scales
     out = np.full((len(tried), n), np.inf)
     for row, j in enumerate(tried):
-        columns = j + 2 * np.arange(count)
+        columns = scale_columns(j, preset)
         valid = (radii[columns][None, :] <= reach[:, None]).astype(np.float64)
         used = valid.sum(axis=1)
         keep = used >= preset.parts_min_radii
         if not keep.any() or n == 0:
             continue
         query, valid, used = profiles[keep][:, columns], valid[keep], used[keep]
-        # Centred on the query's mean, the expansion below cancels far less.
-        centre = (query * valid).sum(axis=0) / np.maximum(valid.sum(axis=0), 1.0)
-        nearest = _nearest_squared(query - centre, valid, whole - centre, n, per_shape)
+        nearest = _nearest_squared(query, valid, rows, n, per_shape)
         rms = np.sqrt(np.maximum(nearest, 0.0) / used[:, None])
         out[row] = used @ rms / used.sum() + prior * np.log(_scale(j))
     return out
+
+
+def scale_columns(j: int, preset: Preset) -> np.ndarray:
+    """The columns of a query's profiles compared with a whole's radii at scale ``j``
+    (a whole keeps every second column of the grid, :func:`compared_profiles`)."""
+    columns: np.ndarray = j + 2 * np.arange(preset.parts_radii)
+    return columns
 
 
 def best_scale(scores: np.ndarray, preset: Preset, scales: range | None = None) -> PartsMatch:
@@ -261,33 +267,48 @@ def _scale(j: int) -> float:
     return float(2.0 ** (j / GRID_STEPS_PER_OCTAVE))
 
 
-#: Candidate samples compared at once: bounds the (query samples x block) matrix.
-_BLOCK_ROWS = 1 << 15
+#: Distances computed at once, query samples times candidate samples (whole candidates,
+#: at least one): the matrix (1 MB) stays in the processor's cache, which matters more
+#: than the number of products.
+_BLOCK_ENTRIES = 1 << 18
+
+
+class _GalleryRows:
+    """Candidates' samples as :func:`_nearest_squared` reads them at every scale: (N, K)
+    in double precision, in single, and the single's cumulative sums of squares."""
+
+    def __init__(self, rows: np.ndarray) -> None:
+        self.double = rows
+        self.single = rows.astype(np.float32)
+        self.cumulative = np.cumsum(self.single * self.single, axis=1)
 
 
 def _nearest_squared(
-    query: np.ndarray, valid: np.ndarray, whole: np.ndarray, n: int, per_shape: int
+    query: np.ndarray, valid: np.ndarray, rows: _GalleryRows, n: int, per_shape: int
 ) -> np.ndarray:
     """(q, n): each query row's smallest masked squared distance to the rows of each
-    candidate, ``sum_k valid_ck (query_ck - whole_yk)^2``, by one matrix product.
+    candidate, ``sum_k valid_ck (query_ck - whole_yk)^2``.
 
-    A row's valid radii are the first ones (those within its reach), so its candidates'
-    part of the expansion, ``sum_k valid_ck whole_yk^2``, is their cumulative sum of
-    squares at its count: gathered, not multiplied.
+    The nearest row is found in single precision by one matrix product per block, the
+    expansion ``|q|^2 - 2 q.y + |y|^2`` (a row's valid radii are the first ones, those
+    within its reach, so the candidates' ``sum_k valid_ck y_k^2`` is their cumulative sum
+    of squares at its count: gathered, not multiplied), and its distance is computed again
+    in double precision from the difference: the expansion's rounding never reaches the
+    result, only which of two rows within it of each other is nearest.
     """
-    rows = whole.reshape(n * per_shape, -1)
-    weighted = valid * query
-    own = (weighted * query).sum(axis=1)[:, None]
+    weighted = (valid * query).astype(np.float32)
     last_valid = valid.sum(axis=1).astype(np.int64) - 1
     out = np.empty((len(query), n))
-    shapes_per_block = max(1, _BLOCK_ROWS // per_shape)
+    shapes_per_block = max(1, _BLOCK_ENTRIES // (len(query) * per_shape))
     for first in range(0, n, shapes_per_block):
         last = min(n, first + shapes_per_block)
-        block = rows[first * per_shape : last * per_shape]
-        norms = np.cumsum(block * block, axis=1)[:, last_valid].T
-        squared = own + norms - 2.0 * weighted @ block.T
-        starts = np.arange(0, len(block), per_shape)
-        out[:, first:last] = np.minimum.reduceat(squared, starts, axis=1)
+        block = slice(first * per_shape, last * per_shape)
+        squared = rows.cumulative[block][:, last_valid].T
+        squared -= 2.0 * (weighted @ rows.single[block].T)  # |q|^2 left out: the same
+        nearest = squared.reshape(len(query), last - first, per_shape).argmin(axis=2)
+        chosen = rows.double[first * per_shape + nearest + per_shape * np.arange(last - first)]
+        difference = chosen - query[:, None, :]
+        out[:, first:last] = np.einsum("qsk,qk->qs", difference * difference, valid)
     return out
 
 
