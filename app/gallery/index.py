@@ -68,6 +68,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import faiss
 import numpy as np
@@ -78,17 +79,32 @@ from worker.engine.compare import (
     paired_preset_dissimilarity,
     preset_dissimilarity,
 )
-from worker.engine.parts import PartsMatch, best_scale, coarse, scale_scores
+from worker.engine.parts import (
+    PartsMatch,
+    best_scale,
+    coarse,
+    grid_radii,
+    scale_columns,
+    scale_scores,
+)
 from worker.engine.presets import PARTS, Preset
 
 from .candidates import FIT_SAMPLE, MAX_DIMS, CandidateTransform
 from .vectors import GalleryVectors, ids_fingerprint
+from .words import SampleWords, build_words, needs_vocabulary
 
 CANDIDATES = 2048  # faiss candidates per modality (D2), first round
 MAX_CANDIDATES = 16_384  # per modality, when more rounds can still certify the top-k
 MAX_SCORED = 256  # long-modality exact scores per round, in fused-estimate order
 PARTS_BLOCK_SAMPLES = 1 << 16  # gallery samples a partial search compares at once
 PARTS_SHORTLIST = 32  # shapes a partial search compares with every sample
+#: From this many shapes a partial search takes its candidates from the inverted file of
+#: the samples' profiles (.words) instead of comparing every shape coarsely: one in
+#: WORD_SHARE of the shapes, at least WORD_CANDIDATES (docs/benchmarks.md: the share
+#: that finds the exhaustive ranking's top 10 at 100,000 shapes).
+WORDS_FROM = 4096
+WORD_CANDIDATES = 256
+WORD_SHARE = 25
 BOUND_SAFETY = 1.0 - 1e-5  # float32 candidate distances: keep the bound a true lower bound
 
 
@@ -138,9 +154,10 @@ class GalleryIndex:
         max_candidates: int = MAX_CANDIDATES,
         max_scored: int = MAX_SCORED,
         parts_shape: tuple[int, int] | None = None,
+        parts_path: Path | None = None,
     ) -> None:
         self.preset = preset
-        self.store = GalleryVectors(dims, parts_shape)
+        self.store = GalleryVectors(dims, parts_shape, parts_path)
         self.dims = self.store.dims
         self.modalities = self.store.modalities
         self.refit_fraction = refit_fraction
@@ -157,6 +174,8 @@ class GalleryIndex:
         self.changes_since_fit = 0
         self.dirty = False
         self.refits = 0
+        # The inverted file of the samples' profiles, from WORDS_FROM shapes (.words).
+        self.words: SampleWords | None = None
 
     # ------------------------------------------------------------------ size
     def __len__(self) -> int:
@@ -204,6 +223,8 @@ class GalleryIndex:
             if item in self.store.pos:
                 self._remove(item)
             i = self.store.append(item, vectors)
+            if self.words is not None:
+                self.words.file(item, self.store.coarse[i])
             if self.fits is not None:
                 self._grow_reduced()
                 for m in self.modalities:
@@ -233,6 +254,8 @@ class GalleryIndex:
 
     def _remove(self, item: int) -> None:
         i, last = self.store.pop(item)
+        if self.words is not None:
+            self.words.forget(item)
         if self.fits is not None:
             for m in self.modalities:
                 self.reduced[m][i] = self.reduced[m][last]
@@ -290,8 +313,27 @@ class GalleryIndex:
             if whole:
                 self.n_at_fit = n
                 self.changes_since_fit = 0
+                self._refile_words(n)
             self.refits += 1
             self.dirty = True
+
+    def _refile_words(self, n: int) -> None:
+        """The inverted file of the samples' profiles at a whole refit: from
+        ``WORDS_FROM`` shapes, a new vocabulary when the gallery has grown enough since
+        the last (:func:`.words.needs_vocabulary`), otherwise every shape filed at once
+        with the same words."""
+        if self.store.parts_shape is None or n < WORDS_FROM:
+            self.words = None
+        elif needs_vocabulary(self.words, n):
+            self.words = build_words(self.store.ids[:n], self.store.coarse[:n])
+        else:
+            assert self.words is not None
+            self.words = self.words.refiled(self._present)
+
+    def _present(self, ids: np.ndarray) -> np.ndarray:
+        """Which of ``ids`` are in the gallery."""
+        pos = self.store.pos
+        return np.fromiter((int(i) in pos for i in ids), dtype=bool, count=len(ids))
 
     def compare_with(self, preset: Preset) -> None:
         """Rank with ``preset`` (the same descriptors; other fusion weights or
@@ -345,7 +387,7 @@ class GalleryIndex:
         """The parts dissimilarity of a query (its profiles and reach) to shapes ``ids``,
         every sample compared at the query's best scale, as a partial search's exact pass."""
         with self.lock:
-            gallery = self.store.parts[self.store.positions(ids)]
+            gallery = self.store.parts_at(self.store.positions(ids))
             return self._parts_scores(profiles, reach, gallery).dissimilarity
 
     def search(
@@ -425,9 +467,11 @@ class GalleryIndex:
         flat modalities and the parts modality (a query that looks partial,
         :func:`worker.engine.compare.query_weights`).
 
-        Every shape is scored with the flat modalities exactly and the parts coarsely
-        (:func:`worker.engine.parts.coarse`); the best ``max(PARTS_SHORTLIST, 2 k)`` by
-        that product are scored with every sample, their scale chosen among them.
+        Every shape (from ``WORDS_FROM`` shapes: the ``WORD_CANDIDATES`` the inverted file
+        of the samples' profiles finds, :mod:`.words`) is scored with the flat modalities
+        exactly and the parts coarsely (:func:`worker.engine.parts.coarse`); the best
+        ``max(PARTS_SHORTLIST, 2 k)`` by that product are scored with every sample, their
+        scale chosen among them.
 
         Parameters
         ----------
@@ -449,17 +493,25 @@ class GalleryIndex:
             if n == 0 or k <= 0:
                 return [], 1.0
             flat = tuple(m for m in weights if m != PARTS)
-            positions = np.flatnonzero(~np.isin(self.store.ids[:n], excluded))
+            few = coarse(profiles, reach, self.store.coarse[:n])
+            if self.words is not None:
+                found_ids = self.words.candidates(
+                    *self._word_queries(*few[:2]),
+                    self._present,
+                    max(WORD_CANDIDATES, n // WORD_SHARE) + len(excluded),
+                )
+                positions = np.sort(self.store.positions(found_ids[~np.isin(found_ids, excluded)]))
+            else:
+                positions = np.flatnonzero(~np.isin(self.store.ids[:n], excluded))
             if not len(positions):
                 return [], 1.0
             per = self.exact_scores(query, positions, flat, "sum")[1] if flat else {}
-            few = coarse(profiles, reach, self.store.parts[:n])
             per[PARTS] = self._parts_scores(*few[:2], few[2][positions]).dissimilarity
             rough = np.asarray(fuse(per, "product", dict(weights)), dtype=np.float64)
             short = np.argsort(rough, kind="stable")[: max(PARTS_SHORTLIST, 2 * k)]
             positions = positions[short]
             per = {m: v[short] for m, v in per.items() if m != PARTS}
-            found = self._parts_scores(profiles, reach, self.store.parts[positions])
+            found = self._parts_scores(profiles, reach, self.store.parts_at(positions))
             per[PARTS] = found.dissimilarity
             fused = np.asarray(fuse(per, "product", dict(weights)), dtype=np.float64)
             ids = self.store.ids[positions]
@@ -475,6 +527,22 @@ class GalleryIndex:
         stats.candidates, stats.scored, stats.rounds = n, len(positions), 2
         stats.seconds = time.perf_counter() - start
         return matches, found.scale
+
+    def _word_queries(
+        self, profiles: np.ndarray, reach: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The query's samples at every scale the parts search tries, as the inverted file
+        takes them: (q, K) the compared columns, and which radii are within reach."""
+        preset = self.preset
+        radii = grid_radii(preset)
+        vectors, valid = [], []
+        for j in range(preset.parts_scales):
+            columns = scale_columns(j, preset)
+            mask = radii[columns][None, :] <= reach[:, None]
+            usable = mask.sum(axis=1) >= preset.parts_min_radii
+            vectors.append(profiles[usable][:, columns])
+            valid.append(mask[usable])
+        return np.concatenate(vectors), np.concatenate(valid)
 
     def _parts_scores(
         self, profiles: np.ndarray, reach: np.ndarray, gallery: np.ndarray

@@ -3,6 +3,11 @@
 Written to a sibling temporary directory and renamed into place, so a crash
 leaves either the old index or the new one. The database stays the source of
 truth: an index that cannot be read is rebuilt from it (:mod:`.service`).
+
+Every sample's parts profiles are not copied in: an index that keeps them in a file
+(:class:`~.vectors.PartsRows`, beside the directory) records which slot of it each
+shape has; the file only grows, so the rows a saved index refers to never change.
+An index that keeps them in memory saves them in ``arrays.npz``.
 """
 
 from __future__ import annotations
@@ -21,8 +26,9 @@ from worker.engine.presets import Preset
 from .candidates import CandidateTransform, searchable
 from .index import GalleryIndex
 from .vectors import ids_fingerprint
+from .words import SampleWords
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: the parts' coarse rows and slots, the samples' inverted file
 
 
 def save_index(index: GalleryIndex, directory: Path) -> None:
@@ -38,7 +44,15 @@ def save_index(index: GalleryIndex, directory: Path) -> None:
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir(parents=True)
         # Any: np.savez also takes a keyword allow_pickle, which the typed dict must not hide.
-        arrays: dict[str, Any] = {"ids": store.ids[:n], "parts": store.parts[:n]}
+        arrays: dict[str, Any] = {"ids": store.ids[:n]}
+        rows = store.rows
+        if rows is not None:
+            arrays["coarse"] = store.coarse[:n]
+            if rows.path is None:  # in memory: the rows themselves, by position
+                arrays["parts"] = store.parts_at(np.arange(n))
+            else:
+                rows.flush()
+                arrays["slots"] = store.slots[:n]
         for m in index.modalities:
             fit = fits[m]
             arrays.update(
@@ -55,6 +69,8 @@ def save_index(index: GalleryIndex, directory: Path) -> None:
                 }
             )
             faiss.write_index(fit.index, str(tmp / f"{m}.faiss"))
+        if index.words is not None:
+            arrays.update({f"words.{k}": v for k, v in index.words.arrays().items()})
         np.savez(tmp / "arrays.npz", **arrays)
         manifest = {
             "format": FORMAT_VERSION,
@@ -63,6 +79,8 @@ def save_index(index: GalleryIndex, directory: Path) -> None:
             "dims": index.dims,
             "comparisons": {m: fits[m].comparison for m in index.modalities},
             "parts_shape": store.parts_shape,
+            "parts_file": None if rows is None or rows.path is None else rows.path.name,
+            "parts_count": 0 if rows is None else rows.count,
             "size": n,
             "n_at_fit": index.n_at_fit,
             "changes_since_fit": index.changes_since_fit,
@@ -104,7 +122,15 @@ def _read(directory: Path, preset: Preset, **options: Any) -> GalleryIndex:
         raise ValueError("index made by another format or preset version")
     shape = manifest.get("parts_shape")
     parts_shape = None if shape is None else (int(shape[0]), int(shape[1]))
-    index = GalleryIndex(preset, manifest["dims"], parts_shape=parts_shape, **options)
+    parts_file = manifest.get("parts_file")
+    path = None if parts_file is None else directory.parent / parts_file
+    if path is not None and path.stat().st_size < int(manifest["parts_count"]) * 2 * int(
+        np.prod(parts_shape or (0, 0))
+    ):
+        raise ValueError("the parts file is shorter than the index refers to")
+    index = GalleryIndex(
+        preset, manifest["dims"], parts_shape=parts_shape, parts_path=path, **options
+    )
     with np.load(directory / "arrays.npz") as npz:
         arrays = {k: np.array(npz[k]) for k in npz.files}
     n = int(manifest["size"])
@@ -116,7 +142,14 @@ def _read(directory: Path, preset: Preset, **options: Any) -> GalleryIndex:
     store.ids[:n] = ids
     store.pos = {int(i): p for p, i in enumerate(ids)}
     store.n = n
-    store.parts[:n] = arrays["parts"]
+    if store.rows is not None:
+        store.coarse[:n] = arrays["coarse"]
+        if path is None:
+            for position in range(n):
+                store.slots[position] = store.rows.append(arrays["parts"][position])
+        else:
+            store.rows.count = int(manifest["parts_count"])
+            store.slots[:n] = arrays["slots"]
     fits = {}
     # Files written before the comparisons were recorded: the preset's D1 or D2 for all.
     saved = manifest.get("comparisons") or {m: preset.dissimilarity for m in index.modalities}
@@ -140,6 +173,9 @@ def _read(directory: Path, preset: Preset, **options: Any) -> GalleryIndex:
             index=faiss_index,
         )
     index.fits = fits
+    saved_words = {k.removeprefix("words."): v for k, v in arrays.items() if k.startswith("words.")}
+    if saved_words:
+        index.words = SampleWords.from_arrays(saved_words)
     index.n_at_fit = int(manifest["n_at_fit"])
     index.changes_since_fit = int(manifest["changes_since_fit"])
     index.dirty = False

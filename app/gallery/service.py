@@ -384,6 +384,12 @@ class Gallery:
         self._keep_fusion(fit)
 
     @property
+    def parts_file(self) -> Path:
+        """Where every sample's parts profiles are kept, read for a partial search's
+        shortlist only (beside the saved index, which refers to its rows)."""
+        return self.directory.with_name(self.directory.name + ".parts")
+
+    @property
     def fusion_file(self) -> Path:
         """Where an adopted learned fusion is kept for a restart (beside the saved index,
         which a save replaces whole)."""
@@ -476,11 +482,13 @@ class Gallery:
                 log.warning(
                     "index at %s unusable (%s); rebuilding from the database", directory, exc
                 )
+            self.parts_file.unlink(missing_ok=True)  # its slots start again
             index = GalleryIndex(
                 preset,
                 preset.modality_sizes(),
                 refit_fraction=self.refit_fraction,
                 parts_shape=preset.parts_shape(),
+                parts_path=self.parts_file,
             )
             how, missing = "rebuilt", None
         labels = dict(enrolled)

@@ -6,18 +6,26 @@ and its square, updated on every add and remove and re-centred on the current
 mean at each refit (``shift``) to avoid cancellation, so it always equals
 ``gallery_sigma`` over the enrolled vectors.
 
-The parts modality's profiles (:mod:`worker.engine.parts`), when the preset has it,
-are kept beside the vectors in the same positions, as float16 (the precision they are
-stored in).
+The parts modality's profiles (:mod:`worker.engine.parts`), when the preset has it, are
+kept as float16 (the precision they are stored in) in two places: the first
+``COARSE_SAMPLES`` samples of each shape in memory, by position (what the coarse pass and
+the inverted file read, for many shapes), and every sample in :class:`PartsRows`, by
+slot (what the exact pass reads, for a shortlist): in memory, or in a file read row by
+row, so that a gallery of a million shapes keeps 1.9 KB a shape of profiles in memory
+instead of 15 KB. Slots are never reused, so the file only grows, and a saved index's
+rows are never overwritten.
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
 from collections.abc import Mapping
+from pathlib import Path
 
 import numpy as np
 
+from worker.engine.parts import COARSE_SAMPLES
 from worker.engine.presets import MODALITIES, PARTS, SIZE
 
 INITIAL_CAPACITY = 64
@@ -28,6 +36,65 @@ def ids_fingerprint(ids: np.ndarray) -> str:
     return hashlib.sha256(np.sort(np.asarray(ids, dtype=np.int64)).tobytes()).hexdigest()
 
 
+class PartsRows:
+    """Every sample's profiles of each shape, by slot: (m, K) float16 a slot.
+
+    Parameters
+    ----------
+    shape : (m, K) of a shape's profiles.
+    path : a file to keep them in (read and written row by row, never mapped: read
+        rows stay out of the process's memory); None keeps them in memory.
+    """
+
+    def __init__(self, shape: tuple[int, int], path: Path | None = None) -> None:
+        self.shape = shape
+        self.path = path
+        self.row_bytes = int(np.prod(shape)) * 2
+        self.count = 0  # slots used
+        self._memory = np.empty((0 if path else INITIAL_CAPACITY, *shape), dtype=np.float16)
+        self._fd: int | None = None
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self._fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+
+    def append(self, rows: np.ndarray) -> int:
+        """Store a shape's rows in the next slot; the slot."""
+        slot = self.count
+        data = np.ascontiguousarray(rows, dtype=np.float16)
+        if self._fd is not None:
+            os.pwrite(self._fd, data.tobytes(), slot * self.row_bytes)
+        else:
+            if slot == len(self._memory):
+                grown = np.empty((max(2 * slot, INITIAL_CAPACITY), *self.shape), np.float16)
+                grown[:slot] = self._memory[:slot]
+                self._memory = grown
+            self._memory[slot] = data
+        self.count += 1
+        return slot
+
+    def read(self, slots: np.ndarray) -> np.ndarray:
+        """(len(slots), m, K) float16, the rows of ``slots``."""
+        slots = np.asarray(slots, dtype=np.int64)
+        if self._fd is None:
+            rows: np.ndarray = self._memory[slots]
+            return rows
+        out = np.empty((len(slots), *self.shape), dtype=np.float16)
+        for row, slot in enumerate(slots):
+            data = os.pread(self._fd, self.row_bytes, int(slot) * self.row_bytes)
+            out[row] = np.frombuffer(data, dtype=np.float16).reshape(self.shape)
+        return out
+
+    def flush(self) -> None:
+        """Make the file's rows durable (a saved index refers to them)."""
+        if self._fd is not None:
+            os.fsync(self._fd)
+
+    def close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+
 class GalleryVectors:
     """Exact vectors of every modality, by position, with running sums for sigma.
 
@@ -35,12 +102,22 @@ class GalleryVectors:
     ----------
     dims : modality -> M_m, the length of its flat vector.
     parts_shape : (m, K) of a shape's compared parts profiles; None: no parts.
+    parts_path : the file of every sample's profiles (:class:`PartsRows`); None: in memory.
     """
 
-    def __init__(self, dims: Mapping[str, int], parts_shape: tuple[int, int] | None = None) -> None:
+    def __init__(
+        self,
+        dims: Mapping[str, int],
+        parts_shape: tuple[int, int] | None = None,
+        parts_path: Path | None = None,
+    ) -> None:
         self.dims = dict(dims)
         self.parts_shape = parts_shape
-        self.parts = np.empty((INITIAL_CAPACITY, *(parts_shape or (0, 0))), dtype=np.float16)
+        m, k = parts_shape or (0, 0)
+        # The first samples of each shape by position, and every sample's by slot.
+        self.coarse = np.empty((INITIAL_CAPACITY, min(m, COARSE_SAMPLES), k), dtype=np.float16)
+        self.rows = PartsRows((m, k), parts_path) if parts_shape else None
+        self.slots = np.full(INITIAL_CAPACITY, -1, dtype=np.int64)
         self.modalities = tuple(m for m in (*MODALITIES, SIZE) if m in self.dims)
         self.ids = np.empty(INITIAL_CAPACITY, dtype=np.int64)  # (capacity,) id by position
         self.pos: dict[int, int] = {}
@@ -71,11 +148,12 @@ class GalleryVectors:
             if x.shape != (self.dims[m],):
                 raise ValueError(f"{m}: expected {self.dims[m]} values, got {x.size}")
             rows[m] = x
-        if self.parts_shape is not None:
+        if self.rows is not None:
             parts = np.asarray(vectors[PARTS])
             if parts.shape != self.parts_shape:
                 raise ValueError(f"parts: expected {self.parts_shape}, got {parts.shape}")
-            self.parts[i] = parts
+            self.coarse[i] = parts[: self.coarse.shape[1]]
+            self.slots[i] = self.rows.append(parts)
         for m, x in rows.items():
             self.vectors[m][i] = x
             d = x - self.shift[m]
@@ -99,7 +177,8 @@ class GalleryVectors:
             self.sum[m] -= d
             self.sumsq[m] -= d * d
             self.vectors[m][i] = self.vectors[m][last]
-        self.parts[i] = self.parts[last]
+        self.coarse[i] = self.coarse[last]
+        self.slots[i] = self.slots[last]
         if i != last:
             moved = int(self.ids[last])
             self.ids[i] = moved
@@ -119,9 +198,17 @@ class GalleryVectors:
             grown = np.empty((capacity, self.dims[m]), dtype=np.float64)
             grown[: self.n] = self.vectors[m][: self.n]
             self.vectors[m] = grown
-        parts = np.empty((capacity, *self.parts.shape[1:]), dtype=np.float16)
-        parts[: self.n] = self.parts[: self.n]
-        self.parts = parts
+        coarse = np.empty((capacity, *self.coarse.shape[1:]), dtype=np.float16)
+        coarse[: self.n] = self.coarse[: self.n]
+        self.coarse = coarse
+        slots = np.full(capacity, -1, dtype=np.int64)
+        slots[: self.n] = self.slots[: self.n]
+        self.slots = slots
+
+    def parts_at(self, positions: np.ndarray) -> np.ndarray:
+        """(len(positions), m, K) float16: every sample's profiles of the shapes there."""
+        assert self.rows is not None, "no parts"
+        return self.rows.read(self.slots[np.asarray(positions, dtype=np.int64)])
 
     def _changed(self) -> None:
         self._sigma = None

@@ -6,6 +6,7 @@ import faiss
 import numpy as np
 import pytest
 
+import app.gallery.index as index_module
 from app.gallery.index import PARTS_SHORTLIST, GalleryIndex, SearchStats
 from app.gallery.persistence import load_index, save_index
 from worker.engine.compare import (
@@ -15,7 +16,7 @@ from worker.engine.compare import (
     gallery_sigma,
     query_weights,
 )
-from worker.engine.parts import compared_profiles, grid_radii, part_dissimilarity
+from worker.engine.parts import COARSE_SAMPLES, compared_profiles, grid_radii, part_dissimilarity
 from worker.engine.presets import (
     DEFAULT_PRESET,
     MODALITIES,
@@ -223,9 +224,16 @@ def test_a_partial_search_ranks_as_the_exhaustive_product(n):
         np.testing.assert_allclose([m.score for m in found], fused[expected], rtol=1e-9)
 
 
-def test_parts_profiles_are_saved_and_loaded(tmp_path):
+@pytest.mark.parametrize("in_file", [False, True], ids=["in memory", "in a file"])
+def test_parts_profiles_are_saved_and_loaded(tmp_path, in_file):
+    """Every sample's profiles, kept in memory or in a file beside the saved index (read
+    row by row; a removed shape's slot is not reused, so a saved index's rows never
+    change), and the coarse rows by position."""
     vectors, profiles = _parts_gallery(5, seed=2)
-    index = GalleryIndex(DEFAULT, DEFAULT.modality_sizes(), parts_shape=DEFAULT.parts_shape())
+    path = tmp_path / "index.parts" if in_file else None
+    index = GalleryIndex(
+        DEFAULT, DEFAULT.modality_sizes(), parts_shape=DEFAULT.parts_shape(), parts_path=path
+    )
     for i in range(5):
         compared = compared_profiles(profiles[i], DEFAULT)
         index.add(10 + i, {**{m: vectors[m][i] for m in MODALITIES}, PARTS: compared})
@@ -233,9 +241,15 @@ def test_parts_profiles_are_saved_and_loaded(tmp_path):
     save_index(index, tmp_path / "index")
     loaded = load_index(tmp_path / "index", DEFAULT)
     assert loaded.store.parts_shape == DEFAULT.parts_shape()
+    assert (loaded.store.rows.path is not None) == in_file
     for item in (10, 12, 13, 14):
         want = compared_profiles(profiles[item - 10], DEFAULT).astype(np.float16)
-        np.testing.assert_array_equal(loaded.store.parts[loaded.store.pos[item]], want)
+        position = loaded.store.pos[item]
+        np.testing.assert_array_equal(loaded.store.parts_at(np.array([position]))[0], want)
+        np.testing.assert_array_equal(loaded.store.coarse[position], want[:COARSE_SAMPLES])
+    if in_file:  # rows added after the save go after the saved ones
+        loaded.add(20, {**{m: vectors[m][0] for m in MODALITIES}, PARTS: compared})
+        assert loaded.store.slots[loaded.store.pos[20]] == 5
 
 
 @pytest.mark.parametrize("name", ["smeets2010-shrec", DEFAULT_PRESET], ids=["D2", "D1"])
@@ -317,3 +331,61 @@ def test_an_index_saved_under_other_comparisons_is_refitted_where_they_differ(tm
     }
     query = {m: gallery[m][7] * 1.02 for m in MODALITIES}
     assert [m.id for m in loaded.search(query, 10)] == _ranking(LEARNED, gallery, query)[0]
+
+
+def test_from_thousands_of_shapes_the_inverted_file_finds_what_every_shape_compared_finds(
+    monkeypatch,
+):
+    """A gallery of objects in several poses, each query a part of an unseen pose: the
+    partial search's candidates from the inverted file of the samples' profiles give the
+    ranking that comparing every shape coarsely gives."""
+    monkeypatch.setattr(index_module, "WORDS_FROM", 100)
+    rng = np.random.default_rng(8)
+    objects, poses = 40, 10
+    _, bases = _parts_gallery(objects, seed=6)
+    vectors = _gallery(objects * poses, seed=6, preset=DEFAULT)
+    index = GalleryIndex(DEFAULT, DEFAULT.modality_sizes(), parts_shape=DEFAULT.parts_shape())
+
+    def pose(o: int) -> np.ndarray:
+        return bases[o] + 0.02 * rng.normal(size=bases[o].shape)
+
+    index.add_many(
+        (
+            i,
+            {
+                **{m: vectors[m][i] for m in MODALITIES},
+                PARTS: compared_profiles(pose(i % objects), DEFAULT),
+            },
+        )
+        for i in range(objects * poses)
+    )
+    assert index.words is not None and len(index.words.ids) == objects * poses
+    weights = {PARTS: 1.0}
+    same = 0
+    for q in range(12):
+        part = pose(q % objects)[:150]
+        reach = np.full(150, np.inf)
+        found, _ = index.partial_search({}, part, reach, weights, 10)
+        words, index.words = index.words, None  # every shape compared coarsely
+        every, _ = index.partial_search({}, part, reach, weights, 10)
+        index.words = words
+        assert found[0].id % objects == q % objects  # its own object first
+        same += [m.id for m in found] == [m.id for m in every]
+    assert same == 12
+
+    # Churn: a shape removed is no longer found, one added after the build is; a whole
+    # refit files them at once with the same vocabulary and answers the same.
+    part, reach = pose(0)[:150], np.full(150, np.inf)
+    first = index.partial_search({}, part, reach, weights, 10)[0][0].id
+    assert index.remove(first)
+    index.add(
+        10_000,
+        {**{m: vectors[m][first] for m in MODALITIES}, PARTS: compared_profiles(pose(0), DEFAULT)},
+    )
+    assert index.words.added and 10_000 in index.words.added
+    before = [m.id for m in index.partial_search({}, part, reach, weights, 10)[0]]
+    assert first not in before and 10_000 in before
+    vocabulary = index.words.centroids
+    index.refit()
+    assert index.words.centroids is vocabulary and not index.words.added
+    assert [m.id for m in index.partial_search({}, part, reach, weights, 10)[0]] == before
