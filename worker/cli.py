@@ -382,20 +382,24 @@ def add_subcommands(sub: Any) -> None:
 
     partial = sub.add_parser(
         "partiality",
-        help="whether partial copies of the meshes (cuts, holes, one view) find their whole",
+        help="whether partial and scanned copies of the meshes find their whole",
         description="Describe every mesh of labels.csv and partial copies of it (a planar cut "
         "of 5, 15 and 30%% of the vertices, geodesic holes of 10 and 25%% of the area, a "
-        "single-view scan), and query the whole meshes with each copy; report per modality, "
-        "for the parts modality, the preset's score and ShapeDNA the own class and own "
-        "source at rank 1 and the mAP. With --poses the poses join the gallery as one more "
-        "class. Writes partiality.json and partiality.md.",
+        "single-view scan, SHREC'17's range scans and holes, Gaussian noise of 0.25, 0.5 "
+        "and 1%% of the diagonal), and query the whole meshes with each copy; report per "
+        "modality, for the parts modality, the preset's score and ShapeDNA the own class and "
+        "own source at rank 1 and the mAP, and all to all among each variant's copies the "
+        "NN, tiers, DCG and mAP. With --poses the poses join the gallery as one more class. "
+        "Writes partiality.json and partiality.md.",
     )
     _add_collection_arguments(partial)
     partial.add_argument(
         "--poses", help="directory of poses of one object (e.g. SCAPE) to add as one more class"
     )
     partial.add_argument(
-        "--variants", help="comma-separated subset of the partial copies (default: all six)"
+        "--variants",
+        help="comma-separated subset of the partial copies: cut-5, cut-15, cut-30, holes-10, "
+        "holes-25, view, range, shrec-holes, noise-0.25, noise-0.5, noise-1 (default: all)",
     )
     partial.add_argument(
         "--out", help="report directory (default: evaluation-out/partiality/PRESET)"

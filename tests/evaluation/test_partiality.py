@@ -55,5 +55,9 @@ def test_run_writes_the_report_and_cut_copies_find_their_class(tmp_path):
     assert cut["count"] == 6 and cut["looks_partial"] > 0.5
     assert report["scores"][PARTS]["cut-15"]["own_class"] == 1.0
     assert report["scores"][PRESET_ROW]["cut-15"]["own_class"] == 1.0
+    # All to all among the copies: each class has two cuts, each finds the other.
+    among = saved["all_to_all"][PRESET_ROW]["cut-15"]
+    assert set(among) >= {"nn", "first_tier", "second_tier", "dcg", "map"}
+    assert among["nn"] >= 2 / 3 and among["first_tier"] == among["nn"]
     markdown = (tmp_path / "out" / "partiality.md").read_text()
-    assert "| Parts |" in markdown and "`cut-15`" in markdown
+    assert "| Parts |" in markdown and "`cut-15`" in markdown and "All to all" in markdown

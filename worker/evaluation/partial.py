@@ -10,7 +10,16 @@ here keeps a part of the surface, its largest connected piece:
 * ``holes-10``, ``holes-25``: geodesic discs around five random vertices removed until
   the share of the area is gone (graph distances along the edges);
 * ``view``: a single-view scan, the faces seen from one random direction: facing it and
-  not hidden behind another face (orthographic rays through each face's centroid).
+  not hidden behind another face (orthographic rays through each face's centroid);
+* ``range``: SHREC'17's range scans (Rodola et al., "Deformable shape retrieval with
+  missing parts", 3DOR 2017): an orthographic depth grid shot from a random direction at
+  a random resolution (300 vertices .. as many as the mesh has), triangulated as a grid,
+  so that occlusion edges become shortcuts, in a random similarity transform;
+* ``shrec-holes``: SHREC'17's holes: geodesic discs of random radius (up to 20% of the
+  diameter) eroded around some of 70 farthest samples, the rest decimated to a random
+  resolution (300 vertices .. as many as the mesh has), in a random similarity transform;
+* ``noise-0.25``, ``noise-0.5``, ``noise-1``: the whole surface, every vertex displaced
+  by Gaussian noise of that percentage of the bounding box's diagonal.
 
 Seeded like the tessellation variants (:func:`.variants.variant_seed`), so a rerun cuts
 the same way.
@@ -25,10 +34,18 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, dijkstra
 
 from worker.engine.errors import MeshError
+from worker.engine.geodesic import farthest_point_samples
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
 
 #: Number of discs the ``holes-*`` variants remove.
 HOLE_COUNT = 5
+#: SHREC'17's holes: the farthest samples hole centres are drawn among, the largest
+#: radius as a share of the diameter, the fewest vertices a copy is decimated to.
+SHREC_CENTRES = 70
+SHREC_MAX_RADIUS = 0.2
+SHREC_MIN_VERTICES = 300
+#: Similarity transforms scale by 10**u, u uniform in this range.
+LOG10_SCALE_RANGE = (-2.0, 2.0)
 
 
 def largest_piece(mesh: Mesh, keep: np.ndarray) -> Mesh:
@@ -52,6 +69,46 @@ def random_direction(rng: np.random.Generator) -> np.ndarray:
     return unit
 
 
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    """A uniformly random rotation matrix (3, 3) (QR of a Gaussian matrix, signs fixed)."""
+    q, r = np.linalg.qr(rng.standard_normal((3, 3)))
+    q = q * np.sign(np.diag(r))
+    if np.linalg.det(q) < 0:
+        q[:, 0] = -q[:, 0]
+    return q
+
+
+def similarity(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """``mesh`` in a random rotation, scaled by ``10**u`` (u in ``LOG10_SCALE_RANGE``) and
+    moved by up to its size."""
+    scale = 10.0 ** rng.uniform(*LOG10_SCALE_RANGE)
+    size = float(np.ptp(mesh.vertices, axis=0).max())
+    moved = mesh.vertices @ random_rotation(rng).T + rng.uniform(-size, size, 3)
+    return Mesh(vertices=moved * scale, faces=mesh.faces)
+
+
+def decimated(mesh: Mesh, fraction: float) -> Mesh:
+    """Quadric error decimation to ``fraction`` of the faces (Garland-Heckbert)."""
+    import fast_simplification
+
+    vertices, faces = fast_simplification.simplify(
+        mesh.vertices, mesh.faces.astype(np.int32), target_reduction=1.0 - fraction
+    )
+    return clean_mesh(vertices, faces)
+
+
+def random_resolution(mesh: Mesh, rng: np.random.Generator) -> int:
+    """A vertex count uniform in ``SHREC_MIN_VERTICES`` .. the mesh's."""
+    return int(rng.integers(min(SHREC_MIN_VERTICES, mesh.n_vertices), mesh.n_vertices + 1))
+
+
+def noisy_surface(mesh: Mesh, percent: float, rng: np.random.Generator) -> Mesh:
+    """Every vertex displaced by isotropic Gaussian noise of sigma ``percent``% of the
+    bounding box's diagonal."""
+    sigma = percent / 100.0 * float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    return Mesh(mesh.vertices + rng.normal(scale=sigma, size=mesh.vertices.shape), mesh.faces)
+
+
 def planar_cut(mesh: Mesh, share: float, direction: np.ndarray) -> Mesh:
     """Remove every face with a vertex among the ``share`` of the vertices highest along
     ``direction`` (3,); the largest remaining piece."""
@@ -64,14 +121,10 @@ def geodesic_holes(mesh: Mesh, share: float, rng: np.random.Generator) -> Mesh:
     """Remove discs around ``HOLE_COUNT`` random vertices, nearest faces first (by the
     graph distance along the edges to the nearest centre, a face as far as its farthest
     corner), until ``share`` of the area is gone; the largest remaining piece."""
-    vertices, faces = mesh.vertices, mesh.faces
-    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    lengths = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
-    n = len(vertices)
-    graph = sp.coo_matrix((lengths, (edges[:, 0], edges[:, 1])), shape=(n, n)).tocsr()
+    faces, n = mesh.faces, mesh.n_vertices
     centres = rng.choice(n, size=min(HOLE_COUNT, n), replace=False)
-    distance = dijkstra(graph, directed=False, indices=centres).min(axis=0)
-    areas = face_areas(vertices, faces)
+    distance = dijkstra(_edge_graph(mesh), directed=False, indices=centres).min(axis=0)
+    areas = face_areas(mesh.vertices, faces)
     order = np.argsort(distance[faces].max(axis=1), kind="stable")
     removed = order[np.cumsum(areas[order]) <= share * areas.sum()]
     keep = np.ones(len(faces), dtype=bool)
@@ -79,23 +132,142 @@ def geodesic_holes(mesh: Mesh, share: float, rng: np.random.Generator) -> Mesh:
     return largest_piece(mesh, keep)
 
 
+def _edge_graph(mesh: Mesh) -> sp.csr_matrix:
+    """The mesh's edges as a symmetric graph weighted by their lengths."""
+    vertices, faces = mesh.vertices, mesh.faces
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    lengths = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
+    n = len(vertices)
+    return sp.coo_matrix((lengths, (edges[:, 0], edges[:, 1])), shape=(n, n)).tocsr()
+
+
+def shrec_holes(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """SHREC'17's holes (module docstring): a random number of the ``SHREC_CENTRES``
+    farthest samples, each eroding the faces within a graph distance along the edges
+    uniform in (0, ``SHREC_MAX_RADIUS`` x the diameter); the largest remaining piece
+    decimated to :func:`random_resolution`, in a random :func:`similarity`. The
+    diameter is the double sweep's (the farthest vertex from the farthest vertex of a
+    random one)."""
+    graph = _edge_graph(mesh)
+    areas = np.bincount(
+        mesh.faces.ravel(), np.repeat(face_areas(mesh.vertices, mesh.faces), 3), mesh.n_vertices
+    )
+    centres = farthest_point_samples(mesh.vertices, SHREC_CENTRES, areas)
+    start = rng.integers(mesh.n_vertices, size=1)
+    far = np.argmax(dijkstra(graph, directed=False, indices=start), axis=1)
+    diameter = float(np.max(dijkstra(graph, directed=False, indices=far)))
+    chosen = rng.choice(centres, size=int(rng.integers(1, len(centres) + 1)), replace=False)
+    radii = rng.uniform(0.0, SHREC_MAX_RADIUS * diameter, size=len(chosen))
+    reached = dijkstra(graph, directed=False, indices=chosen, limit=float(radii.max()))
+    inside: np.ndarray = np.any(reached < radii[:, None], axis=0)
+    piece = largest_piece(mesh, ~inside[mesh.faces].any(axis=1))
+    target = random_resolution(piece, rng)
+    if target < piece.n_vertices:
+        piece = decimated(piece, target / piece.n_vertices)
+    return similarity(piece, rng)
+
+
+def _view_frame(direction: np.ndarray) -> np.ndarray:
+    """(3, 3) rows: two unit vectors across the view, and the view ``direction`` (3,)."""
+    view = direction / np.linalg.norm(direction)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(view[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    across = np.cross(view, helper)
+    across /= np.linalg.norm(across)
+    return np.stack([across, np.cross(view, across), view])
+
+
+def depth_grid(mesh: Mesh, direction: np.ndarray, pitch: float) -> tuple[np.ndarray, np.ndarray]:
+    """An orthographic depth image of ``mesh`` seen along ``-direction`` (a z-buffer:
+    every triangle against the pixel centres of its bounding box).
+
+    Returns
+    -------
+    image : (h, w) the height along ``direction`` of the nearest surface at each pixel
+        centre, ``nan`` where the ray misses; pixels ``pitch`` apart.
+    origin : (2,) the image's corner in the plane across the view.
+    """
+    local = mesh.vertices @ _view_frame(direction).T
+    origin = local[:, :2].min(axis=0)
+    corners = (local[:, :2] - origin)[mesh.faces] / pitch  # in pixels
+    depth = local[mesh.faces, 2]
+    width, height = np.ceil((local[:, :2].max(axis=0) - origin) / pitch).astype(int) + 1
+    low = np.ceil(corners.min(axis=1) - 0.5).astype(np.int64)
+    span = np.maximum(np.floor(corners.max(axis=1) - 0.5).astype(np.int64) - low + 1, 0)
+    count = span[:, 0] * span[:, 1]
+    tri = np.repeat(np.arange(len(corners)), count)
+    offset = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    x = low[tri, 0] + offset % span[tri, 0]
+    y = low[tri, 1] + offset // span[tri, 0]
+    a, b, c = corners[tri, 0], corners[tri, 1], corners[tri, 2]
+    e1, e2 = b - a, c - a
+    p = np.stack([x + 0.5, y + 0.5], axis=1) - a
+    det = e1[:, 0] * e2[:, 1] - e2[:, 0] * e1[:, 1]
+    safe = np.where(det != 0.0, det, 1.0)
+    u = (p[:, 0] * e2[:, 1] - e2[:, 0] * p[:, 1]) / safe
+    v = (e1[:, 0] * p[:, 1] - p[:, 0] * e1[:, 1]) / safe
+    hit = (det != 0.0) & (u >= 0) & (v >= 0) & (u + v <= 1)
+    d = depth[tri]
+    z = d[:, 0] + u * (d[:, 1] - d[:, 0]) + v * (d[:, 2] - d[:, 0])
+    image = np.full(height * width, -np.inf)
+    np.maximum.at(image, (y * width + x)[hit], z[hit])
+    image[np.isinf(image)] = np.nan
+    return image.reshape(height, width), origin
+
+
+def grid_mesh(image: np.ndarray, origin: np.ndarray, direction: np.ndarray, pitch: float) -> Mesh:
+    """A depth image (:func:`depth_grid`) triangulated as a grid, as a range scanner's
+    software does: two triangles per square of four hit pixels, one per square of
+    three, with no test of the depths (an occlusion edge becomes a shortcut)."""
+    height, width = image.shape
+    ys, xs = np.mgrid[0:height, 0:width]
+    plane = origin + (np.stack([xs, ys], axis=-1) + 0.5) * pitch
+    local = np.concatenate([plane, np.nan_to_num(image)[..., None]], axis=-1)
+    vertices = local.reshape(-1, 3) @ _view_frame(direction)
+    index = np.arange(height * width).reshape(height, width)
+    a, b = index[:-1, :-1].ravel(), index[:-1, 1:].ravel()  # a b
+    c, d = index[1:, :-1].ravel(), index[1:, 1:].ravel()  # c d
+    hit = ~np.isnan(image.ravel())
+    ha, hb, hc, hd = hit[a], hit[b], hit[c], hit[d]
+    every = ha & hb & hc & hd
+    triangles = [
+        ((a, b, d), every | (ha & hb & hd & ~hc)),
+        ((a, d, c), every | (ha & hd & hc & ~hb)),
+        ((a, b, c), ha & hb & hc & ~hd),
+        ((b, d, c), hb & hd & hc & ~ha),
+    ]
+    faces = np.concatenate([np.stack(t, axis=1)[keep] for t, keep in triangles])
+    return clean_mesh(vertices, faces)
+
+
+def range_scan(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """SHREC'17's range scan (module docstring): the depth grid (:func:`depth_grid`) from
+    a random direction with about :func:`random_resolution` pixels hit, triangulated
+    (:func:`grid_mesh`); its largest piece in a random :func:`similarity`."""
+    direction = random_direction(rng)
+    target = random_resolution(mesh, rng)
+    extent = np.ptp(mesh.vertices @ _view_frame(direction).T, axis=0)
+    pitch = float(np.sqrt(extent[0] * extent[1] / target))
+    image, origin = depth_grid(mesh, direction, pitch)
+    for _ in range(2):  # the silhouette's share of the box decides the pixels hit
+        pitch *= float(np.sqrt(max(int(np.count_nonzero(~np.isnan(image))), 1) / target))
+        image, origin = depth_grid(mesh, direction, pitch)
+    return similarity(grid_mesh(image, origin, direction, pitch), rng)
+
+
 def single_view(mesh: Mesh, direction: np.ndarray) -> Mesh:
     """The faces a scanner looking along ``-direction`` (3,) sees: facing it, and with no
     other face in front of their centroid on the ray through it (orthographic rays;
     triangles found through a uniform grid of their projected bounding boxes)."""
     vertices, faces = mesh.vertices, mesh.faces
-    view = direction / np.linalg.norm(direction)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(view[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    across = np.cross(view, helper)
-    across /= np.linalg.norm(across)
-    plane = np.stack([vertices @ across, vertices @ np.cross(view, across)], axis=1)
-    depth = vertices @ view  # larger is nearer the scanner
+    frame = _view_frame(direction)
+    local = vertices @ frame.T
+    plane, depth = local[:, :2], local[:, 2]  # larger depth is nearer the scanner
     corners, corner_depth = plane[faces], depth[faces]
     centroid, centroid_depth = corners.mean(axis=1), corner_depth.mean(axis=1)
     normals = np.cross(
         vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]]
     )
-    facing = normals @ view > 0.0
+    facing = normals @ frame[2] > 0.0
 
     # Each triangle in every grid cell its projected bounding box touches.
     low, high = corners.min(axis=1), corners.max(axis=1)
@@ -147,4 +319,9 @@ PARTIAL_VARIANTS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
     "holes-10": lambda mesh, rng: geodesic_holes(mesh, 0.10, rng),
     "holes-25": lambda mesh, rng: geodesic_holes(mesh, 0.25, rng),
     "view": lambda mesh, rng: single_view(mesh, random_direction(rng)),
+    "range": range_scan,
+    "shrec-holes": shrec_holes,
+    "noise-0.25": lambda mesh, rng: noisy_surface(mesh, 0.25, rng),
+    "noise-0.5": lambda mesh, rng: noisy_surface(mesh, 0.5, rng),
+    "noise-1": lambda mesh, rng: noisy_surface(mesh, 1.0, rng),
 }

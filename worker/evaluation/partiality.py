@@ -11,6 +11,11 @@ modality, for the preset's own score (each query weighed by how partial it looks
 * **mAP**: the mean over queries of the average precision of the whole ranking, the
   meshes of the query's class (its source included) relevant.
 
+And, as SHREC'17 ranks partial shapes (Rodola et al., "Deformable shape retrieval with
+missing parts", 3DOR 2017), all to all among the copies of one variant: each copy
+queries the others (its class relevant), scored by nearest neighbour, first and second
+tier, DCG and mAP (:func:`worker.recognition.metrics.retrieval_scores`).
+
 Rankings are per query, so the product rule is used as it is (no root): only the order
 of each query's candidates counts here.
 """
@@ -192,22 +197,31 @@ def partiality_scores(
 
     Returns
     -------
-    {"scores": {row: {variant: {"own_class", "own_source", "map"}}}, "variants": {variant:
-    {"count", "partiality_median", "looks_partial"}}}; ``looks_partial`` is the share
-    of the variant's copies whose partiality is above 0 (weighed by the parts modality).
+    {"scores": {row: {variant: {"own_class", "own_source", "map"}}}, "all_to_all": {row:
+    {variant: {"nn", "first_tier", "second_tier", "dcg", "map", ...}}}, "variants":
+    {variant: {"count", "partiality_median", "looks_partial"}}}; ``looks_partial`` is
+    the share of the variant's copies whose partiality is above 0 (weighed by the parts
+    modality). A variant whose copies leave a class with a single copy has no
+    all-to-all scores (nothing relevant to find).
     """
     labels_arr = np.asarray([str(x) for x in labels])
     rows: dict[str, dict[str, dict[str, float]]] = {}
+    among: dict[str, dict[str, dict[str, float]]] = {}
     about: dict[str, dict[str, Any]] = {}
     for name, (sources, copies) in variants.items():
         pair = None if baselines is None else (baselines[1][name], baselines[0])
         matrices = query_matrices(copies, gallery, preset, pair, jobs)
         for row, d in matrices.items():
             rows.setdefault(row, {})[name] = ranking_scores(d, np.asarray(sources), labels_arr)
+        copy_labels = labels_arr[np.asarray(sources, dtype=np.int64)]
+        if len(copies) and np.unique(copy_labels, return_counts=True)[1].min() >= 2:
+            pair = None if baselines is None else (baselines[1][name], baselines[1][name])
+            for row, d in query_matrices(copies, copies, preset, pair, jobs).items():
+                among.setdefault(row, {})[name] = metrics.retrieval_scores(d, copy_labels)
         shares = query_partiality(copies, preset)
         about[name] = {
             "count": len(copies),
             "partiality_median": float(np.median(shares)),
             "looks_partial": float(np.mean(shares > 0)),
         }
-    return {"scores": rows, "variants": about}
+    return {"scores": rows, "all_to_all": among, "variants": about}

@@ -439,6 +439,28 @@ def render_partiality_markdown(report: Mapping[str, Any]) -> str:
             for v in (report["scores"][key][name] for name in variants)
         ]
         lines.append(f"| {title} | " + " | ".join(cells) + " |")
+    among = report.get("all_to_all") or {}
+    ranked = [v for v in variants if any(v in cells for cells in among.values())]
+    if ranked:
+        lines += [
+            "",
+            "All to all among each variant's copies, as SHREC'17 ranks partial shapes: every "
+            "copy queries the others of its variant. Per cell: **NN** / **1st tier** / "
+            "**2nd tier** / **DCG** / **mAP**, in %.",
+            "",
+            "| | " + " | ".join(ranked) + " |",
+            "|---|" + "---:|" * len(ranked),
+        ]
+        for key, title in report["rows"].items():
+            if key in among:
+                cells = [
+                    " / ".join(
+                        _pct(among[key][name][k], 1)
+                        for k in ("nn", "first_tier", "second_tier", "dcg", "map")
+                    )
+                    for name in ranked
+                ]
+                lines.append(f"| {title} | " + " | ".join(cells) + " |")
     lines += [
         "",
         "How partial the copies look (the preset's partiality, 0 a whole, 1 wholly partial): "

@@ -20,24 +20,12 @@ import numpy as np
 
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas, tiling_edge
 
-from .partial import PARTIAL_VARIANTS
+from .partial import LOG10_SCALE_RANGE, PARTIAL_VARIANTS, decimated, random_rotation
 
 #: Gaussian vertex noise, as a fraction of the mesh's mean edge length.
 NOISE_FRACTION = 0.1
-#: Rotated and rescaled copies are scaled by 10**u, u uniform in this range.
-LOG10_SCALE_RANGE = (-2.0, 2.0)
 #: Isotropic remeshing: split/collapse/flip/relax/reproject rounds.
 REMESH_ITERATIONS = 10
-
-
-def decimated(mesh: Mesh, fraction: float) -> Mesh:
-    """Quadric error decimation to ``fraction`` of the faces (Garland-Heckbert)."""
-    import fast_simplification
-
-    vertices, faces = fast_simplification.simplify(
-        mesh.vertices, mesh.faces.astype(np.int32), target_reduction=1.0 - fraction
-    )
-    return clean_mesh(vertices, faces)
 
 
 def import_pymeshlab(purpose: str) -> ModuleType:
@@ -91,12 +79,8 @@ def subdivided(mesh: Mesh) -> Mesh:
 
 def rotated_scaled(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     """A uniformly random rotation and a scale of ``10**u``, u in ``LOG10_SCALE_RANGE``."""
-    q, r = np.linalg.qr(rng.standard_normal((3, 3)))
-    q = q * np.sign(np.diag(r))
-    if np.linalg.det(q) < 0:
-        q[:, 0] = -q[:, 0]
     scale = 10.0 ** rng.uniform(*LOG10_SCALE_RANGE)
-    return Mesh(vertices=mesh.vertices @ q.T * scale, faces=mesh.faces)
+    return Mesh(vertices=mesh.vertices @ random_rotation(rng).T * scale, faces=mesh.faces)
 
 
 def noisy(mesh: Mesh, rng: np.random.Generator) -> Mesh:

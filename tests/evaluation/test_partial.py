@@ -1,0 +1,75 @@
+"""Partial copies as scanners make them (the partiality protocol's SHREC'17 variants)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from worker.engine.holes import boundary_loops
+from worker.engine.mesh_io import Mesh, clean_mesh
+from worker.evaluation.partial import (
+    PARTIAL_VARIANTS,
+    SHREC_MIN_VERTICES,
+    depth_grid,
+    grid_mesh,
+    noisy_surface,
+)
+from worker.evaluation.variants import make_variant
+
+
+@pytest.fixture(scope="module")
+def sphere() -> Mesh:
+    ball = trimesh.creation.icosphere(subdivisions=5)  # 10,242 vertices, radius 1
+    return clean_mesh(ball.vertices, ball.faces)
+
+
+def _scan(mesh: Mesh, direction: np.ndarray, pitch: float) -> Mesh:
+    return grid_mesh(*depth_grid(mesh, direction, pitch), direction, pitch)
+
+
+def test_a_range_scan_samples_the_visible_side_on_a_grid(sphere):
+    view = np.array([0.0, 0.0, 1.0])
+    scan = _scan(sphere, view, 0.05)
+    radius = np.linalg.norm(scan.vertices, axis=1)
+    # On the sphere's facets (inside the unit sphere, by less than a facet's sag), on the
+    # side facing the scanner, and about as many as pixels fit in its disc.
+    assert np.all(radius <= 1.0 + 1e-9) and np.all(radius > 0.998)
+    assert np.all(scan.vertices[:, 2] > -1e-9)
+    assert scan.n_vertices == pytest.approx(np.pi / 0.05**2, rel=0.05)
+    # Triangulated as a grid: seen from the scanner, every edge is a pixel's side or diagonal.
+    corners = scan.vertices[scan.faces][..., :2]
+    edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2) / 0.05
+    assert np.allclose(np.minimum(np.abs(edges - 1), np.abs(edges - np.sqrt(2))), 0, atol=1e-6)
+
+
+def test_the_grid_joins_what_occludes_to_what_it_hides():
+    # A near square half over a far one: the scan is one piece across the depth jump.
+    square = trimesh.creation.box(extents=[2.0, 2.0, 0.01])
+    near = trimesh.Trimesh(square.vertices + [1.0, 0.0, 1.0], square.faces)
+    both = trimesh.util.concatenate([square, near])
+    mesh = Mesh(np.asarray(both.vertices, dtype=float), np.asarray(both.faces, dtype=np.int64))
+    scan = _scan(mesh, np.array([0.0, 0.0, 1.0]), 0.1)
+    depths = np.unique(np.round(scan.vertices[:, 2], 3))
+    assert set(depths) == {0.005, 1.005}  # clean_mesh kept the largest piece: both depths
+    assert scan.vertices[:, 0].min() < -0.9 and scan.vertices[:, 0].max() > 1.9
+
+
+@pytest.mark.parametrize("variant", ["range", "shrec-holes"])
+def test_shrec_copies_are_partial_at_a_random_resolution_and_reproducible(sphere, variant):
+    made = make_variant(sphere, variant, "sphere.off")
+    again = make_variant(sphere, variant, "sphere.off")
+    np.testing.assert_array_equal(made.vertices, again.vertices)
+    assert SHREC_MIN_VERTICES * 0.8 <= made.n_vertices <= sphere.n_vertices
+    assert len(boundary_loops(made).start) > 0  # open: something is missing
+    others = [make_variant(sphere, variant, f"other-{i}.off").n_vertices for i in range(4)]
+    assert len(set(others)) > 1  # the resolution varies from copy to copy
+
+
+def test_noise_is_a_share_of_the_bounding_box_diagonal(sphere):
+    noisy = noisy_surface(sphere, 0.5, np.random.default_rng(0))
+    moved = noisy.vertices - sphere.vertices
+    diagonal = np.linalg.norm(np.ptp(sphere.vertices, axis=0))
+    assert moved.std() == pytest.approx(0.005 * diagonal, rel=0.05)
+    np.testing.assert_array_equal(noisy.faces, sphere.faces)
+    assert {"noise-0.25", "noise-0.5", "noise-1", "range", "shrec-holes"} <= set(PARTIAL_VARIANTS)
