@@ -217,7 +217,10 @@ def partiality_scores(
         if len(copies) and np.unique(copy_labels, return_counts=True)[1].min() >= 2:
             pair = None if baselines is None else (baselines[1][name], baselines[1][name])
             for row, d in query_matrices(copies, copies, preset, pair, jobs).items():
-                among.setdefault(row, {})[name] = metrics.retrieval_scores(d, copy_labels)
+                # A copy with no sample clear of its boundary is infinitely far from all
+                # (the parts): it ranks the others by index, as against the wholes.
+                finite = np.where(np.isfinite(d), d, np.finfo(np.float64).max)
+                among.setdefault(row, {})[name] = metrics.retrieval_scores(finite, copy_labels)
         shares = query_partiality(copies, preset)
         about[name] = {
             "count": len(copies),
