@@ -8,7 +8,10 @@ A backup is a directory:
   kept in the database: they are in it);
 * ``index/``: the default collection's saved search index of the preset's version (a
   head start: the service reconciles it with the database on start, or rebuilds it
-  from the stored descriptors, as it does the other collections' indexes);
+  from the stored descriptors, as it does the other collections' indexes), and
+  ``index.parts``, the rows of its parts file it refers to (the file only grows: rows
+  a saved index refers to are never written again, so a copy of them while the service
+  runs is whole);
 * ``manifest.json``: what it holds, with every file's size and sha256.
 
 A mesh deleted while the backup runs loses its file before the copy reaches it: it is
@@ -24,6 +27,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import shutil
 import sqlite3
 import time
@@ -138,11 +142,27 @@ def _copy_index(index: Path, target: Path) -> None:
         before = manifest.read_bytes()
         try:
             shutil.copytree(index, target)
+            _copy_parts_rows(index, json.loads(before), target.with_name(target.name + ".parts"))
         except (FileNotFoundError, shutil.Error):  # replaced while copied
             continue
         if manifest.is_file() and manifest.read_bytes() == before:
             return
     shutil.rmtree(target, ignore_errors=True)
+    target.with_name(target.name + ".parts").unlink(missing_ok=True)
+
+
+def _copy_parts_rows(index: Path, manifest: dict[str, Any], target: Path) -> None:
+    """The first rows of the index's parts file, as many as its manifest refers to."""
+    if not manifest.get("parts_file"):
+        return
+    remaining = int(manifest["parts_count"]) * 2 * math.prod(manifest["parts_shape"])
+    with open(index.parent / manifest["parts_file"], "rb") as source, open(target, "wb") as out:
+        while remaining > 0:
+            block = source.read(min(remaining, 1 << 20))
+            if not block:
+                raise FileNotFoundError("the parts file is shorter than its index")
+            out.write(block)
+            remaining -= len(block)
 
 
 def restore(source: Path, settings: Settings) -> dict[str, Any]:
@@ -172,7 +192,10 @@ def restore(source: Path, settings: Settings) -> dict[str, Any]:
     if (source / "uploads").is_dir():
         shutil.copytree(source / "uploads", settings.uploads_dir, dirs_exist_ok=True)
     if (source / "index").is_dir():
-        shutil.copytree(source / "index", settings.preset_index_directory)
+        index = settings.preset_index_directory
+        shutil.copytree(source / "index", index)
+        if (source / "index.parts").is_file():
+            shutil.copyfile(source / "index.parts", index.with_name(index.name + ".parts"))
     shutil.copyfile(source / DATABASE, target)  # last: a half restore has no database
     upgrade_head(settings.sqlalchemy_url)  # a backup of an earlier version: its migrations
     return manifest

@@ -114,6 +114,10 @@ def test_a_backup_under_load_restores_every_mesh_and_answer(tmp_path_factory, tm
         files = {i: copy.client.get(f"/meshes/{i}/file").content for i in common}
         assert files == expected_files
         assert _answers(copy, common) == expected_answers
+    # The backed-up index (with the rows of its parts file) was loaded, not rebuilt.
+    assert "index.parts" in manifest["files"]
+    logs = "".join(path.read_text() for path in (tmp_path / "new" / "logs").glob("api-*.log"))
+    assert "Application startup complete" in logs and "unusable" not in logs
 
 
 def test_a_mesh_deleted_while_backing_up_is_left_out_whole(tmp_path):
