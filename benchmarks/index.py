@@ -39,19 +39,23 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from app.gallery.index import GalleryIndex, SearchStats
-from benchmarks.common import tosca_descriptors, tosca_labels
+from benchmarks.common import (
+    Vectors,
+    resident_mb,
+    synthetic,
+    synthetic_model,
+    tosca_descriptors,
+)
 from worker.engine.compare import dissimilarity, fuse, gallery_sigma
 from worker.engine.presets import DEFAULT_PRESET, MODALITIES, Preset, get_preset
 
 K = 10
 #: Modality -> (N, M) float descriptors of a gallery, or -> (M,) of one query.
-Vectors = dict[str, np.ndarray]
 #: A table row: what :func:`measure` measured, and ``data`` (what was searched).
 Row = dict[str, Any]
 
@@ -75,14 +79,6 @@ def build(preset: Preset, gallery: Vectors, ids: np.ndarray) -> GalleryIndex:
     index = GalleryIndex(preset, preset.modality_sizes())
     index.add_many((int(i), {m: gallery[m][j] for m in MODALITIES}) for j, i in enumerate(ids))
     return index
-
-
-def resident_mb() -> float:
-    """The process's resident memory now (Linux)."""
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
 
 
 def measure(
@@ -146,52 +142,6 @@ def measure(
         "refit": refit_seconds,
         "index_mb": index_mb,
     }
-
-
-def synthetic_model(preset_name: str) -> dict[str, Vectors]:
-    """Log-space class structure of the real TOSCA descriptors, per modality."""
-    descriptors = tosca_descriptors(preset_name)
-    labels = tosca_labels()
-    names = sorted(descriptors)
-    classes = sorted(set(labels[n] for n in names))
-    model = {}
-    for m in MODALITIES:
-        x = np.stack([descriptors[n].vector(m) for n in names])
-        positive = x[x > 0]
-        floor = positive.min() if positive.size else 1e-12
-        logx = np.log(np.maximum(x, floor))
-        mu = logx.mean(axis=0)
-        class_means = np.stack(
-            [logx[[labels[n] == c for n in names]].mean(axis=0) for c in classes]
-        )
-        residuals = np.concatenate(
-            [logx[[labels[n] == c for n in names]] - class_means[i] for i, c in enumerate(classes)]
-        )
-        model[m] = {
-            "mu": mu,
-            "between": class_means - mu,
-            "spread": (class_means - mu).std(axis=0),
-            "within": residuals,
-        }
-    return model
-
-
-def synthetic(
-    model: dict[str, Vectors], n_classes: int, per_class: int, rng: np.random.Generator
-) -> Vectors:
-    """``n_classes * per_class`` descriptors (modality -> (N, M)), class by class."""
-    n = n_classes * per_class
-    nb = len(next(iter(model.values()))["between"])
-    nw = len(next(iter(model.values()))["within"])
-    # The same class and pose draws for every modality (a shape is one draw).
-    centre_weights = rng.normal(size=(n_classes, nb)) / np.sqrt(nb)
-    member_weights = rng.normal(size=(n, nw)) / np.sqrt(nw)
-    out = {}
-    for m, part in model.items():
-        noise = 0.3 * part["spread"] * rng.normal(size=(n_classes, len(part["mu"])))
-        centres = part["mu"] + centre_weights @ part["between"] + noise
-        out[m] = np.exp(np.repeat(centres, per_class, axis=0) + member_weights @ part["within"])
-    return out
 
 
 def tosca_rows(preset_name: str) -> list[Row]:

@@ -48,8 +48,14 @@ from app.gallery.words import (
     SAMPLES_PER_WORD,
     WORD_SAMPLES,
 )
-from benchmarks.common import REPO, TOSCA, add_evaluation_cache_arguments
-from benchmarks.index import resident_mb, synthetic, synthetic_model
+from benchmarks.common import (
+    REPO,
+    TOSCA,
+    add_evaluation_cache_arguments,
+    resident_mb,
+    synthetic,
+    synthetic_model,
+)
 from worker.engine.compare import fuse, partiality, query_weights
 from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.presets import PARTS, Preset, get_preset
@@ -188,7 +194,7 @@ def build_gallery(
     the index (and its parts file) under ``store``, and the queries beside it.
 
     Object ``o`` is made from real whole ``b = o mod 83``: its flat vectors a class of
-    :func:`benchmarks.index.synthetic` (poses a random combination of the real
+    :func:`benchmarks.common.synthetic` (poses a random combination of the real
     within-class residuals), its profiles ``b``'s plus its offset (:func:`objects_model`),
     each pose's plus ``POSE_NOISE`` per sample. Its query is ``b``'s real partial copy,
     its profiles offset alike, its flat vectors an unseen pose's times the real copy's

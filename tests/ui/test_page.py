@@ -345,7 +345,9 @@ def test_score_bars_mean_the_same_everywhere_and_only_modalities_that_count(page
             closeness = float(bars.nth(j).get_attribute("data-closeness"))
             assert closeness == pytest.approx(match["closeness"][modality])
             width = bars.nth(j).locator("span").evaluate("(e) => e.style.width")
-            assert float(width.removesuffix("%")) == pytest.approx(max(2, 100 * closeness))
+            # CSS serializes a percentage to six significant digits.
+            shown_width = float(width.removesuffix("%"))
+            assert shown_width == pytest.approx(max(2, 100 * closeness), rel=1e-5)
     # The best match, another pose of the same figure, is closer than most pairs of
     # different objects in every modality that ranked it.
     assert min(body["matches"][0]["closeness"][m] for m in body["modalities"]) > 0.5
