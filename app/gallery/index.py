@@ -105,10 +105,6 @@ PARTS_SHORTLIST = 32  # shapes a partial search compares with every sample
 WORDS_FROM = 4096
 WORD_CANDIDATES = 256
 WORD_SHARE = 25
-#: The inverted file's most voted shapes the coarse pass tries every scale on; the rest
-#: are tried within SCALE_SPREAD steps of the scale that fits those best.
-SCALE_CHOOSERS = 256
-SCALE_SPREAD = 2
 BOUND_SAFETY = 1.0 - 1e-5  # float32 candidate distances: keep the bound a true lower bound
 
 
@@ -504,16 +500,13 @@ class GalleryIndex:
                     self._present,
                     max(WORD_CANDIDATES, n // WORD_SHARE) + len(excluded),
                 )
-                # In vote order: the query's scale is chosen on the most voted.
-                positions = self.store.positions(found_ids[~np.isin(found_ids, excluded)])
-                parts = self._voted_parts_scores(*few[:2], few[2], positions)
+                positions = np.sort(self.store.positions(found_ids[~np.isin(found_ids, excluded)]))
             else:
                 positions = np.flatnonzero(~np.isin(self.store.ids[:n], excluded))
-                parts = self._parts_scores(*few[:2], few[2][positions]).dissimilarity
             if not len(positions):
                 return [], 1.0
             per = self.exact_scores(query, positions, flat, "sum")[1] if flat else {}
-            per[PARTS] = parts
+            per[PARTS] = self._parts_scores(*few[:2], few[2][positions]).dissimilarity
             rough = np.asarray(fuse(per, "product", dict(weights)), dtype=np.float64)
             short = np.argsort(rough, kind="stable")[: max(PARTS_SHORTLIST, 2 * k)]
             positions = positions[short]
@@ -554,41 +547,14 @@ class GalleryIndex:
     def _parts_scores(
         self, profiles: np.ndarray, reach: np.ndarray, gallery: np.ndarray
     ) -> PartsMatch:
-        """The parts dissimilarity of a query to ``gallery`` (float16 profiles)."""
-        return best_scale(self._scale_scores(profiles, reach, gallery), self.preset)
-
-    def _scale_scores(
-        self,
-        profiles: np.ndarray,
-        reach: np.ndarray,
-        gallery: np.ndarray,
-        scales: range | None = None,
-    ) -> np.ndarray:
-        """:func:`~worker.engine.parts.scale_scores` of ``gallery`` (float16 profiles)
-        in blocks of ``PARTS_BLOCK_SAMPLES`` samples."""
+        """The parts dissimilarity of a query to ``gallery`` (float16 profiles), in
+        blocks of ``PARTS_BLOCK_SAMPLES`` samples."""
         block = max(1, PARTS_BLOCK_SAMPLES // max(gallery.shape[1], 1))
         scores = [
-            scale_scores(profiles, reach, gallery[a : a + block], self.preset, scales)
+            scale_scores(profiles, reach, gallery[a : a + block], self.preset)
             for a in range(0, len(gallery), block)
         ]
-        return np.concatenate(scores, axis=1)
-
-    def _voted_parts_scores(
-        self, profiles: np.ndarray, reach: np.ndarray, coarse: np.ndarray, positions: np.ndarray
-    ) -> np.ndarray:
-        """The coarse parts dissimilarity to the shapes at ``positions`` (in the inverted
-        file's vote order) at the query's scale, as :meth:`_parts_scores` chooses it, with
-        a third of the work: the first ``SCALE_CHOOSERS`` are scored at every scale, the
-        rest within ``SCALE_SPREAD`` of the scale that fits the first best, and the scale
-        chosen among those every shape was scored at."""
-        lead = self._scale_scores(profiles, reach, coarse[positions[:SCALE_CHOOSERS]])
-        if len(positions) <= SCALE_CHOOSERS or not np.isfinite(lead).any():
-            return best_scale(lead, self.preset).dissimilarity
-        j = int(np.argmin(lead.min(axis=1)))
-        near = range(max(j - SCALE_SPREAD, 0), min(j + SCALE_SPREAD + 1, len(lead)))
-        rest = self._scale_scores(profiles, reach, coarse[positions[SCALE_CHOOSERS:]], near)
-        both = np.concatenate([lead[near.start : near.stop], rest], axis=1)
-        return best_scale(both, self.preset, near).dissimilarity
+        return best_scale(np.concatenate(scores, axis=1), self.preset)
 
     def _candidate_search(
         self,

@@ -16,14 +16,7 @@ from worker.engine.compare import (
     gallery_sigma,
     query_weights,
 )
-from worker.engine.parts import (
-    COARSE_SAMPLES,
-    best_scale,
-    coarse,
-    compared_profiles,
-    grid_radii,
-    part_dissimilarity,
-)
+from worker.engine.parts import COARSE_SAMPLES, compared_profiles, grid_radii, part_dissimilarity
 from worker.engine.presets import (
     DEFAULT_PRESET,
     MODALITIES,
@@ -379,23 +372,6 @@ def test_from_thousands_of_shapes_the_inverted_file_finds_what_every_shape_compa
         assert found[0].id % objects == q % objects  # its own object first
         same += [m.id for m in found] == [m.id for m in every]
     assert same == 12
-
-    # The coarse pass tries every scale on the most voted shapes only: the rest are
-    # scored near the scale that fits those best, and the scale chosen among the scales
-    # every shape was scored at.
-    part, reach = pose(1)[:150], np.full(150, np.inf)
-    few = coarse(part, reach, index.store.coarse[: len(index)])
-    positions = rng.permutation(len(index))
-    full = index._scale_scores(*few[:2], few[2][positions])
-    monkeypatch.setattr(index_module, "SCALE_CHOOSERS", 16)
-    for spread in (0, 1, DEFAULT.parts_scales):
-        monkeypatch.setattr(index_module, "SCALE_SPREAD", spread)
-        lead = int(np.argmin(full[:, :16].min(axis=1)))
-        near = range(max(lead - spread, 0), min(lead + spread + 1, len(full)))
-        expected = full[near.start + int(np.argmin(full[near.start : near.stop].min(axis=1)))]
-        voted = index._voted_parts_scores(*few[:2], few[2], positions)
-        np.testing.assert_allclose(voted, expected, rtol=1e-9)
-    np.testing.assert_allclose(voted, best_scale(full, DEFAULT).dissimilarity, rtol=1e-9)
 
     # Churn: a shape removed is no longer found, one added after the build is; a whole
     # refit files them at once with the same vocabulary and answers the same.
