@@ -83,8 +83,7 @@ from worker.engine.parts import (
     PartsMatch,
     best_scale,
     coarse,
-    grid_radii,
-    scale_columns,
+    samples_at_scale,
     scale_scores,
 )
 from worker.engine.presets import PARTS, Preset
@@ -533,16 +532,11 @@ class GalleryIndex:
     ) -> tuple[np.ndarray, np.ndarray]:
         """The query's samples at every scale the parts search tries, as the inverted file
         takes them: (q, K) the compared columns, and which radii are within reach."""
-        preset = self.preset
-        radii = grid_radii(preset)
-        vectors, valid = [], []
-        for j in range(preset.parts_scales):
-            columns = scale_columns(j, preset)
-            mask = radii[columns][None, :] <= reach[:, None]
-            usable = mask.sum(axis=1) >= preset.parts_min_radii
-            vectors.append(profiles[usable][:, columns])
-            valid.append(mask[usable])
-        return np.concatenate(vectors), np.concatenate(valid)
+        scales = [
+            samples_at_scale(profiles, reach, j, self.preset)
+            for j in range(self.preset.parts_scales)
+        ]
+        return np.concatenate([q for q, _ in scales]), np.concatenate([v for _, v in scales])
 
     def _parts_scores(
         self, profiles: np.ndarray, reach: np.ndarray, gallery: np.ndarray

@@ -124,13 +124,13 @@ def _read(directory: Path, preset: Preset, **options: Any) -> GalleryIndex:
     parts_shape = None if shape is None else (int(shape[0]), int(shape[1]))
     parts_file = manifest.get("parts_file")
     path = None if parts_file is None else directory.parent / parts_file
-    if path is not None and path.stat().st_size < int(manifest["parts_count"]) * 2 * int(
-        np.prod(parts_shape or (0, 0))
-    ):
-        raise ValueError("the parts file is shorter than the index refers to")
     index = GalleryIndex(
         preset, manifest["dims"], parts_shape=parts_shape, parts_path=path, **options
     )
+    rows = index.store.rows
+    if path is not None and rows is not None:
+        if path.stat().st_size < int(manifest["parts_count"]) * rows.row_bytes:
+            raise ValueError("the parts file is shorter than the index refers to")
     with np.load(directory / "arrays.npz") as npz:
         arrays = {k: np.array(npz[k]) for k in npz.files}
     n = int(manifest["size"])

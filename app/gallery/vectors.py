@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import weakref
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -56,6 +57,7 @@ class PartsRows:
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
             self._fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+            weakref.finalize(self, os.close, self._fd)  # an index replaced lets its file go
 
     def append(self, rows: np.ndarray) -> int:
         """Store a shape's rows in the next slot; the slot."""
@@ -88,11 +90,6 @@ class PartsRows:
         """Make the file's rows durable (a saved index refers to them)."""
         if self._fd is not None:
             os.fsync(self._fd)
-
-    def close(self) -> None:
-        if self._fd is not None:
-            os.close(self._fd)
-            self._fd = None
 
 
 class GalleryVectors:

@@ -225,7 +225,6 @@ def scale_scores(
     (``inf`` at a scale where no sample of the query has enough radii clear of its
     boundary). Candidates can be scored in blocks and the blocks' columns joined
     before :func:`best_scale` chooses. Parameters as :func:`part_dissimilarity`."""
-    radii = grid_radii(preset)
     prior = preset.parts_scale_prior
     whole = np.ascontiguousarray(gallery, dtype=np.float64)
     n, per_shape = whole.shape[:2]
@@ -233,13 +232,11 @@ def scale_scores(
     tried = range(preset.parts_scales) if scales is None else scales
     out = np.full((len(tried), n), np.inf)
     for row, j in enumerate(tried):
-        columns = scale_columns(j, preset)
-        valid = (radii[columns][None, :] <= reach[:, None]).astype(np.float64)
-        used = valid.sum(axis=1)
-        keep = used >= preset.parts_min_radii
-        if not keep.any() or n == 0:
+        query, within = samples_at_scale(profiles, reach, j, preset)
+        if not len(query) or n == 0:
             continue
-        query, valid, used = profiles[keep][:, columns], valid[keep], used[keep]
+        valid = within.astype(np.float64)
+        used = valid.sum(axis=1)
         nearest = _nearest_squared(query, valid, rows, n, per_shape)
         rms = np.sqrt(np.maximum(nearest, 0.0) / used[:, None])
         out[row] = used @ rms / used.sum() + prior * np.log(_scale(j))
@@ -251,6 +248,18 @@ def scale_columns(j: int, preset: Preset) -> np.ndarray:
     (a whole keeps every second column of the grid, :func:`compared_profiles`)."""
     columns: np.ndarray = j + 2 * np.arange(preset.parts_radii)
     return columns
+
+
+def samples_at_scale(
+    profiles: np.ndarray, reach: np.ndarray, j: int, preset: Preset
+) -> tuple[np.ndarray, np.ndarray]:
+    """A query's samples as scale ``j`` compares them: (q', K) their profiles' columns
+    (:func:`scale_columns`) and (q', K) bool, which of those radii are within the sample's
+    reach; samples with fewer than ``parts_min_radii`` of them left out."""
+    columns = scale_columns(j, preset)
+    within = grid_radii(preset)[columns][None, :] <= reach[:, None]
+    keep = within.sum(axis=1) >= preset.parts_min_radii
+    return profiles[keep][:, columns], within[keep]
 
 
 def best_scale(scores: np.ndarray, preset: Preset, scales: range | None = None) -> PartsMatch:

@@ -176,6 +176,30 @@ def _view_frame(direction: np.ndarray) -> np.ndarray:
     return np.stack([across, np.cross(view, across), view])
 
 
+def _box_cells(first: np.ndarray, span: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every integer cell of boxes ``first`` (b, 2) .. ``first + span - 1``: (box, x, y)."""
+    count = span[:, 0] * span[:, 1]
+    box = np.repeat(np.arange(len(first)), count)
+    offset = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    return box, first[box, 0] + offset % span[box, 0], first[box, 1] + offset // span[box, 0]
+
+
+def _inside_at(
+    corners: np.ndarray, depths: np.ndarray, points: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Whether each point (p, 2) lies in its triangle ``corners`` (p, 3, 2) (a degenerate
+    one contains none), and the triangle's ``depths`` (p, 3) interpolated there."""
+    a, b, c = corners[:, 0], corners[:, 1], corners[:, 2]
+    e1, e2, p = b - a, c - a, points - a
+    det = e1[:, 0] * e2[:, 1] - e2[:, 0] * e1[:, 1]
+    safe = np.where(det != 0.0, det, 1.0)
+    u = (p[:, 0] * e2[:, 1] - e2[:, 0] * p[:, 1]) / safe
+    v = (e1[:, 0] * p[:, 1] - p[:, 0] * e1[:, 1]) / safe
+    inside = (det != 0.0) & (u >= 0) & (v >= 0) & (u + v <= 1)
+    at = depths[:, 0] + u * (depths[:, 1] - depths[:, 0]) + v * (depths[:, 2] - depths[:, 0])
+    return inside, at
+
+
 def depth_grid(mesh: Mesh, direction: np.ndarray, pitch: float) -> tuple[np.ndarray, np.ndarray]:
     """An orthographic depth image of ``mesh`` seen along ``-direction`` (a z-buffer:
     every triangle against the pixel centres of its bounding box).
@@ -193,21 +217,9 @@ def depth_grid(mesh: Mesh, direction: np.ndarray, pitch: float) -> tuple[np.ndar
     width, height = np.ceil((local[:, :2].max(axis=0) - origin) / pitch).astype(int) + 1
     low = np.ceil(corners.min(axis=1) - 0.5).astype(np.int64)
     span = np.maximum(np.floor(corners.max(axis=1) - 0.5).astype(np.int64) - low + 1, 0)
-    count = span[:, 0] * span[:, 1]
-    tri = np.repeat(np.arange(len(corners)), count)
-    offset = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-    x = low[tri, 0] + offset % span[tri, 0]
-    y = low[tri, 1] + offset // span[tri, 0]
-    a, b, c = corners[tri, 0], corners[tri, 1], corners[tri, 2]
-    e1, e2 = b - a, c - a
-    p = np.stack([x + 0.5, y + 0.5], axis=1) - a
-    det = e1[:, 0] * e2[:, 1] - e2[:, 0] * e1[:, 1]
-    safe = np.where(det != 0.0, det, 1.0)
-    u = (p[:, 0] * e2[:, 1] - e2[:, 0] * p[:, 1]) / safe
-    v = (e1[:, 0] * p[:, 1] - p[:, 0] * e1[:, 1]) / safe
-    hit = (det != 0.0) & (u >= 0) & (v >= 0) & (u + v <= 1)
-    d = depth[tri]
-    z = d[:, 0] + u * (d[:, 1] - d[:, 0]) + v * (d[:, 2] - d[:, 0])
+    tri, x, y = _box_cells(low, span)
+    centres = np.stack([x + 0.5, y + 0.5], axis=1)
+    hit, z = _inside_at(corners[tri], depth[tri], centres)
     image = np.full(height * width, -np.inf)
     np.maximum.at(image, (y * width + x)[hit], z[hit])
     image[np.isinf(image)] = np.nan
@@ -276,11 +288,7 @@ def single_view(mesh: Mesh, direction: np.ndarray) -> Mesh:
     first = np.floor((low - origin) / cell).astype(np.int64)
     span = np.floor((high - origin) / cell).astype(np.int64) - first + 1
     width = int((first[:, 0] + span[:, 0]).max()) + 1
-    count = span[:, 0] * span[:, 1]
-    triangle = np.repeat(np.arange(len(faces)), count)
-    offset = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-    x = first[triangle, 0] + offset % span[triangle, 0]
-    y = first[triangle, 1] + offset // span[triangle, 0]
+    triangle, x, y = _box_cells(first, span)
     order = np.argsort(y * width + x, kind="stable")
     cells, triangles = (y * width + x)[order], triangle[order]
 
@@ -295,16 +303,8 @@ def single_view(mesh: Mesh, direction: np.ndarray) -> Mesh:
         + np.arange(pairs.sum())
         - np.repeat(np.cumsum(pairs) - pairs, pairs)
     ]
-    a, b, c = corners[other, 0], corners[other, 1], corners[other, 2]
-    e1, e2, p = b - a, c - a, centroid[face] - a
-    det = e1[:, 0] * e2[:, 1] - e2[:, 0] * e1[:, 1]
-    usable = np.abs(det) > 0.0
-    safe = np.where(usable, det, 1.0)
-    u = (p[:, 0] * e2[:, 1] - e2[:, 0] * p[:, 1]) / safe
-    v = (e1[:, 0] * p[:, 1] - p[:, 0] * e1[:, 1]) / safe
-    inside = usable & (u >= 0) & (v >= 0) & (u + v <= 1) & (other != face)
-    d = corner_depth[other]
-    at_centroid = d[:, 0] + u * (d[:, 1] - d[:, 0]) + v * (d[:, 2] - d[:, 0])
+    inside, at_centroid = _inside_at(corners[other], corner_depth[other], centroid[face])
+    inside &= other != face
     margin = 1e-6 * float(np.ptp(depth))
     hidden = np.zeros(len(faces), dtype=bool)
     hidden[face[inside & (at_centroid > centroid_depth[face] + margin)]] = True

@@ -412,6 +412,22 @@ def render_robustness_markdown(report: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _variant_table(
+    rows: Mapping[str, str],
+    scores: Mapping[str, Mapping[str, Mapping[str, float]]],
+    variants: list[str],
+    keys: tuple[str, ...],
+) -> list[str]:
+    """A markdown table: a line per row key of ``scores`` (titled by ``rows``), a column
+    per variant, each cell the ``keys``' scores in % joined by " / "."""
+    lines = ["| | " + " | ".join(variants) + " |", "|---|" + "---:|" * len(variants)]
+    for key, title in rows.items():
+        if key in scores:
+            cells = [" / ".join(_pct(scores[key][v][k], 1) for k in keys) for v in variants]
+            lines.append(f"| {title} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def render_partiality_markdown(report: Mapping[str, Any]) -> str:
     """partiality.md: per row and partial variant, own class, own source and mAP."""
     preset = report["preset"]
@@ -428,17 +444,10 @@ def render_partiality_markdown(report: Mapping[str, Any]) -> str:
         "the whole meshes. Per cell: **own class** at rank 1 / **own source** at rank 1 / "
         "**mAP** (the query's class relevant), in %.",
         "",
-        "| | " + " | ".join(variants) + " |",
-        "|---|" + "---:|" * len(variants),
+        *_variant_table(
+            report["rows"], report["scores"], variants, ("own_class", "own_source", "map")
+        ),
     ]
-    for key, title in report["rows"].items():
-        if key not in report["scores"]:
-            continue
-        cells = [
-            " / ".join(_pct(v[k], 1) for k in ("own_class", "own_source", "map"))
-            for v in (report["scores"][key][name] for name in variants)
-        ]
-        lines.append(f"| {title} | " + " | ".join(cells) + " |")
     among = report.get("all_to_all") or {}
     ranked = [v for v in variants if any(v in cells for cells in among.values())]
     if ranked:
@@ -448,19 +457,10 @@ def render_partiality_markdown(report: Mapping[str, Any]) -> str:
             "copy queries the others of its variant. Per cell: **NN** / **1st tier** / "
             "**2nd tier** / **DCG** / **mAP**, in %.",
             "",
-            "| | " + " | ".join(ranked) + " |",
-            "|---|" + "---:|" * len(ranked),
+            *_variant_table(
+                report["rows"], among, ranked, ("nn", "first_tier", "second_tier", "dcg", "map")
+            ),
         ]
-        for key, title in report["rows"].items():
-            if key in among:
-                cells = [
-                    " / ".join(
-                        _pct(among[key][name][k], 1)
-                        for k in ("nn", "first_tier", "second_tier", "dcg", "map")
-                    )
-                    for name in ranked
-                ]
-                lines.append(f"| {title} | " + " | ".join(cells) + " |")
     lines += [
         "",
         "How partial the copies look (the preset's partiality, 0 a whole, 1 wholly partial): "
