@@ -1,0 +1,101 @@
+"""What a point cloud cannot tell: which nearby points are joined.
+
+    OPENBLAS_NUM_THREADS=1 python -m experiments.point_clouds
+
+A point cloud of a surface's vertices has lost its edges. Where two sheets of a surface
+pass closer than a few sample spacings (a hand on a thigh, touching legs, a tail along a
+flank), an operator built from the points alone (a point-cloud Laplacian, local
+triangulations, a reconstruction) joins them; where the sampling is coarse or uneven it
+has too few neighbours to find the surface. Either moves every whole modality (the GDM,
+the DDT, the spectrum). For every TOSCA mesh: the share of vertex pairs closer than 3
+median edge lengths in space whose path along the mesh's edges is longer than 15 (from
+up to 300 vertices of such pairs, seed 0); and, for the first mesh of each class, the 10
+lowest nonzero eigenvalues of robust-laplacian's point-cloud operator (Sharp & Crane
+2020) on the file's vertices against the file's own (intrinsic Delaunay, averaged mass,
+the same vertices), ``|lambda_points / lambda_mesh - 1|``: the median and the largest.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as sla
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+from benchmarks.common import TOSCA, first_of_each_class, tosca_labels
+from worker.engine.intrinsic import averaged_mass, surface_operators
+from worker.engine.mesh_io import Mesh, canonical_frame, load_mesh
+from worker.engine.topology import edge_keys
+
+NEAR, FAR, SOURCES, EIGENVALUES = 3.0, 15.0, 300, 10
+
+
+def edge_graph(mesh: Mesh) -> tuple[sp.csr_matrix, float]:
+    """The mesh's edges as a graph weighted by length, and their median length."""
+    keys = np.unique(edge_keys(mesh.faces, mesh.n_vertices).ravel())
+    a, b = np.divmod(keys, mesh.n_vertices)
+    length = np.linalg.norm(mesh.vertices[a] - mesh.vertices[b], axis=1)
+    n = mesh.n_vertices
+    return sp.csr_matrix((length, (a, b)), shape=(n, n)), float(np.median(length))
+
+
+def joined_share(mesh: Mesh) -> float:
+    """Share of vertex pairs within ``NEAR`` edge lengths in space that are more than
+    ``FAR`` apart along the edges (sampled from up to ``SOURCES`` of their vertices)."""
+    graph, edge = edge_graph(mesh)
+    pairs = cKDTree(mesh.vertices).query_pairs(NEAR * edge, output_type="ndarray")
+    sources = np.unique(pairs[:, 0])
+    chosen = np.random.default_rng(0).choice(sources, min(SOURCES, len(sources)), replace=False)
+    along = dijkstra(graph, directed=False, indices=chosen, limit=2 * FAR * edge)
+    row = np.full(mesh.n_vertices, -1)
+    row[chosen] = np.arange(len(chosen))
+    sampled = pairs[row[pairs[:, 0]] >= 0]
+    return float(np.mean(along[row[sampled[:, 0]], sampled[:, 1]] > FAR * edge))
+
+
+def lowest_eigenvalues(stiffness: sp.spmatrix, mass: sp.spmatrix) -> np.ndarray:
+    values: np.ndarray = np.sort(sla.eigsh(stiffness, EIGENVALUES + 1, mass, sigma=-1e-8)[0])
+    return values[1:]
+
+
+def eigenvalue_errors(mesh: Mesh) -> np.ndarray:
+    """``|lambda_points / lambda_mesh - 1|`` of the lowest nonzero eigenvalues."""
+    import robust_laplacian
+
+    surface = canonical_frame(mesh)
+    intrinsic, ops = surface_operators(surface.vertices, surface.faces)
+    of_mesh = lowest_eigenvalues(ops.stiffness, averaged_mass(intrinsic, ops.face_areas))
+    stiffness, mass = robust_laplacian.point_cloud_laplacian(surface.vertices)
+    errors: np.ndarray = np.abs(lowest_eigenvalues(stiffness, mass) / of_mesh - 1.0)
+    return errors
+
+
+def contacts() -> None:
+    labels = tosca_labels()
+    shares: dict[str, list[float]] = {}
+    for name, label in labels.items():
+        shares.setdefault(label, []).append(joined_share(load_mesh(TOSCA / name)))
+    errors = {labels[n]: eigenvalue_errors(load_mesh(TOSCA / n)) for n in first_of_each_class()}
+    print(
+        "| class | meshes | near pairs far along the surface, median % | largest % "
+        "| first mesh: point-cloud eigenvalues' error |"
+    )
+    print("|---|---:|---:|---:|---|")
+    for label, values in shares.items():
+        e = errors[label]
+        print(
+            f"| {label} | {len(values)} | {100 * np.median(values):.2f} | {100 * max(values):.2f} "
+            f"| median {100 * np.median(e):.1f}%, largest {100 * e.max():.1f}% |"
+        )
+
+
+def main() -> None:
+    argparse.ArgumentParser(description=__doc__.split("\n")[0]).parse_args()
+    contacts()
+
+
+if __name__ == "__main__":
+    main()
