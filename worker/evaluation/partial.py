@@ -36,6 +36,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from worker.engine.errors import MeshError
 from worker.engine.geodesic import farthest_point_samples
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
+from worker.engine.topology import edge_keys
 
 #: Number of discs the ``holes-*`` variants remove.
 HOLE_COUNT = 5
@@ -123,7 +124,7 @@ def geodesic_holes(mesh: Mesh, share: float, rng: np.random.Generator) -> Mesh:
     corner), until ``share`` of the area is gone; the largest remaining piece."""
     faces, n = mesh.faces, mesh.n_vertices
     centres = rng.choice(n, size=min(HOLE_COUNT, n), replace=False)
-    distance = dijkstra(_edge_graph(mesh), directed=False, indices=centres).min(axis=0)
+    distance = dijkstra(edge_graph(mesh), directed=False, indices=centres).min(axis=0)
     areas = face_areas(mesh.vertices, faces)
     order = np.argsort(distance[faces].max(axis=1), kind="stable")
     removed = order[np.cumsum(areas[order]) <= share * areas.sum()]
@@ -132,13 +133,13 @@ def geodesic_holes(mesh: Mesh, share: float, rng: np.random.Generator) -> Mesh:
     return largest_piece(mesh, keep)
 
 
-def _edge_graph(mesh: Mesh) -> sp.csr_matrix:
-    """The mesh's edges as a symmetric graph weighted by their lengths."""
-    vertices, faces = mesh.vertices, mesh.faces
-    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    lengths = np.linalg.norm(vertices[edges[:, 0]] - vertices[edges[:, 1]], axis=1)
-    n = len(vertices)
-    return sp.coo_matrix((lengths, (edges[:, 0], edges[:, 1])), shape=(n, n)).tocsr()
+def edge_graph(mesh: Mesh) -> sp.csr_matrix:
+    """The mesh's edges, each once, as a graph weighted by their lengths (for an
+    undirected shortest-path search)."""
+    n = mesh.n_vertices
+    start, end = np.divmod(np.unique(edge_keys(mesh.faces, n).ravel()), n)
+    lengths = np.linalg.norm(mesh.vertices[start] - mesh.vertices[end], axis=1)
+    return sp.csr_matrix((lengths, (start, end)), shape=(n, n))
 
 
 def shrec_holes(mesh: Mesh, rng: np.random.Generator) -> Mesh:
@@ -148,7 +149,7 @@ def shrec_holes(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     decimated to :func:`random_resolution`, in a random :func:`similarity`. The
     diameter is the double sweep's (the farthest vertex from the farthest vertex of a
     random one)."""
-    graph = _edge_graph(mesh)
+    graph = edge_graph(mesh)
     areas = np.bincount(
         mesh.faces.ravel(), np.repeat(face_areas(mesh.vertices, mesh.faces), 3), mesh.n_vertices
     )
