@@ -50,10 +50,11 @@ keeps the certificate valid.
 A query that looks partial (:func:`worker.engine.compare.partiality`) is ranked by
 :meth:`GalleryIndex.partial_search` instead: the parts modality
 (:mod:`worker.engine.parts`) has no vector to index, so every enrolled shape's profiles
-(kept beside the vectors, float16) are compared coarsely with every shape (a few
-samples of each), fused with the flat modalities' exact scores at the query's weights,
-and a shortlist is compared with every sample. Its cost grows with the gallery
-(``benchmarks/index.py`` measures it); a whole query never takes this path.
+(kept beside the vectors, float16) are compared coarsely with the query (a few
+samples of each): every shape, or in a large gallery the candidates an inverted file
+of the samples' profiles gives (:mod:`.words`), fused with the flat modalities' exact
+scores at the query's weights, and a shortlist is compared with every sample
+(``benchmarks/partial_search.py`` measures it); a whole query never takes this path.
 
 Thread safety: all public methods take one lock (searches take milliseconds).
 
@@ -99,11 +100,15 @@ PARTS_BLOCK_SAMPLES = 1 << 16  # gallery samples a partial search compares at on
 PARTS_SHORTLIST = 32  # shapes a partial search compares with every sample
 #: From this many shapes a partial search takes its candidates from the inverted file of
 #: the samples' profiles (.words) instead of comparing every shape coarsely: one in
-#: WORD_SHARE of the shapes, at least WORD_CANDIDATES (docs/benchmarks.md: the share
-#: that finds the exhaustive ranking's top 10 at 100,000 shapes).
+#: WORD_SHARE of the shapes, at least WORD_CANDIDATES and at most WORD_MAX_CANDIDATES
+#: (docs/benchmarks.md: the counts that find the exhaustive ranking's top 10 at 100,000
+#: shapes, and at a million, where its ten lay within the query scale's 6,400 most voted).
 WORDS_FROM = 4096
 WORD_CANDIDATES = 256
 WORD_SHARE = 25
+WORD_MAX_CANDIDATES = 8192
+#: Shapes each scale's votes put first that are compared coarsely to choose the scale.
+WORD_PROBE = 64
 BOUND_SAFETY = 1.0 - 1e-5  # float32 candidate distances: keep the bound a true lower bound
 
 
@@ -466,11 +471,13 @@ class GalleryIndex:
         flat modalities and the parts modality (a query that looks partial,
         :func:`worker.engine.compare.query_weights`).
 
-        Every shape (from ``WORDS_FROM`` shapes: the ``WORD_CANDIDATES`` the inverted file
-        of the samples' profiles finds, :mod:`.words`) is scored with the flat modalities
-        exactly and the parts coarsely (:func:`worker.engine.parts.coarse`); the best
-        ``max(PARTS_SHORTLIST, 2 k)`` by that product are scored with every sample, their
-        scale chosen among them.
+        Every shape is scored with the flat modalities exactly and the parts coarsely
+        (:func:`worker.engine.parts.coarse`) at every scale, the scale of the best match
+        chosen; from ``WORDS_FROM`` shapes, the inverted file of the samples' profiles
+        (:mod:`.words`) chooses the scale and ``n / WORD_SHARE`` candidates (from
+        ``WORD_CANDIDATES`` to ``WORD_MAX_CANDIDATES``), scored at that scale only
+        (:meth:`_word_candidates`). The best ``max(PARTS_SHORTLIST, 2 k)`` by that
+        product are scored with every sample, their scale chosen among them.
 
         Parameters
         ----------
@@ -493,19 +500,17 @@ class GalleryIndex:
                 return [], 1.0
             flat = tuple(m for m in weights if m != PARTS)
             few = coarse(profiles, reach, self.store.coarse[:n])
+            scales: range | None = None  # every scale, the best chosen over the candidates
             if self.words is not None:
-                found_ids = self.words.candidates(
-                    *self._word_queries(*few[:2]),
-                    self._present,
-                    max(WORD_CANDIDATES, n // WORD_SHARE) + len(excluded),
-                )
-                positions = np.sort(self.store.positions(found_ids[~np.isin(found_ids, excluded)]))
+                count = min(max(WORD_CANDIDATES, n // WORD_SHARE), WORD_MAX_CANDIDATES)
+                scales, found_ids = self._word_candidates(*few[:2], count, excluded)
+                positions = np.sort(self.store.positions(found_ids))
             else:
                 positions = np.flatnonzero(~np.isin(self.store.ids[:n], excluded))
             if not len(positions):
                 return [], 1.0
             per = self.exact_scores(query, positions, flat, "sum")[1] if flat else {}
-            per[PARTS] = self._parts_scores(*few[:2], few[2][positions]).dissimilarity
+            per[PARTS] = self._parts_scores(*few[:2], few[2][positions], scales).dissimilarity
             rough = np.asarray(fuse(per, "product", dict(weights)), dtype=np.float64)
             short = np.argsort(rough, kind="stable")[: max(PARTS_SHORTLIST, 2 * k)]
             positions = positions[short]
@@ -527,28 +532,52 @@ class GalleryIndex:
         stats.seconds = time.perf_counter() - start
         return matches, found.scale
 
-    def _word_queries(
-        self, profiles: np.ndarray, reach: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """The query's samples at every scale the parts search tries, as the inverted file
-        takes them: (q, K) the compared columns, and which radii are within reach."""
-        scales = [
-            samples_at_scale(profiles, reach, j, self.preset)
-            for j in range(self.preset.parts_scales)
-        ]
-        return np.concatenate([q for q, _ in scales]), np.concatenate([v for _, v in scales])
+    def _word_candidates(
+        self, profiles: np.ndarray, reach: np.ndarray, count: int, excluded: np.ndarray
+    ) -> tuple[range, np.ndarray]:
+        """A partial query's scale and its ``count`` candidates from the inverted file.
+
+        The samples vote at each scale apart (``profiles``, ``reach``: the coarse
+        pass's samples); each scale's ``WORD_PROBE`` best are compared coarsely at it,
+        and the scale of the best match is the query's, as the exhaustive pass chooses
+        it over every shape (it can only be missed when no shape near that best is among
+        the probe). Its candidates are that scale's ``count`` best by votes.
+        """
+        assert self.words is not None
+        words, present = self.words, self._present
+        voted, best = [], np.full(self.preset.parts_scales, np.inf)
+        for j in range(self.preset.parts_scales):
+            voted.append(words.voted(*samples_at_scale(profiles, reach, j, self.preset)))
+            probe = words.best(*voted[j], present, WORD_PROBE + len(excluded))
+            probe = self._without(probe, excluded)
+            if len(probe):
+                gallery = self.store.coarse[self.store.positions(probe)]
+                scores = self._parts_scores(profiles, reach, gallery, range(j, j + 1))
+                best[j] = scores.dissimilarity.min()
+        j = int(np.argmin(best))
+        found = words.best(*voted[j], present, count + len(excluded))
+        return range(j, j + 1), self._without(found, excluded)
+
+    @staticmethod
+    def _without(ids: np.ndarray, excluded: np.ndarray) -> np.ndarray:
+        kept: np.ndarray = ids[~np.isin(ids, excluded)]
+        return kept
 
     def _parts_scores(
-        self, profiles: np.ndarray, reach: np.ndarray, gallery: np.ndarray
+        self,
+        profiles: np.ndarray,
+        reach: np.ndarray,
+        gallery: np.ndarray,
+        scales: range | None = None,
     ) -> PartsMatch:
-        """The parts dissimilarity of a query to ``gallery`` (float16 profiles), in
-        blocks of ``PARTS_BLOCK_SAMPLES`` samples."""
+        """The parts dissimilarity of a query to ``gallery`` (float16 profiles) at the best
+        of ``scales`` (default all), in blocks of ``PARTS_BLOCK_SAMPLES`` samples."""
         block = max(1, PARTS_BLOCK_SAMPLES // max(gallery.shape[1], 1))
         scores = [
-            scale_scores(profiles, reach, gallery[a : a + block], self.preset)
+            scale_scores(profiles, reach, gallery[a : a + block], self.preset, scales)
             for a in range(0, len(gallery), block)
         ]
-        return best_scale(np.concatenate(scores, axis=1), self.preset)
+        return best_scale(np.concatenate(scores, axis=1), self.preset, scales)
 
     def _candidate_search(
         self,

@@ -11,11 +11,15 @@ shapes, Bronstein et al. 2011, "Shape Google"). Here:
   each shape: its first ones, spread over its surface by the farthest-point order,
   the samples the coarse pass compares too);
 * each shape is filed under the words of those samples (each word once);
-* a query sample, at each scale the parts search tries, is assigned its ``ASSIGN``
+* a query sample, at a scale the parts search tries, is assigned its ``ASSIGN``
   nearest words by the radii within its reach (a masked distance: the profile's other
   radii cross the query's boundary), and every shape filed under them gets the word's
   weight, its inverse document frequency (a rare profile says more);
-* the shapes with the most weight are the candidates the exact passes score.
+* the shapes with the most weight are the candidates the exact passes score. The
+  search votes at each scale apart and takes its candidates at the query's scale
+  (:meth:`app.gallery.index.GalleryIndex.partial_search`): at the wrong scales a
+  query's samples look like other shapes' samples, and their votes would drown the
+  right scale's.
 
 Shapes are filed by id. The inverted file is kept as arrays, made at once for the shapes
 there are (:func:`build_words`, at the index's whole refit); a shape added after is held
@@ -195,10 +199,23 @@ class SampleWords:
         valid : (q, K) bool, the radii within the sample's reach.
         present : which of the given ids are still in the gallery.
         """
+        return self.best(*self.voted(queries, valid), present, count)
+
+    def voted(self, queries: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every filed shape's ids and weight for query vectors (as :meth:`candidates`)."""
         if not len(queries):
-            return np.zeros(0, dtype=np.int64)
-        ids, votes = self.votes(self._assign(np.asarray(queries, dtype=np.float64), valid))
-        # The best, removed shapes left out (looked up for the best few only).
+            return np.zeros(0, dtype=np.int64), np.zeros(0)
+        return self.votes(self._assign(np.asarray(queries, dtype=np.float64), valid))
+
+    @staticmethod
+    def best(
+        ids: np.ndarray,
+        votes: np.ndarray,
+        present: Callable[[np.ndarray], np.ndarray],
+        count: int,
+    ) -> np.ndarray:
+        """Of :meth:`voted`'s shapes, the ids of the ``count`` with the most weight, most
+        first, removed ones left out (looked up for the best few only)."""
         voted = np.flatnonzero(votes > 0)
         if len(voted) > 2 * count:
             voted = voted[np.argpartition(-votes[voted], 2 * count)[: 2 * count]]

@@ -333,15 +333,11 @@ def test_an_index_saved_under_other_comparisons_is_refitted_where_they_differ(tm
     assert [m.id for m in loaded.search(query, 10)] == _ranking(LEARNED, gallery, query)[0]
 
 
-def test_from_thousands_of_shapes_the_inverted_file_finds_what_every_shape_compared_finds(
-    monkeypatch,
-):
-    """A gallery of objects in several poses, each query a part of an unseen pose: the
-    partial search's candidates from the inverted file of the samples' profiles give the
-    ranking that comparing every shape coarsely gives."""
+def _posed_index(monkeypatch, rng: np.random.Generator, objects: int = 40, poses: int = 10):
+    """An index of ``objects`` in ``poses`` noisy poses each (shape ``i`` is object ``i mod
+    objects``), with the inverted file of the samples' profiles from 100 shapes; and the
+    function that makes a new pose of an object."""
     monkeypatch.setattr(index_module, "WORDS_FROM", 100)
-    rng = np.random.default_rng(8)
-    objects, poses = 40, 10
     _, bases = _parts_gallery(objects, seed=6)
     vectors = _gallery(objects * poses, seed=6, preset=DEFAULT)
     index = GalleryIndex(DEFAULT, DEFAULT.modality_sizes(), parts_shape=DEFAULT.parts_shape())
@@ -359,6 +355,28 @@ def test_from_thousands_of_shapes_the_inverted_file_finds_what_every_shape_compa
         )
         for i in range(objects * poses)
     )
+    return index, pose, vectors
+
+
+def _every_shape_compared(index: GalleryIndex, *query) -> tuple[list[int], float]:
+    """A partial search's answer with every shape compared coarsely (no inverted file)."""
+    words, index.words = index.words, None
+    try:
+        every, scale = index.partial_search(*query)
+    finally:
+        index.words = words
+    return [m.id for m in every], scale
+
+
+def test_from_thousands_of_shapes_the_inverted_file_finds_what_every_shape_compared_finds(
+    monkeypatch,
+):
+    """A gallery of objects in several poses, each query a part of an unseen pose: the
+    partial search's candidates from the inverted file of the samples' profiles give the
+    ranking that comparing every shape coarsely gives."""
+    rng = np.random.default_rng(8)
+    objects, poses = 40, 10
+    index, pose, vectors = _posed_index(monkeypatch, rng, objects, poses)
     assert index.words is not None and len(index.words.ids) == objects * poses
     weights = {PARTS: 1.0}
     same = 0
@@ -366,11 +384,9 @@ def test_from_thousands_of_shapes_the_inverted_file_finds_what_every_shape_compa
         part = pose(q % objects)[:150]
         reach = np.full(150, np.inf)
         found, _ = index.partial_search({}, part, reach, weights, 10)
-        words, index.words = index.words, None  # every shape compared coarsely
-        every, _ = index.partial_search({}, part, reach, weights, 10)
-        index.words = words
+        every, _ = _every_shape_compared(index, {}, part, reach, weights, 10)
         assert found[0].id % objects == q % objects  # its own object first
-        same += [m.id for m in found] == [m.id for m in every]
+        same += [m.id for m in found] == every
     assert same == 12
 
     # Churn: a shape removed is no longer found, one added after the build is; a whole
@@ -389,3 +405,20 @@ def test_from_thousands_of_shapes_the_inverted_file_finds_what_every_shape_compa
     index.refit()
     assert index.words.centroids is vocabulary and not index.words.added
     assert [m.id for m in index.partial_search({}, part, reach, weights, 10)[0]] == before
+
+
+@pytest.mark.parametrize("j", [0, 2, 5])
+def test_the_inverted_file_chooses_the_scale_every_shape_compared_chooses(monkeypatch, j):
+    """A part that keeps ``2^(-j/4)`` of its whole's area, its profiles' radii grown by
+    ``2^(j/8)`` against the whole's: the samples vote at each scale, and the scale whose
+    most voted shapes hold the best match is the one comparing every shape finds, with
+    the same ranking (candidates compared at that scale only)."""
+    rng = np.random.default_rng(9)
+    index, pose, _ = _posed_index(monkeypatch, rng)
+    whole = pose(7)[:150]
+    # Column c of the part is column c - j of its whole (the first j: the whole's first).
+    part = np.concatenate([np.repeat(whole[:, :1], j, axis=1), whole[:, : whole.shape[1] - j]], 1)
+    query = ({}, part, np.full(150, np.inf), {PARTS: 1.0}, 10)
+    found, scale = index.partial_search(*query)
+    assert scale == 2.0 ** (j / 8) and found[0].id % 40 == 7
+    assert ([m.id for m in found], scale) == _every_shape_compared(index, *query)
