@@ -183,26 +183,15 @@ class SampleWords:
         ids = np.concatenate([self.ids[kept], added_ids])
         return SampleWords(self.centroids, ids, slots[order], bounds, fitted=self.fitted)
 
-    def candidates(
-        self,
-        queries: np.ndarray,
-        valid: np.ndarray,
-        present: Callable[[np.ndarray], np.ndarray],
-        count: int,
-    ) -> np.ndarray:
-        """Ids of the ``count`` shapes with the most weight (fewer if fewer are filed).
+    def voted(self, queries: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every filed shape's ids and weight (:meth:`votes`) for query vectors.
 
         Parameters
         ----------
         queries : (q, K) query vectors: a sample at a scale, the profile's columns that
             scale compares with the gallery's radii.
         valid : (q, K) bool, the radii within the sample's reach.
-        present : which of the given ids are still in the gallery.
         """
-        return self.best(*self.voted(queries, valid), present, count)
-
-    def voted(self, queries: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Every filed shape's ids and weight for query vectors (as :meth:`candidates`)."""
         if not len(queries):
             return np.zeros(0, dtype=np.int64), np.zeros(0)
         return self.votes(self._assign(np.asarray(queries, dtype=np.float64), valid))
@@ -215,7 +204,8 @@ class SampleWords:
         count: int,
     ) -> np.ndarray:
         """Of :meth:`voted`'s shapes, the ids of the ``count`` with the most weight, most
-        first, removed ones left out (looked up for the best few only)."""
+        first (fewer if fewer are filed), those not ``present`` left out (looked up for
+        the best few only)."""
         voted = np.flatnonzero(votes > 0)
         if len(voted) > 2 * count:
             voted = voted[np.argpartition(-votes[voted], 2 * count)[: 2 * count]]

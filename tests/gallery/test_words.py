@@ -86,7 +86,7 @@ def test_shapes_filed_after_and_refiled_vote_as_if_filed_at_once():
     np.testing.assert_allclose(votes, want, rtol=1e-12)
 
 
-def test_candidates_assign_by_the_valid_radii_only_and_leave_out_the_removed(monkeypatch):
+def test_samples_vote_by_their_valid_radii_only_and_the_removed_are_left_out(monkeypatch):
     monkeypatch.setattr(words_module, "ASSIGN", 1)  # the nearest word only
     centroids = np.eye(4) * 3.0
     ids = np.array([7, 8, 9, 10])
@@ -94,11 +94,14 @@ def test_candidates_assign_by_the_valid_radii_only_and_leave_out_the_removed(mon
     # Near word 1 on the first two radii; the last two (beyond its reach) near word 3.
     query = np.array([[0.0, 3.0, 0.0, 9.0]])
     valid = np.array([[True, True, False, False]])
-    assert words.candidates(query, valid, lambda i: np.ones(len(i), bool), 1).tolist() == [8]
-    unmasked = words.candidates(query, np.ones_like(valid), lambda i: np.ones(len(i), bool), 1)
-    assert unmasked.tolist() == [10]
+
+    def best(valid: np.ndarray, present, count: int) -> list[int]:
+        return words.best(*words.voted(query, valid), present, count).tolist()
+
+    assert best(valid, lambda i: np.ones(len(i), bool), 1) == [8]
+    assert best(np.ones_like(valid), lambda i: np.ones(len(i), bool), 1) == [10]
     # Shape 8 alone has the query's word; removed, no shape is a candidate.
-    assert words.candidates(query, valid, lambda i: i != 8, 4).tolist() == []
+    assert best(valid, lambda i: i != 8, 4) == []
 
 
 def test_the_vocabulary_is_fitted_again_when_the_gallery_doubles():
