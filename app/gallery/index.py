@@ -545,18 +545,21 @@ class GalleryIndex:
         """
         assert self.words is not None
         words, present = self.words, self._present
-        voted, best = [], np.full(self.preset.parts_scales, np.inf)
+        best, chosen = np.inf, 0
+        chosen_votes: tuple[np.ndarray, np.ndarray] | None = None  # the chosen scale's only
         for j in range(self.preset.parts_scales):
-            voted.append(words.voted(*samples_at_scale(profiles, reach, j, self.preset)))
-            probe = words.best(*voted[j], present, WORD_PROBE + len(excluded))
+            voted = words.voted(*samples_at_scale(profiles, reach, j, self.preset))
+            probe = words.best(*voted, present, WORD_PROBE + len(excluded))
             probe = self._without(probe, excluded)
             if len(probe):
                 gallery = self.store.coarse[self.store.positions(probe)]
                 scores = self._parts_scores(profiles, reach, gallery, range(j, j + 1))
-                best[j] = scores.dissimilarity.min()
-        j = int(np.argmin(best))
-        found = words.best(*voted[j], present, count + len(excluded))
-        return range(j, j + 1), self._without(found, excluded)
+                if scores.dissimilarity.min() < best:
+                    best, chosen, chosen_votes = scores.dissimilarity.min(), j, voted
+        if chosen_votes is None:  # no sample has enough radii clear of the boundary
+            return range(1), np.zeros(0, dtype=np.int64)
+        found = words.best(*chosen_votes, present, count + len(excluded))
+        return range(chosen, chosen + 1), self._without(found, excluded)
 
     @staticmethod
     def _without(ids: np.ndarray, excluded: np.ndarray) -> np.ndarray:
