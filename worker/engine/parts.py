@@ -226,7 +226,7 @@ def scale_scores(
     boundary). Candidates can be scored in blocks and the blocks' columns joined
     before :func:`best_scale` chooses. Parameters as :func:`part_dissimilarity`."""
     prior = preset.parts_scale_prior
-    whole = np.ascontiguousarray(gallery, dtype=np.float64)
+    whole = np.ascontiguousarray(gallery)
     n, per_shape = whole.shape[:2]
     rows = _GalleryRows(whole.reshape(n * per_shape, -1))
     tried = range(preset.parts_scales) if scales is None else scales
@@ -284,12 +284,21 @@ _BLOCK_ENTRIES = 1 << 18
 
 class _GalleryRows:
     """Candidates' samples as :func:`_nearest_squared` reads them at every scale: (N, K)
-    in double precision, in single, and the single's cumulative sums of squares."""
+    as stored (float16 or wider: the exact distances are computed from these values in
+    double precision), in single precision, and the single's sums of squares over the
+    first radii, for each count of radii asked for."""
 
     def __init__(self, rows: np.ndarray) -> None:
-        self.double = rows
+        self.exact = rows
         self.single = rows.astype(np.float32)
-        self.cumulative = np.cumsum(self.single * self.single, axis=1)
+        self._squares: dict[int, np.ndarray] = {}
+
+    def squares(self, count: int) -> np.ndarray:
+        """(N,) ``sum_{k < count} y_k^2`` in single precision."""
+        if count not in self._squares:
+            first = self.single[:, :count]
+            self._squares[count] = np.einsum("nk,nk->n", first, first)
+        return self._squares[count]
 
 
 def _nearest_squared(
@@ -300,25 +309,36 @@ def _nearest_squared(
 
     The nearest row is found in single precision by one matrix product per block, the
     expansion ``|q|^2 - 2 q.y + |y|^2`` (a row's valid radii are the first ones, those
-    within its reach, so the candidates' ``sum_k valid_ck y_k^2`` is their cumulative sum
-    of squares at its count: gathered, not multiplied), and its distance is computed again
-    in double precision from the difference: the expansion's rounding never reaches the
-    result, only which of two rows within it of each other is nearest.
+    within its reach, so the candidates' ``sum_k valid_ck y_k^2`` is one vector for all
+    query rows with as many valid radii: the rows are taken in that order and each group
+    adds its vector), and its distance is computed again in double precision from the
+    difference: the expansion's rounding never reaches the result, only which of two
+    rows within it of each other is nearest.
     """
-    weighted = (valid * query).astype(np.float32)
-    last_valid = valid.sum(axis=1).astype(np.int64) - 1
+    counts = valid.sum(axis=1).astype(np.int64)
+    order = np.argsort(counts, kind="stable")
+    query, valid, counts = query[order], valid[order], counts[order]
+    weighted = (-2.0 * valid * query).astype(np.float32)  # |q|^2 left out: the same
+    starts = np.flatnonzero(np.diff(counts, prepend=-1))
+    groups = [
+        (int(a), int(b), rows.squares(int(counts[a])))
+        for a, b in zip(starts, np.append(starts[1:], len(counts)), strict=True)
+    ]
     out = np.empty((len(query), n))
     shapes_per_block = max(1, _BLOCK_ENTRIES // (len(query) * per_shape))
     for first in range(0, n, shapes_per_block):
         last = min(n, first + shapes_per_block)
         block = slice(first * per_shape, last * per_shape)
-        squared = rows.cumulative[block][:, last_valid].T
-        squared -= 2.0 * (weighted @ rows.single[block].T)  # |q|^2 left out: the same
+        squared = weighted @ rows.single[block].T
+        for a, b, squares in groups:
+            squared[a:b] += squares[block]
         nearest = squared.reshape(len(query), last - first, per_shape).argmin(axis=2)
-        chosen = rows.double[first * per_shape + nearest + per_shape * np.arange(last - first)]
-        difference = chosen - query[:, None, :]
+        chosen = rows.exact[first * per_shape + nearest + per_shape * np.arange(last - first)]
+        difference = np.asarray(chosen, dtype=np.float64) - query[:, None, :]
         out[:, first:last] = np.einsum("qsk,qk->qs", difference * difference, valid)
-    return out
+    unsorted = np.empty_like(out)
+    unsorted[order] = out
+    return unsorted
 
 
 def part_dissimilarity_reference(
