@@ -7,6 +7,7 @@ from app.gallery import words as words_module
 from app.gallery.words import (
     SampleWords,
     build_words,
+    largest,
     nearest_words,
     needs_vocabulary,
     unique_words,
@@ -120,3 +121,20 @@ def test_the_vocabulary_is_fitted_again_when_the_gallery_doubles():
     assert needs_vocabulary(None, 300)
     assert not needs_vocabulary(words, 599) and needs_vocabulary(words, 601)
     assert needs_vocabulary(words, 149)
+
+
+@pytest.mark.parametrize("count", [1, 8, 64, 512])
+def test_the_largest_votes_are_those_a_full_partition_finds(count):
+    """The threshold read off a strided sample keeps exactly the largest votes, and a
+    threshold that too few pass falls back to every positive vote."""
+    rng = np.random.default_rng(count)
+    for votes in (
+        np.where(rng.random(200_000) < 0.6, rng.gamma(2.0, 1.0, 200_000), 0.0),
+        np.concatenate([np.zeros(199_000), rng.random(1_000)]),  # most shapes unvoted
+        np.where(np.arange(200_000) % 997 == 0, 1.0, 0.0),  # a few voted, all tied
+    ):
+        found = largest(votes, count)
+        positive = np.flatnonzero(votes > 0)
+        plain = positive[np.argsort(-votes[positive], kind="stable")][:count]
+        assert len(found) == len(plain)
+        np.testing.assert_array_equal(np.sort(votes[found]), np.sort(votes[plain]))
