@@ -109,6 +109,9 @@ WORD_SHARE = 25
 WORD_MAX_CANDIDATES = 8192
 #: Shapes each scale's votes put first that are compared coarsely to choose the scale.
 WORD_PROBE = 64
+#: Scales on either side of the one the inverted file chose that the shortlist tries
+#: (docs/benchmarks.md: the exhaustive ranking's top 10 kept, a fifth of the time saved).
+WORD_SHORTLIST_SCALES = 1
 BOUND_SAFETY = 1.0 - 1e-5  # float32 candidate distances: keep the bound a true lower bound
 
 
@@ -477,7 +480,9 @@ class GalleryIndex:
         (:mod:`.words`) chooses the scale and ``n / WORD_SHARE`` candidates (from
         ``WORD_CANDIDATES`` to ``WORD_MAX_CANDIDATES``), scored at that scale only
         (:meth:`_word_candidates`). The best ``max(PARTS_SHORTLIST, 2 k)`` by that
-        product are scored with every sample, their scale chosen among them.
+        product are scored with every sample, their scale chosen among them (all scales,
+        or with the inverted file the chosen one and ``WORD_SHORTLIST_SCALES`` either
+        side).
 
         Parameters
         ----------
@@ -501,10 +506,15 @@ class GalleryIndex:
             flat = tuple(m for m in weights if m != PARTS)
             few = coarse(profiles, reach, self.store.coarse[:n])
             scales: range | None = None  # every scale, the best chosen over the candidates
+            tried: range | None = None  # the shortlist's scales
             if self.words is not None:
                 count = min(max(WORD_CANDIDATES, n // WORD_SHARE), WORD_MAX_CANDIDATES)
                 scales, found_ids = self._word_candidates(*few[:2], count, excluded)
                 positions = np.sort(self.store.positions(found_ids))
+                tried = range(
+                    max(0, scales.start - WORD_SHORTLIST_SCALES),
+                    min(self.preset.parts_scales, scales.stop + WORD_SHORTLIST_SCALES),
+                )
             else:
                 positions = np.flatnonzero(~np.isin(self.store.ids[:n], excluded))
             if not len(positions):
@@ -515,7 +525,7 @@ class GalleryIndex:
             short = np.argsort(rough, kind="stable")[: max(PARTS_SHORTLIST, 2 * k)]
             positions = positions[short]
             per = {m: v[short] for m, v in per.items() if m != PARTS}
-            found = self._parts_scores(profiles, reach, self.store.parts_at(positions))
+            found = self._parts_scores(profiles, reach, self.store.parts_at(positions), tried)
             per[PARTS] = found.dissimilarity
             fused = np.asarray(fuse(per, "product", dict(weights)), dtype=np.float64)
             ids = self.store.ids[positions]
