@@ -101,16 +101,17 @@ PARTS_SHORTLIST = 32  # shapes a partial search compares with every sample
 #: From this many shapes a partial search takes its candidates from the inverted file of
 #: the samples' profiles (.words) instead of comparing every shape coarsely: one in
 #: WORD_SHARE of the shapes, at least WORD_CANDIDATES and at most WORD_MAX_CANDIDATES
-#: (docs/benchmarks.md: the counts that find the exhaustive ranking's top 10 at 100,000
-#: shapes, and at a million, where its ten lay within the query scale's 6,400 most voted).
+#: (docs/decisions.md, "Partial queries: 2,000 candidates at 100,000 shapes": against the
+#: exhaustive ranking, twice as many agree no more often at 10,000 or 100,000 shapes; at a
+#: million half as many agree less often).
 WORDS_FROM = 4096
 WORD_CANDIDATES = 256
-WORD_SHARE = 25
+WORD_SHARE = 50
 WORD_MAX_CANDIDATES = 8192
 #: Shapes each scale's votes put first that are compared coarsely to choose the scale.
 WORD_PROBE = 64
 #: Scales on either side of the one the inverted file chose that the shortlist tries
-#: (docs/benchmarks.md: the exhaustive ranking's top 10 kept, a fifth of the time saved).
+#: (all six agree with the exhaustive ranking no more often at 100,000 shapes).
 WORD_SHORTLIST_SCALES = 1
 BOUND_SAFETY = 1.0 - 1e-5  # float32 candidate distances: keep the bound a true lower bound
 
