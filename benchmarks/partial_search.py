@@ -20,8 +20,9 @@ and whole queries interleaved, one at a time, one BLAS thread. For the first
 coarsely (the exhaustive two-pass ranking, without the inverted file of the samples'
 profiles): top 1 is how often the two agree on the first shape, top 10 the mean overlap
 of their ten, and "object first" how often each puts a pose of the query's own object
-first (the exhaustive ranking is the bar, not the truth). RSS is the replica process's resident memory after the queries (the parts
-file's pages the kernel caches are not in it).
+first (the exhaustive ranking is the bar, not the truth). RSS is the replica process's
+resident memory after the queries (the parts file's pages the kernel caches are not in
+it).
 """
 
 from __future__ import annotations

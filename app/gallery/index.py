@@ -101,9 +101,9 @@ PARTS_SHORTLIST = 32  # shapes a partial search compares with every sample
 #: From this many shapes a partial search takes its candidates from the inverted file of
 #: the samples' profiles (.words) instead of comparing every shape coarsely: one in
 #: WORD_SHARE of the shapes, at least WORD_CANDIDATES and at most WORD_MAX_CANDIDATES
-#: (docs/decisions.md, "Partial queries: 2,000 candidates at 100,000 shapes": against the
-#: exhaustive ranking, twice as many agree no more often at 10,000 or 100,000 shapes; at a
-#: million half as many agree less often).
+#: (docs/decisions.md, "Partial queries: one candidate in 50": against the exhaustive
+#: ranking, twice as many agree no more often at 10,000 or 100,000 shapes; at a million
+#: half as many agree less often).
 WORDS_FROM = 4096
 WORD_CANDIDATES = 256
 WORD_SHARE = 50
