@@ -564,9 +564,11 @@ class GalleryIndex:
             probe = self._without(probe, excluded)
             if len(probe):
                 gallery = self.store.coarse[self.store.positions(probe)]
-                scores = self._parts_scores(profiles, reach, gallery, range(j, j + 1))
-                if scores.dissimilarity.min() < best:
-                    best, chosen, chosen_votes = scores.dissimilarity.min(), j, voted
+                low = self._parts_scores(
+                    profiles, reach, gallery, range(j, j + 1)
+                ).dissimilarity.min()
+                if low < best:
+                    best, chosen, chosen_votes = low, j, voted
         if chosen_votes is None:  # no sample has enough radii clear of the boundary
             return range(1), np.zeros(0, dtype=np.int64)
         found = words.best(*chosen_votes, present, count + len(excluded))
