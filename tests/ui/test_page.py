@@ -335,7 +335,8 @@ def test_score_bars_mean_the_same_everywhere_and_only_modalities_that_count(page
     weight: the GDM, weighed 0 by the default fusion, has none. The page's own answer is
     read (the collector may refit the yardstick between two searches)."""
     page.click("#tab-search")
-    page.set_input_files("#file-search", [])  # the same file again is a change
+    # Cleared first: choosing the file the last search chose fires no change event.
+    page.set_input_files("#file-search", [])
     with page.expect_response(
         lambda r: r.url.endswith("/query") and r.request.method == "POST", timeout=180_000
     ) as answer:
