@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
+from typing import Any, cast
 
 import numpy as np
 import pytest
 from conftest import EXAMPLES
 
+from worker.engine.parts import compared_profiles, grid_radii, part_dissimilarity
 from worker.engine.presets import DEFAULT_PRESET, PARTS, get_preset
-from worker.evaluation.partiality import ranking_scores
+from worker.evaluation.partiality import parts_matrix, ranking_scores
 from worker.evaluation.robustness import PRESET_ROW
 from worker.evaluation.run import run_partiality
 from worker.evaluation.shapedna import BASELINE
@@ -29,6 +32,31 @@ def test_ranking_scores_count_own_class_own_source_and_average_precision():
     assert scores["own_source"] == pytest.approx(1 / 3)
     # APs: 1; a at ranks 1 and 4 -> (1 + 2/4) / 2; b at ranks 2 and 4 -> (1/2 + 2/4) / 2
     assert scores["map"] == pytest.approx((1 + 0.75 + 0.5) / 3)
+
+
+def test_all_to_all_a_query_chooses_its_scale_among_the_others():
+    """Among a collection's shapes a query is left out of its own candidates: it would
+    match itself best, at scale 1, and a part of a whole would be compared with that
+    whole at the wrong scale."""
+    preset = get_preset(DEFAULT_PRESET)
+    rng = np.random.default_rng(0)
+    columns = len(grid_radii(preset))
+    wholes = -np.cumsum(rng.uniform(0.0, 0.3, size=(3, 40, columns)), axis=2)
+    part = np.roll(wholes[0], 3, axis=1)  # 2^(3/8) larger: as a part of 59% of the area
+    profiles = [*wholes, part]
+    shapes = cast(
+        Any, [SimpleNamespace(parts=p, parts_reach=np.full(len(p), np.inf)) for p in profiles]
+    )
+    among = parts_matrix(shapes, shapes, preset, themselves=True)
+    assert np.isinf(np.diag(among)).all()
+    for i, p in enumerate(profiles):
+        others = compared_profiles(np.stack(profiles[:i] + profiles[i + 1 :]), preset)
+        alone = part_dissimilarity(p, np.full(len(p), np.inf), others, preset).dissimilarity
+        np.testing.assert_allclose(np.delete(among[i], i), alone, rtol=1e-12)
+    prior = preset.parts_scale_prior * np.log(2.0 ** (3 / 8))
+    assert among[3, 0] == pytest.approx(prior, abs=1e-9)
+    with_itself = parts_matrix(shapes, shapes, preset)
+    assert with_itself[3, 3] == 0.0 and with_itself[3, 0] > among[3, 0] + 0.05
 
 
 @pytest.mark.slow  # describes 6 meshes and a cut copy of each

@@ -34,7 +34,7 @@ from worker.engine.compare import (
     query_weights,
 )
 from worker.engine.descriptor import ShapeDescriptor
-from worker.engine.parts import compared_profiles, part_dissimilarity
+from worker.engine.parts import best_scale, compared_profiles, scale_scores
 from worker.engine.presets import MODALITIES, PARTS, Preset
 from worker.recognition import metrics
 
@@ -63,20 +63,28 @@ def parts_matrix(
     gallery: Sequence[ShapeDescriptor],
     preset: Preset,
     jobs: int = 1,
+    themselves: bool = False,
 ) -> np.ndarray:
     """(q, n) the parts dissimilarity of every query to every gallery shape (every
-    sample of every shape), the queries shared among ``jobs`` processes."""
+    sample of every shape), the queries shared among ``jobs`` processes.
+
+    ``themselves``: the queries are the gallery, and each is left out of its own
+    candidates (as a service's query is never in its gallery): its scale is chosen by
+    its best match among the others (it would match itself best, at scale 1), and its
+    own entry is ``inf``.
+    """
     whole = compared_profiles(np.stack([g.parts.astype(np.float64) for g in gallery]), preset)
     profiles = [q.parts.astype(np.float64) for q in queries]
     reach = [q.parts_reach for q in queries]
+    own: list[int | None] = list(range(len(queries))) if themselves else [None] * len(queries)
     if jobs <= 1 or len(queries) < 2:
         return np.stack(
-            [_parts_row(whole, preset, p, r) for p, r in zip(profiles, reach, strict=True)]
+            [_parts_row(whole, preset, *row) for row in zip(profiles, reach, own, strict=True)]
         )
     with ProcessPoolExecutor(
         max_workers=jobs, initializer=_hold_gallery, initargs=(whole, preset)
     ) as pool:
-        return np.stack(list(pool.map(_held_row, profiles, reach, chunksize=4)))
+        return np.stack(list(pool.map(_held_row, profiles, reach, own, chunksize=4)))
 
 
 _HELD: dict[str, tuple[np.ndarray, Preset]] = {}
@@ -88,14 +96,17 @@ def _hold_gallery(whole: np.ndarray, preset: Preset) -> None:
     _HELD["gallery"] = (whole, preset)
 
 
-def _held_row(profiles: np.ndarray, reach: np.ndarray) -> np.ndarray:
-    return _parts_row(*_HELD["gallery"], profiles, reach)
+def _held_row(profiles: np.ndarray, reach: np.ndarray, own: int | None) -> np.ndarray:
+    return _parts_row(*_HELD["gallery"], profiles, reach, own)
 
 
 def _parts_row(
-    whole: np.ndarray, preset: Preset, profiles: np.ndarray, reach: np.ndarray
+    whole: np.ndarray, preset: Preset, profiles: np.ndarray, reach: np.ndarray, own: int | None
 ) -> np.ndarray:
-    return part_dissimilarity(profiles, reach, whole, preset).dissimilarity
+    scores = scale_scores(profiles, reach, whole, preset)
+    if own is not None:
+        scores[:, own] = np.inf
+    return best_scale(scores, preset).dissimilarity
 
 
 def query_matrices(
@@ -104,12 +115,14 @@ def query_matrices(
     preset: Preset,
     baselines: tuple[np.ndarray, np.ndarray] | None = None,
     jobs: int = 1,
+    themselves: bool = False,
 ) -> dict[str, np.ndarray]:
     """Row key -> (q, n) dissimilarity of every query to every gallery shape.
 
     Parameters
     ----------
     queries, gallery : descriptors of the preset (with the parts modality).
+    themselves : the queries are the gallery (:func:`parts_matrix`).
     preset : the dissimilarity (D2's sigma over the gallery), fusion and partial weights.
     baselines : ShapeDNA descriptors of the queries and of the gallery; the baseline row
         is left out without them.
@@ -121,7 +134,7 @@ def query_matrices(
     if baselines is not None:
         flat[0][BASELINE], flat[1][BASELINE] = baselines
     out = cross_dissimilarities(flat[0], flat[1], preset)
-    out[PARTS] = parts_matrix(queries, gallery, preset, jobs)
+    out[PARTS] = parts_matrix(queries, gallery, preset, jobs, themselves)
     out[PRESET_ROW] = weighed_by_partiality(out, query_partiality(queries, preset), preset)
     return out
 
@@ -145,7 +158,7 @@ def collection_matrices(
     {"parts": (n, n), PRESET_ROW: (n, n)}; row ``i`` weighed by query ``i``'s
     partiality, so neither is symmetric.
     """
-    per = {**per_modality, PARTS: parts_matrix(descriptors, descriptors, preset, jobs)}
+    per = {**per_modality, PARTS: parts_matrix(descriptors, descriptors, preset, jobs, True)}
     shares = query_partiality(descriptors, preset)
     return {PARTS: per[PARTS], PRESET_ROW: weighed_by_partiality(per, shares, preset)}
 
@@ -216,7 +229,7 @@ def partiality_scores(
         copy_labels = labels_arr[np.asarray(sources, dtype=np.int64)]
         if len(copies) and np.unique(copy_labels, return_counts=True)[1].min() >= 2:
             pair = None if baselines is None else (baselines[1][name], baselines[1][name])
-            for row, d in query_matrices(copies, copies, preset, pair, jobs).items():
+            for row, d in query_matrices(copies, copies, preset, pair, jobs, True).items():
                 # A copy with no sample clear of its boundary is infinitely far from all
                 # (the parts): it ranks the others by index, as against the wholes.
                 finite = np.where(np.isfinite(d), d, np.finfo(np.float64).max)
