@@ -85,6 +85,7 @@ from worker.engine.parts import (
     best_scale,
     coarse,
     samples_at_scale,
+    scale_count,
     scale_scores,
 )
 from worker.engine.presets import PARTS, Preset
@@ -110,9 +111,10 @@ WORD_SHARE = 50
 WORD_MAX_CANDIDATES = 8192
 #: Shapes each scale's votes put first that are compared coarsely to choose the scale.
 WORD_PROBE = 64
-#: Scales on either side of the one the inverted file chose that the shortlist tries
-#: (all six agree with the exhaustive ranking no more often at 100,000 shapes).
-WORD_SHORTLIST_SCALES = 1
+#: Steps of the profiles' grid on either side of the scale the inverted file chose whose
+#: scales the shortlist tries (all agree with the exhaustive ranking no more often at
+#: 100,000 shapes).
+WORD_SHORTLIST_STEPS = 1
 BOUND_SAFETY = 1.0 - 1e-5  # float32 candidate distances: keep the bound a true lower bound
 
 
@@ -476,14 +478,14 @@ class GalleryIndex:
         :func:`worker.engine.compare.query_weights`).
 
         Every shape is scored with the flat modalities exactly and the parts coarsely
-        (:func:`worker.engine.parts.coarse`) at every scale, the scale of the best match
-        chosen; from ``WORDS_FROM`` shapes, the inverted file of the samples' profiles
-        (:mod:`.words`) chooses the scale and ``n / WORD_SHARE`` candidates (from
-        ``WORD_CANDIDATES`` to ``WORD_MAX_CANDIDATES``), scored at that scale only
-        (:meth:`_word_candidates`). The best ``max(PARTS_SHORTLIST, 2 k)`` by that
-        product are scored with every sample, their scale chosen among them (all scales,
-        or with the inverted file the chosen one and ``WORD_SHORTLIST_SCALES`` either
-        side).
+        (:func:`worker.engine.parts.coarse`) at the scale of each step of the profiles'
+        grid, the scale of the best match chosen; from ``WORDS_FROM`` shapes, the
+        inverted file of the samples' profiles (:mod:`.words`) chooses the scale and
+        ``n / WORD_SHARE`` candidates (from ``WORD_CANDIDATES`` to
+        ``WORD_MAX_CANDIDATES``), scored at that scale only (:meth:`_word_candidates`).
+        The best ``max(PARTS_SHORTLIST, 2 k)`` by that product are scored with every
+        sample, their scale chosen among them (all scales, or with the inverted file
+        those within ``WORD_SHORTLIST_STEPS`` steps of the grid of the chosen one).
 
         Parameters
         ----------
@@ -506,15 +508,17 @@ class GalleryIndex:
                 return [], 1.0
             flat = tuple(m for m in weights if m != PARTS)
             few = coarse(profiles, reach, self.store.coarse[:n])
-            scales: range | None = None  # every scale, the best chosen over the candidates
-            tried: range | None = None  # the shortlist's scales
+            step = self.preset.parts_scale_steps
+            # The coarse pass at each step of the grid, the best chosen over the candidates.
+            scales = range(0, scale_count(self.preset), step)
+            tried: range | None = None  # the shortlist's scales: all
             if self.words is not None:
                 count = min(max(WORD_CANDIDATES, n // WORD_SHARE), WORD_MAX_CANDIDATES)
                 scales, found_ids = self._word_candidates(*few[:2], count, excluded)
                 positions = np.sort(self.store.positions(found_ids))
                 tried = range(
-                    max(0, scales.start - WORD_SHORTLIST_SCALES),
-                    min(self.preset.parts_scales, scales.stop + WORD_SHORTLIST_SCALES),
+                    max(0, scales.start - WORD_SHORTLIST_STEPS * step),
+                    min(scale_count(self.preset), scales.stop + WORD_SHORTLIST_STEPS * step),
                 )
             else:
                 positions = np.flatnonzero(~np.isin(self.store.ids[:n], excluded))
@@ -548,8 +552,8 @@ class GalleryIndex:
     ) -> tuple[range, np.ndarray]:
         """A partial query's scale and its ``count`` candidates from the inverted file.
 
-        The samples vote at each scale apart (``profiles``, ``reach``: the coarse
-        pass's samples); each scale's ``WORD_PROBE`` best are compared coarsely at it,
+        The samples vote at each step of the grid apart (``profiles``, ``reach``: the
+        coarse pass's samples); each scale's ``WORD_PROBE`` best are compared coarsely at it,
         and the scale of the best match is the query's, as the exhaustive pass chooses
         it over every shape (it can only be missed when no shape near that best is among
         the probe). Its candidates are that scale's ``count`` best by votes.
@@ -558,7 +562,7 @@ class GalleryIndex:
         words, present = self.words, self._present
         best, chosen = np.inf, 0
         chosen_votes: tuple[np.ndarray, np.ndarray] | None = None  # the chosen scale's only
-        for j in range(self.preset.parts_scales):
+        for j in range(0, scale_count(self.preset), self.preset.parts_scale_steps):
             voted = words.voted(*samples_at_scale(profiles, reach, j, self.preset))
             probe = words.best(*voted, present, WORD_PROBE + len(excluded))
             probe = self._without(probe, excluded)

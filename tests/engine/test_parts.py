@@ -136,6 +136,33 @@ def test_a_part_normalized_by_its_own_area_is_found_at_its_scale():
     assert match.kept_share == pytest.approx(2.0 ** (-2 * shift / 8))
 
 
+def test_a_part_between_two_steps_of_the_grid_is_found_between_them():
+    """Profiles are stored at the grid's radii; a query scale between two of them
+    compares the query's profiles interpolated in ``log r``: a part whose scale lies a
+    quarter of a step past a column (profiles linear in ``log r`` there) matches its whole
+    exactly, only the prior left."""
+    rng = np.random.default_rng(5)
+    columns = np.arange(len(grid_radii(DEFAULT)), dtype=np.float64)
+    slopes, offsets = rng.uniform(-0.3, -0.01, (4, 40, 1)), rng.uniform(-1.0, 0.0, (4, 40, 1))
+    gallery = offsets + slopes * columns
+    shift = 2.25  # steps of the grid: 2^(2.25/8) = 1.215 in length
+    part = (offsets[2] + slopes[2] * (columns - shift))[:20]
+    match = part_dissimilarity(
+        part, np.full(20, np.inf), compared_profiles(gallery, DEFAULT), DEFAULT
+    )
+    assert DEFAULT.parts_scale_steps == 4
+    assert match.scale == pytest.approx(2.0 ** (shift / GRID_STEPS_PER_OCTAVE), rel=1e-12)
+    prior = DEFAULT.parts_scale_prior * np.log(match.scale)
+    assert match.dissimilarity[2] == pytest.approx(prior, abs=1e-9)
+    whole_steps = part_dissimilarity(
+        part,
+        np.full(20, np.inf),
+        compared_profiles(gallery, DEFAULT),
+        replace(DEFAULT, parts_scale_steps=1),
+    )
+    assert whole_steps.dissimilarity[2] > match.dissimilarity[2] + 0.01
+
+
 def test_samples_that_see_the_cut_are_left_out():
     """Radii beyond a sample's reach are what the cut disturbed: garbage there changes
     nothing, and a sample with too few clear radii is not compared at all."""

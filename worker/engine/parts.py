@@ -29,16 +29,17 @@ Comparison
 ----------
 A part has less area than its whole, so normalized by its own area it is too large:
 by ``1 / sqrt(kappa)`` in length when it keeps ``kappa`` of the area. The query's radii
-are therefore tried at the scales ``s_j = 2^(j / 8)``, ``j = 0 .. J`` (its grid column
-``j + 2 k`` against the gallery's ``2 k``), with a prior ``lambda log s_j`` against
-shrinking a whole. For one scale, query sample ``c`` with valid radii ``V_c`` is as far
-from candidate ``C`` as the root-mean-square difference over ``V_c`` to its nearest
-sample of ``C``; the dissimilarity is the mean of that over the query's samples, each
-weighted by ``|V_c|`` (samples far from the cut carry more of its shape). It asks how
-much of the query the candidate contains, not the other way round: a whole is close to
-each of its parts. The scale is chosen once per query, by its best match
-(:func:`part_dissimilarity`); ``1 / s^2`` then estimates the share of the surface the
-query has.
+are therefore tried at the scales ``s_j = 2^(j / 8p)``, ``j = 0 .. J``, ``p`` scales per
+step of the grid (its grid column ``j / p + 2 k`` against the gallery's ``2 k``; between
+two columns the log profile is interpolated linearly in ``log r``), with a prior
+``lambda log s_j`` against shrinking a whole. For one scale, query sample ``c`` with
+valid radii ``V_c`` is as far from candidate ``C`` as the root-mean-square difference
+over ``V_c`` to its nearest sample of ``C``; the dissimilarity is the mean of that over
+the query's samples, each weighted by ``|V_c|`` (samples far from the cut carry more of
+its shape). It asks how much of the query the candidate contains, not the other way
+round: a whole is close to each of its parts. The scale is chosen once per query, by its
+best match (:func:`part_dissimilarity`); ``1 / s^2`` then estimates the share of the
+surface the query has.
 
 Measured on TOSCA's partial copies (docs/evaluation.md, sec. "Partial queries"), with
 the paper's and the spectrum's modalities as the complete queries' score
@@ -78,6 +79,12 @@ class PartsMatch:
 #: Radii per doubling of the profiles' grid (the compared radii take every second one,
 #: and a query's scales step along it).
 GRID_STEPS_PER_OCTAVE = 8
+
+
+def scale_count(preset: Preset) -> int:
+    """The number of query scales tried: ``parts_scale_steps`` per step of the grid, over
+    ``parts_scales - 1`` steps."""
+    return (preset.parts_scales - 1) * preset.parts_scale_steps + 1
 
 
 def grid_radii(preset: Preset) -> np.ndarray:
@@ -204,8 +211,8 @@ def part_dissimilarity(
     reach : (m,) float, its samples' :func:`boundary_reach`, in the radii's unit.
     gallery : (n, m', K) float, the candidates' :func:`compared_profiles`.
     preset : the radii, the scales and their prior.
-    scales : the scale indices ``j`` tried (default all of the preset's; ``range(1)``
-        compares the query as a whole).
+    scales : the scale indices ``j`` tried (default all :func:`scale_count` of the
+        preset's; ``range(1)`` compares the query as a whole).
 
     Returns
     -------
@@ -229,7 +236,7 @@ def scale_scores(
     whole = np.ascontiguousarray(gallery)
     n, per_shape = whole.shape[:2]
     rows = _GalleryRows(whole.reshape(n * per_shape, -1))
-    tried = range(preset.parts_scales) if scales is None else scales
+    tried = range(scale_count(preset)) if scales is None else scales
     out = np.full((len(tried), n), np.inf)
     for row, j in enumerate(tried):
         query, within = samples_at_scale(profiles, reach, j, preset)
@@ -239,41 +246,49 @@ def scale_scores(
         used = valid.sum(axis=1)
         nearest = _nearest_squared(query, valid, rows, n, per_shape)
         rms = np.sqrt(np.maximum(nearest, 0.0) / used[:, None])
-        out[row] = used @ rms / used.sum() + prior * np.log(_scale(j))
+        out[row] = used @ rms / used.sum() + prior * np.log(_scale(j, preset))
     return out
 
 
 def scale_columns(j: int, preset: Preset) -> np.ndarray:
-    """The columns of a query's profiles compared with a whole's radii at scale ``j``
-    (a whole keeps every second column of the grid, :func:`compared_profiles`)."""
-    columns: np.ndarray = j + 2 * np.arange(preset.parts_radii)
+    """(K,) float, the grid columns of a query's profiles compared with a whole's radii at
+    scale ``j``, ``j / p + 2 k`` (a whole keeps every second column of the grid,
+    :func:`compared_profiles`); fractional between two columns."""
+    columns: np.ndarray = j / preset.parts_scale_steps + 2.0 * np.arange(preset.parts_radii)
     return columns
 
 
 def samples_at_scale(
     profiles: np.ndarray, reach: np.ndarray, j: int, preset: Preset
 ) -> tuple[np.ndarray, np.ndarray]:
-    """A query's samples as scale ``j`` compares them: (q', K) their profiles' columns
-    (:func:`scale_columns`) and (q', K) bool, which of those radii are within the sample's
+    """A query's samples as scale ``j`` compares them: (q', K) their profiles at
+    :func:`scale_columns` (linear between two columns of the grid, which is geometric:
+    linear in ``log r``) and (q', K) bool, which of those radii are within the sample's
     reach; samples with fewer than ``parts_min_radii`` of them left out."""
     columns = scale_columns(j, preset)
-    within = grid_radii(preset)[columns][None, :] <= reach[:, None]
+    below = np.floor(columns).astype(np.int64)
+    above = np.minimum(below + 1, profiles.shape[1] - 1)
+    fraction = columns - below
+    radii = grid_radii(preset)[0] * 2.0 ** (columns / GRID_STEPS_PER_OCTAVE)
+    within = radii[None, :] <= reach[:, None]
     keep = within.sum(axis=1) >= preset.parts_min_radii
-    return profiles[keep][:, columns], within[keep]
+    kept = profiles[keep]
+    at = kept[:, below] * (1.0 - fraction) + kept[:, above] * fraction
+    return at, within[keep]
 
 
 def best_scale(scores: np.ndarray, preset: Preset, scales: range | None = None) -> PartsMatch:
     """The query's scale, by its best match over all candidates, and the dissimilarities
     at it, from :func:`scale_scores`' (J, n)."""
-    tried = range(preset.parts_scales) if scales is None else scales
+    tried = range(scale_count(preset)) if scales is None else scales
     if scores.size == 0 or not np.isfinite(scores).any():
         return PartsMatch(np.full(scores.shape[1], np.inf), 1.0)
     row = int(np.argmin(scores.min(axis=1)))
-    return PartsMatch(scores[row], _scale(tried[row]))
+    return PartsMatch(scores[row], _scale(tried[row], preset))
 
 
-def _scale(j: int) -> float:
-    return float(2.0 ** (j / GRID_STEPS_PER_OCTAVE))
+def _scale(j: int, preset: Preset) -> float:
+    return float(2.0 ** (j / (GRID_STEPS_PER_OCTAVE * preset.parts_scale_steps)))
 
 
 #: Distances computed at once, query samples times candidate samples (whole candidates,
@@ -349,19 +364,24 @@ def part_dissimilarity_reference(
     scales: range | None = None,
 ) -> PartsMatch:
     """:func:`part_dissimilarity` by direct differences, one sample pair at a time."""
-    radii = grid_radii(preset)
-    count = preset.parts_radii
-    best: tuple[float, list[float], float] | None = None
-    for j in range(preset.parts_scales) if scales is None else scales:
-        columns = j + 2 * np.arange(count)
-        scale = _scale(j)
+    grid = grid_radii(preset)
+    steps = preset.parts_scale_steps
+
+    def at_scale(j: int) -> list[float] | None:
         samples = []
         for c in range(len(profiles)):
-            valid = radii[columns] <= reach[c]
+            at, clear = [], []
+            for k in range(preset.parts_radii):
+                column = j / steps + 2 * k
+                i, t = int(column), column - int(column)
+                below = profiles[c, i]
+                at.append(below if t == 0 else (1 - t) * below + t * profiles[c, i + 1])
+                clear.append(grid[0] * 2.0 ** (column / GRID_STEPS_PER_OCTAVE) <= reach[c])
+            valid = np.array(clear)
             if valid.sum() >= preset.parts_min_radii:
-                samples.append((profiles[c, columns][valid], valid))
+                samples.append((np.array(at)[valid], valid))
         if not samples:
-            continue
+            return None
         scores = []
         for candidate in gallery:
             total = weight = 0.0
@@ -370,9 +390,16 @@ def part_dissimilarity_reference(
                 nearest = np.min(np.mean((whole - values) ** 2, axis=1))
                 total += valid.sum() * np.sqrt(nearest)
                 weight += valid.sum()
-            scores.append(total / weight + preset.parts_scale_prior * np.log(scale))
-        if best is None or min(scores) < best[0]:
-            best = (min(scores), scores, scale)
+            prior = preset.parts_scale_prior * np.log(2.0 ** (j / (steps * GRID_STEPS_PER_OCTAVE)))
+            scores.append(total / weight + prior)
+        return scores
+
+    best: tuple[float, list[float], int] | None = None
+    for j in range(scale_count(preset)) if scales is None else scales:
+        scores = at_scale(j)
+        if scores is not None and (best is None or min(scores) < best[0]):
+            best = (min(scores), scores, j)
     if best is None:
         return PartsMatch(np.full(len(gallery), np.inf), 1.0)
-    return PartsMatch(np.asarray(best[1]), best[2])
+    scale = 2.0 ** (best[2] / (steps * GRID_STEPS_PER_OCTAVE))
+    return PartsMatch(np.asarray(best[1]), scale)

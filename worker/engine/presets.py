@@ -110,8 +110,10 @@ class Preset:
         root of the surface's area (:mod:`worker.engine.parts`); None: no parts modality.
         Its radii grow by ``2^(1/4)``, from the GDM's samples (needs ``gdm_samples``).
     parts_radii : radii compared per sample.
-    parts_scales : the query scales tried, ``2^(j/8)`` for ``j < parts_scales`` (up to
-        ``2^(5/8) = 1.54`` at 6: a part down to 42% of its whole's area).
+    parts_scales : the query scales span ``parts_scales - 1`` steps of the profiles' grid
+        (up to ``2^(5/8) = 1.54`` at 6: a part down to 42% of its whole's area).
+    parts_scale_steps : query scales per step of the grid, ``2^(j/8p)`` (between two of
+        its columns the profiles are interpolated).
     parts_scale_prior : ``lambda`` of the prior ``lambda log s`` against shrinking a whole.
     parts_min_radii : a query sample with fewer radii clear of its boundary is left out.
     partial_loop : the query's longest open boundary loop (in square roots of its area)
@@ -166,6 +168,7 @@ class Preset:
     parts_first_radius: float | None = None
     parts_radii: int = 15
     parts_scales: int = 6
+    parts_scale_steps: int = 1
     parts_scale_prior: float = 0.02
     parts_min_radii: int = 3
     partial_loop: tuple[float, float] = (0.1, 0.3)
@@ -222,6 +225,8 @@ class Preset:
             self.parts_first_radius is None or self.fusion != "product"
         ):
             raise ValueError("partial_weights weigh the parts modality in a product rule")
+        if self.parts_scale_steps < 1:
+            raise ValueError("parts_scale_steps: at least one query scale per step of the grid")
         if not 0.0 <= self.partial_loop[0] < self.partial_loop[1]:
             raise ValueError("partial_loop must rise from a non-negative start")
 
@@ -334,6 +339,7 @@ PRESETS: dict[str, Preset] = {
             # size's (metric units only) on TOSCA and on TOSCA with SCAPE.
             fusion_weights={"gdm": 0.0, "ddt": 0.5, "spectrum": 1.0, SIZE: 1.0},
             parts_first_radius=0.07,
+            parts_scale_steps=4,
             partial_weights={PARTS: 1.0},
         ),
     )
@@ -351,6 +357,7 @@ COMPARISON_FIELDS = (
     "fusion_weights",
     "size_tolerance",
     "parts_scale_prior",
+    "parts_scale_steps",
     "parts_min_radii",
     "partial_loop",
     "partial_weights",
