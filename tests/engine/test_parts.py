@@ -27,7 +27,7 @@ from worker.engine.parts import (
 )
 from worker.engine.pipeline import describe_mesh
 from worker.engine.presets import DEFAULT_PRESET, get_preset
-from worker.evaluation.partial import planar_cut
+from worker.evaluation.partial import noisy_surface, planar_cut
 from worker.evaluation.variants import decimated, subdivided
 
 DEFAULT = get_preset(DEFAULT_PRESET)
@@ -297,3 +297,21 @@ def test_a_preset_without_parts_describes_none():
     small = replace(get_preset("smeets2010-shrec"), n_vertices=300, n_eigenpairs=60)
     described = describe_mesh(mesh, small)
     assert described.parts.shape == (0, 0) and described.longest_open_loop == 0.0
+
+
+@pytest.mark.slow
+def test_a_noisy_copy_is_measured_at_its_surfaces_scale(figures):
+    """Noise crumples a file's area (at 0.5% of the diagonal, a few times the surface's
+    on a fine mesh), and the resampled surface smooths most of it away. The parts' radii
+    are in units of the resampled surface's area: the noisy copy finds its figure at
+    about its whole's scale, not at one the crumpled area would give."""
+    mesh = load_mesh(example("quadruped-0"))
+    fine = subdivided(subdivided(mesh))
+    rng = np.random.default_rng(7)
+    noisy = describe_mesh(noisy_surface(fine, 0.5, rng), DEFAULT)
+    found = part_dissimilarity(
+        noisy.parts.astype(np.float64), noisy.parts_reach, _gallery(figures), DEFAULT
+    )
+    scores = dict(zip(figures, found.dissimilarity.tolist(), strict=True))
+    assert min(scores, key=scores.__getitem__) == "quadruped", scores
+    assert found.kept_share > 0.8

@@ -321,7 +321,7 @@ PRESETS: dict[str, Preset] = {
         # Its versions, what each changed and why: docs/decisions.md.
         Preset(
             name="smeets2010-surface",
-            version=10,
+            version=11,
             max_edge=3.0,
             max_hole_perimeter=0.5,
             measure="surface",
