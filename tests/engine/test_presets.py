@@ -33,6 +33,8 @@ def test_inconsistent_presets_are_refused():
         Preset(name="x", version=1, measure="surface", gdm_samples=10)
     with pytest.raises(ValueError, match="averaged mass needs the surface measure"):
         Preset(name="x", version=1, ddt_mass="averaged")
+    with pytest.raises(ValueError, match="at least one query scale per step"):
+        Preset(name="x", version=1, parts_scale_steps=0)
 
 
 def test_unknown_preset_names_the_known_ones():

@@ -70,8 +70,8 @@ def parts_matrix(
 
     ``themselves``: the queries are the gallery, and each is left out of its own
     candidates (as a service's query is never in its gallery): its scale is chosen by
-    its best match among the others (it would match itself best, at scale 1), and its
-    own entry is ``inf``.
+    its best match among the others (it would match itself best, at scale 1). Its own
+    entry is then 0, as every modality's distance of a shape to itself.
     """
     whole = compared_profiles(np.stack([g.parts.astype(np.float64) for g in gallery]), preset)
     profiles = [q.parts.astype(np.float64) for q in queries]
@@ -104,9 +104,12 @@ def _parts_row(
     whole: np.ndarray, preset: Preset, profiles: np.ndarray, reach: np.ndarray, own: int | None
 ) -> np.ndarray:
     scores = scale_scores(profiles, reach, whole, preset)
-    if own is not None:
-        scores[:, own] = np.inf
-    return best_scale(scores, preset).dissimilarity
+    if own is None:
+        return best_scale(scores, preset).dissimilarity
+    scores[:, own] = np.inf
+    row = best_scale(scores, preset).dissimilarity
+    row[own] = 0.0
+    return row
 
 
 def query_matrices(
