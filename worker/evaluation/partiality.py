@@ -125,10 +125,10 @@ def query_matrices(
     Parameters
     ----------
     queries, gallery : descriptors of the preset (with the parts modality).
-    themselves : the queries are the gallery (:func:`parts_matrix`).
     preset : the dissimilarity (D2's sigma over the gallery), fusion and partial weights.
     baselines : ShapeDNA descriptors of the queries and of the gallery; the baseline row
         is left out without them.
+    themselves : the queries are the gallery (:func:`parts_matrix`).
     """
     flat = [
         {m: np.stack([d.vector(m) for d in side]) for m in MODALITIES}
@@ -137,7 +137,7 @@ def query_matrices(
     if baselines is not None:
         flat[0][BASELINE], flat[1][BASELINE] = baselines
     out = cross_dissimilarities(flat[0], flat[1], preset)
-    out[PARTS] = parts_matrix(queries, gallery, preset, jobs, themselves)
+    out[PARTS] = parts_matrix(queries, gallery, preset, jobs, themselves=themselves)
     out[PRESET_ROW] = weighed_by_partiality(out, query_partiality(queries, preset), preset)
     return out
 
@@ -161,7 +161,8 @@ def collection_matrices(
     {"parts": (n, n), PRESET_ROW: (n, n)}; row ``i`` weighed by query ``i``'s
     partiality, so neither is symmetric.
     """
-    per = {**per_modality, PARTS: parts_matrix(descriptors, descriptors, preset, jobs, True)}
+    parts = parts_matrix(descriptors, descriptors, preset, jobs, themselves=True)
+    per = {**per_modality, PARTS: parts}
     shares = query_partiality(descriptors, preset)
     return {PARTS: per[PARTS], PRESET_ROW: weighed_by_partiality(per, shares, preset)}
 
@@ -232,7 +233,8 @@ def partiality_scores(
         copy_labels = labels_arr[np.asarray(sources, dtype=np.int64)]
         if len(copies) and np.unique(copy_labels, return_counts=True)[1].min() >= 2:
             pair = None if baselines is None else (baselines[1][name], baselines[1][name])
-            for row, d in query_matrices(copies, copies, preset, pair, jobs, True).items():
+            each = query_matrices(copies, copies, preset, pair, jobs, themselves=True)
+            for row, d in each.items():
                 # A copy with no sample clear of its boundary is infinitely far from all
                 # (the parts): it ranks the others by index, as against the wholes.
                 finite = np.where(np.isfinite(d), d, np.finfo(np.float64).max)

@@ -325,7 +325,9 @@ def run_robustness(
     labels = [m.label for m in computed.meshes]
     among = None
     if preset.has_parts:
-        among = parts_matrix(computed.descriptors, computed.descriptors, preset, jobs, True)
+        among = parts_matrix(
+            computed.descriptors, computed.descriptors, preset, jobs, themselves=True
+        )
     report: dict[str, Any] = {
         "dataset": str(dataset_dir),
         "command": command,
