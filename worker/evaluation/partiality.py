@@ -34,7 +34,7 @@ from worker.engine.compare import (
     query_weights,
 )
 from worker.engine.descriptor import ShapeDescriptor
-from worker.engine.parts import best_scale, compared_profiles, scale_scores
+from worker.engine.parts import best_scale, compared_profiles, part_dissimilarity, scale_scores
 from worker.engine.presets import MODALITIES, PARTS, Preset
 from worker.recognition import metrics
 
@@ -103,9 +103,9 @@ def _held_row(profiles: np.ndarray, reach: np.ndarray, own: int | None) -> np.nd
 def _parts_row(
     whole: np.ndarray, preset: Preset, profiles: np.ndarray, reach: np.ndarray, own: int | None
 ) -> np.ndarray:
-    scores = scale_scores(profiles, reach, whole, preset)
     if own is None:
-        return best_scale(scores, preset).dissimilarity
+        return part_dissimilarity(profiles, reach, whole, preset).dissimilarity
+    scores = scale_scores(profiles, reach, whole, preset)
     scores[:, own] = np.inf
     row = best_scale(scores, preset).dissimilarity
     row[own] = 0.0
