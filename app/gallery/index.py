@@ -525,7 +525,9 @@ class GalleryIndex:
             if not len(positions):
                 return [], 1.0
             per = self.exact_scores(query, positions, flat, "sum")[1] if flat else {}
-            per[PARTS] = self._parts_scores(*few[:2], few[2][positions], scales).dissimilarity
+            per[PARTS] = self._parts_scores(
+                *few[:2], few[2][positions], scales, rough=True
+            ).dissimilarity
             rough = np.asarray(fuse(per, "product", dict(weights)), dtype=np.float64)
             short = np.argsort(rough, kind="stable")[: max(PARTS_SHORTLIST, 2 * k)]
             positions = positions[short]
@@ -569,7 +571,7 @@ class GalleryIndex:
             if len(probe):
                 gallery = self.store.coarse[self.store.positions(probe)]
                 low = self._parts_scores(
-                    profiles, reach, gallery, range(j, j + 1)
+                    profiles, reach, gallery, range(j, j + 1), rough=True
                 ).dissimilarity.min()
                 if low < best:
                     best, chosen, chosen_votes = low, j, voted
@@ -589,12 +591,14 @@ class GalleryIndex:
         reach: np.ndarray,
         gallery: np.ndarray,
         scales: range | None = None,
+        rough: bool = False,
     ) -> PartsMatch:
         """The parts dissimilarity of a query to ``gallery`` (float16 profiles) at the best
-        of ``scales`` (default all), in blocks of ``PARTS_BLOCK_SAMPLES`` samples."""
+        of ``scales`` (default all), in blocks of ``PARTS_BLOCK_SAMPLES`` samples; ``rough``
+        for a pass that shortlists (:func:`~worker.engine.parts.scale_scores`)."""
         block = max(1, PARTS_BLOCK_SAMPLES // max(gallery.shape[1], 1))
         scores = [
-            scale_scores(profiles, reach, gallery[a : a + block], self.preset, scales)
+            scale_scores(profiles, reach, gallery[a : a + block], self.preset, scales, rough)
             for a in range(0, len(gallery), block)
         ]
         return best_scale(np.concatenate(scores, axis=1), self.preset, scales)

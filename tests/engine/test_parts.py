@@ -109,6 +109,22 @@ def test_candidates_scored_in_blocks_choose_the_same_scale():
     assert joined.scale == whole.scale
 
 
+def test_a_rough_pass_scores_as_the_exact_one_to_single_precision():
+    """The index's shortlisting passes take the single-precision expansion as it comes:
+    on float16 profiles as a gallery keeps them, every scale's scores within 1e-4 of the
+    exact ones, at every scale including those where few radii are clear."""
+    rng = np.random.default_rng(4)
+    gallery = compared_profiles(_profiles(rng, 9, 64), DEFAULT).astype(np.float16)
+    query = _profiles(rng, 1, 64)[0]
+    reach = np.where(rng.random(64) < 0.3, np.inf, rng.uniform(0.05, 1.5, size=64))
+    exact = scale_scores(query, reach, gallery, DEFAULT)
+    rough = scale_scores(query, reach, gallery, DEFAULT, rough=True)
+    assert np.isfinite(exact).sum() > exact.shape[1]  # more than one scale compared
+    np.testing.assert_array_equal(np.isfinite(rough), np.isfinite(exact))
+    finite = np.isfinite(exact)
+    np.testing.assert_allclose(rough[finite], exact[finite], rtol=1e-4)
+
+
 def test_a_whole_contains_every_part_of_itself():
     rng = np.random.default_rng(2)
     gallery = _profiles(rng, 4, 60)

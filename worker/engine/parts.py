@@ -227,15 +227,20 @@ def scale_scores(
     gallery: np.ndarray,
     preset: Preset,
     scales: range | None = None,
+    rough: bool = False,
 ) -> np.ndarray:
     """(J, n) the dissimilarity to each candidate at each scale tried, its prior added
     (``inf`` at a scale where no sample of the query has enough radii clear of its
     boundary). Candidates can be scored in blocks and the blocks' columns joined
-    before :func:`best_scale` chooses. Parameters as :func:`part_dissimilarity`."""
+    before :func:`best_scale` chooses. Parameters as :func:`part_dissimilarity`;
+    ``rough``: each nearest distance as single precision leaves it (within about 1e-5 of
+    the squared distance: :func:`_nearest_squared_rough`), for a pass that only
+    shortlists."""
     prior = preset.parts_scale_prior
     whole = np.ascontiguousarray(gallery)
     n, per_shape = whole.shape[:2]
-    rows = _GalleryRows(whole.reshape(n * per_shape, -1))
+    flat = whole.reshape(n * per_shape, -1)
+    rows = _RoughRows(flat) if rough else _GalleryRows(flat)
     tried = range(scale_count(preset)) if scales is None else scales
     out = np.full((len(tried), n), np.inf)
     for row, j in enumerate(tried):
@@ -244,7 +249,10 @@ def scale_scores(
             continue
         valid = within.astype(np.float64)
         used = valid.sum(axis=1)
-        nearest = _nearest_squared(query, valid, rows, n, per_shape)
+        if isinstance(rows, _RoughRows):
+            nearest = _nearest_squared_rough(query, valid, rows, per_shape)
+        else:
+            nearest = _nearest_squared(query, valid, rows, n, per_shape)
         rms = np.sqrt(np.maximum(nearest, 0.0) / used[:, None])
         out[row] = used @ rms / used.sum() + prior * np.log(_scale(j, preset))
     return out
@@ -354,6 +362,45 @@ def _nearest_squared(
     unsorted = np.empty_like(out)
     unsorted[order] = out
     return unsorted
+
+
+class _RoughRows:
+    """Candidates' samples as :func:`_nearest_squared_rough` reads them: (N, 2K) single
+    precision, each row's values and their squares."""
+
+    def __init__(self, rows: np.ndarray) -> None:
+        count = rows.shape[1]
+        self.count = count
+        self.values = np.empty((len(rows), 2 * count), dtype=np.float32)
+        single = self.values[:, :count]
+        single[...] = rows
+        np.multiply(single, single, out=self.values[:, count:])
+
+
+def _nearest_squared_rough(
+    query: np.ndarray, valid: np.ndarray, rows: _RoughRows, per_shape: int
+) -> np.ndarray:
+    """(q, n) :func:`_nearest_squared`'s result as the single-precision expansion gives it,
+    without computing it again: ``|q|^2 + min_y (-2 q.y + |y|^2)`` over the valid radii,
+    one product per block (the query row ``[-2 valid q, valid]`` against ``[y, y^2]``, so
+    no grouping by valid radii) and each candidate's minimum over its rows. A shape's
+    rows are the product's consecutive rows, so the minimum runs along whole rows of
+    query values; the rounding, about 1e-5 of the squared distance for profiles of a few
+    units, is far below what a shortlist tells apart."""
+    count = rows.count
+    picks = np.empty((2 * count, len(query)), dtype=np.float32)
+    picks[:count] = (-2.0 * valid * query).T
+    picks[count:] = valid.T
+    n = len(rows.values) // per_shape
+    out = np.empty((n, len(query)), dtype=np.float32)
+    shapes_per_block = max(1, _BLOCK_ENTRIES // (len(query) * per_shape))
+    for first in range(0, n, shapes_per_block):
+        last = min(n, first + shapes_per_block)
+        product = rows.values[first * per_shape : last * per_shape] @ picks
+        out[first:last] = product.reshape(last - first, per_shape, len(query)).min(axis=1)
+    squares = np.einsum("qk,qk->q", valid, query * query)
+    nearest: np.ndarray = out.T + squares[:, None]
+    return nearest
 
 
 def part_dissimilarity_reference(
