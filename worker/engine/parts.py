@@ -233,8 +233,8 @@ def scale_scores(
     (``inf`` at a scale where no sample of the query has enough radii clear of its
     boundary). Candidates can be scored in blocks and the blocks' columns joined
     before :func:`best_scale` chooses. Parameters as :func:`part_dissimilarity`;
-    ``rough``: each nearest distance as single precision leaves it (within about 1e-5 of
-    the squared distance: :func:`_nearest_squared_rough`), for a pass that only
+    ``rough``: each nearest distance as single precision leaves it (off by about 1e-5 in
+    each squared distance, :func:`_nearest_squared_rough`), for a pass that only
     shortlists."""
     prior = preset.parts_scale_prior
     whole = np.ascontiguousarray(gallery)
@@ -370,7 +370,6 @@ class _RoughRows:
 
     def __init__(self, rows: np.ndarray) -> None:
         count = rows.shape[1]
-        self.count = count
         self.values = np.empty((len(rows), 2 * count), dtype=np.float32)
         single = self.values[:, :count]
         single[...] = rows
@@ -387,7 +386,7 @@ def _nearest_squared_rough(
     rows are the product's consecutive rows, so the minimum runs along whole rows of
     query values; the rounding, about 1e-5 of the squared distance for profiles of a few
     units, is far below what a shortlist tells apart."""
-    count = rows.count
+    count = query.shape[1]
     picks = np.empty((2 * count, len(query)), dtype=np.float32)
     picks[:count] = (-2.0 * valid * query).T
     picks[count:] = valid.T

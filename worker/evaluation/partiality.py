@@ -164,7 +164,7 @@ def collection_matrices(
     parts = parts_matrix(descriptors, descriptors, preset, jobs, themselves=True)
     per = {**per_modality, PARTS: parts}
     shares = query_partiality(descriptors, preset)
-    return {PARTS: per[PARTS], PRESET_ROW: weighed_by_partiality(per, shares, preset)}
+    return {PARTS: parts, PRESET_ROW: weighed_by_partiality(per, shares, preset)}
 
 
 def weighed_by_partiality(
