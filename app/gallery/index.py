@@ -111,10 +111,11 @@ WORD_SHARE = 50
 WORD_MAX_CANDIDATES = 8192
 #: Shapes each scale's votes put first that are compared coarsely to choose the scale.
 WORD_PROBE = 64
-#: Steps of the profiles' grid on either side of the scale the inverted file chose whose
-#: scales the shortlist tries (all agree with the exhaustive ranking no more often at
-#: 100,000 shapes).
-WORD_SHORTLIST_STEPS = 1
+#: Query scales on either side of the one the inverted file chose that the shortlist tries
+#: (with the preset's four scales to a step of the grid, three quarters of a step: the
+#: whole step agrees with the exhaustive ranking no more often, half of it less often;
+#: docs/decisions.md).
+WORD_SHORTLIST_SCALES = 3
 BOUND_SAFETY = 1.0 - 1e-5  # float32 candidate distances: keep the bound a true lower bound
 
 
@@ -485,7 +486,7 @@ class GalleryIndex:
         ``WORD_MAX_CANDIDATES``), scored at that scale only (:meth:`_word_candidates`).
         The best ``max(PARTS_SHORTLIST, 2 k)`` by that product are scored with every
         sample, their scale chosen among them (all scales, or with the inverted file
-        those within ``WORD_SHORTLIST_STEPS`` steps of the grid of the chosen one).
+        the ``WORD_SHORTLIST_SCALES`` on either side of the chosen one and it).
 
         Parameters
         ----------
@@ -517,8 +518,8 @@ class GalleryIndex:
                 scales, found_ids = self._word_candidates(*few[:2], count, excluded)
                 positions = np.sort(self.store.positions(found_ids))
                 tried = range(
-                    max(0, scales.start - WORD_SHORTLIST_STEPS * step),
-                    min(scale_count(self.preset), scales.stop + WORD_SHORTLIST_STEPS * step),
+                    max(0, scales.start - WORD_SHORTLIST_SCALES),
+                    min(scale_count(self.preset), scales.stop + WORD_SHORTLIST_SCALES),
                 )
             else:
                 positions = np.flatnonzero(~np.isin(self.store.ids[:n], excluded))

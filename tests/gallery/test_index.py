@@ -422,3 +422,24 @@ def test_the_inverted_file_chooses_the_scale_every_shape_compared_chooses(monkey
     found, scale = index.partial_search(*query)
     assert scale == 2.0 ** (j / 8) and found[0].id % 40 == 7
     assert ([m.id for m in found], scale) == _every_shape_compared(index, *query)
+
+
+@pytest.mark.parametrize("quarters", [3, 10, 18])
+def test_between_the_grid_s_steps_the_shortlist_finds_the_scale_every_shape_compared_finds(
+    monkeypatch, quarters
+):
+    """A part whose radii grow by ``2^(q/32)`` against its whole's, ``q`` quarter steps,
+    between two steps of the grid at which the samples vote: the shortlist's scales
+    around the voted one reach it, and the answer is the one every scale of every shape
+    gives."""
+    rng = np.random.default_rng(10)
+    index, pose, _ = _posed_index(monkeypatch, rng)
+    whole = pose(11)[:150]
+    # Column c of the part is column c - q / 4 of its whole, linear between two (the
+    # first columns: the whole's first).
+    shifted = np.arange(whole.shape[1]) - quarters / 4
+    part = np.stack([np.interp(shifted, np.arange(whole.shape[1]), row) for row in whole])
+    query = ({}, part, np.full(150, np.inf), {PARTS: 1.0}, 10)
+    found, scale = index.partial_search(*query)
+    assert scale == 2.0 ** (quarters / 32) and found[0].id % 40 == 11
+    assert ([m.id for m in found], scale) == _every_shape_compared(index, *query)
