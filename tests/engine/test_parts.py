@@ -84,15 +84,22 @@ def _profiles(rng: np.random.Generator, shapes: int, samples: int) -> np.ndarray
     return -np.cumsum(steps, axis=2)
 
 
-def test_part_dissimilarity_matches_the_plain_reference():
+@pytest.mark.parametrize("extra", [0, 4])
+def test_part_dissimilarity_matches_the_plain_reference(extra):
+    """Scales past the grid's (``parts_extra_scales``) leave out the radii past the
+    profiles' last column, in both."""
+    preset = replace(DEFAULT, parts_extra_scales=extra)
     rng = np.random.default_rng(1)
-    gallery = _profiles(rng, 5, 40)
+    gallery = compared_profiles(_profiles(rng, 5, 40), preset)
     query = _profiles(rng, 1, 30)[0]
     reach = np.where(rng.random(30) < 0.3, np.inf, rng.uniform(0.05, 1.5, size=30))
-    fast = part_dissimilarity(query, reach, compared_profiles(gallery, DEFAULT), DEFAULT)
-    plain = part_dissimilarity_reference(query, reach, compared_profiles(gallery, DEFAULT), DEFAULT)
+    fast = part_dissimilarity(query, reach, gallery, preset)
+    plain = part_dissimilarity_reference(query, reach, gallery, preset)
     np.testing.assert_allclose(fast.dissimilarity, plain.dissimilarity, rtol=1e-9)
     assert fast.scale == plain.scale
+    scores = scale_scores(query, reach, gallery, preset)
+    assert scores.shape[0] == (5 + extra) * preset.parts_scale_steps + 1
+    assert np.isfinite(scores).all()  # every scale has samples with enough radii
 
 
 def test_candidates_scored_in_blocks_choose_the_same_scale():
@@ -150,6 +157,30 @@ def test_a_part_normalized_by_its_own_area_is_found_at_its_scale():
     assert np.argmin(match.dissimilarity) == 1
     assert match.scale == 2.0 ** (shift / GRID_STEPS_PER_OCTAVE)
     assert match.kept_share == pytest.approx(2.0 ** (-2 * shift / 8))
+
+
+def test_a_part_smaller_than_the_grid_reaches_is_found_past_it():
+    """A part of 30% of its whole's area (``2^(7/8)`` in length, two steps past the
+    grid's scales): found at its scale with two more steps, its largest radius, past the
+    profiles' last column, left out; without them its scale is the grid's last."""
+    rng = np.random.default_rng(6)
+    gallery = _profiles(rng, 4, 60)
+    shift = 7
+    part = np.roll(gallery[1, :25], shift, axis=1)
+    whole = compared_profiles(gallery, DEFAULT)
+    past = part_dissimilarity(
+        part, np.full(25, np.inf), whole, replace(DEFAULT, parts_extra_scales=2)
+    )
+    assert np.argmin(past.dissimilarity) == 1
+    assert past.scale == 2.0 ** (shift / GRID_STEPS_PER_OCTAVE)
+    assert past.dissimilarity[1] == pytest.approx(
+        DEFAULT.parts_scale_prior * np.log(past.scale), abs=1e-9
+    )
+    within = part_dissimilarity(
+        part, np.full(25, np.inf), whole, replace(DEFAULT, parts_extra_scales=0)
+    )
+    assert within.scale == 2.0 ** ((DEFAULT.parts_scales - 1) / GRID_STEPS_PER_OCTAVE)
+    assert within.dissimilarity[1] > past.dissimilarity[1] + 0.05
 
 
 def test_a_part_between_two_steps_of_the_grid_is_found_between_them():

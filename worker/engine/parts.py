@@ -31,7 +31,8 @@ A part has less area than its whole, so normalized by its own area it is too lar
 by ``1 / sqrt(kappa)`` in length when it keeps ``kappa`` of the area. The query's radii
 are therefore tried at the scales ``s_j = 2^(j / 8p)``, ``j = 0 .. J``, ``p`` scales per
 step of the grid (its grid column ``j / p + 2 k`` against the gallery's ``2 k``; between
-two columns the log profile is interpolated linearly in ``log r``), with a prior
+two columns the log profile is interpolated linearly in ``log r``; past the last column
+a radius is left out, as one past the sample's reach), with a prior
 ``lambda log s_j`` against shrinking a whole. For one scale, query sample ``c`` with
 valid radii ``V_c`` is as far from candidate ``C`` as the root-mean-square difference
 over ``V_c`` to its nearest sample of ``C``; the dissimilarity is the mean of that over
@@ -83,8 +84,9 @@ GRID_STEPS_PER_OCTAVE = 8
 
 def scale_count(preset: Preset) -> int:
     """The number of query scales tried: ``parts_scale_steps`` per step of the grid, over
-    ``parts_scales - 1`` steps."""
-    return (preset.parts_scales - 1) * preset.parts_scale_steps + 1
+    ``parts_scales - 1 + parts_extra_scales`` steps."""
+    steps = preset.parts_scales - 1 + preset.parts_extra_scales
+    return steps * preset.parts_scale_steps + 1
 
 
 def grid_radii(preset: Preset) -> np.ndarray:
@@ -272,13 +274,15 @@ def samples_at_scale(
     """A query's samples as scale ``j`` compares them: (q', K) their profiles at
     :func:`scale_columns` (linear between two columns of the grid, which is geometric:
     linear in ``log r``) and (q', K) bool, which of those radii are within the sample's
-    reach; samples with fewer than ``parts_min_radii`` of them left out."""
+    reach and the profiles' last column (past ``parts_scales``, the largest are not);
+    samples with fewer than ``parts_min_radii`` of them left out."""
     columns = scale_columns(j, preset)
-    below = np.floor(columns).astype(np.int64)
-    above = np.minimum(below + 1, profiles.shape[1] - 1)
-    fraction = columns - below
+    last = profiles.shape[1] - 1
+    below = np.minimum(np.floor(columns).astype(np.int64), last)
+    above = np.minimum(below + 1, last)
+    fraction = columns - np.floor(columns)
     radii = grid_radii(preset)[0] * 2.0 ** (columns / GRID_STEPS_PER_OCTAVE)
-    within = radii[None, :] <= reach[:, None]
+    within = (radii[None, :] <= reach[:, None]) & (columns <= last)[None, :]
     keep = within.sum(axis=1) >= preset.parts_min_radii
     kept = profiles[keep]
     at = kept[:, below] * (1.0 - fraction) + kept[:, above] * fraction
@@ -419,6 +423,10 @@ def part_dissimilarity_reference(
             at, clear = [], []
             for k in range(preset.parts_radii):
                 column = j / steps + 2 * k
+                if column > profiles.shape[1] - 1:  # past the profiles' last radius
+                    at.append(0.0)
+                    clear.append(False)
+                    continue
                 i, t = int(column), column - int(column)
                 below = profiles[c, i]
                 at.append(below if t == 0 else (1 - t) * below + t * profiles[c, i + 1])

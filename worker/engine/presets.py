@@ -112,6 +112,10 @@ class Preset:
     parts_radii : radii compared per sample.
     parts_scales : the query scales span ``parts_scales - 1`` steps of the profiles' grid
         (up to ``2^(5/8) = 1.54`` at 6: a part down to 42% of its whole's area).
+    parts_extra_scales : steps of the grid past those that a query is also tried at (4
+        more: up to ``2^(9/8) = 2.18``, a part down to 21%); there a sample's largest
+        radii fall past the profiles' last column and are left out, as those past its
+        reach are.
     parts_scale_steps : query scales per step of the grid, ``2^(j/8p)`` (between two of
         its columns the profiles are interpolated).
     parts_scale_prior : ``lambda`` of the prior ``lambda log s`` against shrinking a whole.
@@ -168,6 +172,7 @@ class Preset:
     parts_first_radius: float | None = None
     parts_radii: int = 15
     parts_scales: int = 6
+    parts_extra_scales: int = 0
     parts_scale_steps: int = 1
     parts_scale_prior: float = 0.02
     parts_min_radii: int = 3
@@ -225,6 +230,8 @@ class Preset:
             self.parts_first_radius is None or self.fusion != "product"
         ):
             raise ValueError("partial_weights weigh the parts modality in a product rule")
+        if self.parts_extra_scales < 0:
+            raise ValueError("parts_extra_scales: a number of steps of the grid, from 0")
         if self.parts_scale_steps < 1:
             raise ValueError("parts_scale_steps: at least one query scale per step of the grid")
         if not 0.0 <= self.partial_loop[0] < self.partial_loop[1]:
@@ -339,6 +346,7 @@ PRESETS: dict[str, Preset] = {
             # size's (metric units only) on TOSCA and on TOSCA with SCAPE.
             fusion_weights={"gdm": 0.0, "ddt": 0.5, "spectrum": 1.0, SIZE: 1.0},
             parts_first_radius=0.07,
+            parts_extra_scales=2,
             parts_scale_steps=4,
             partial_weights={PARTS: 1.0},
         ),
@@ -357,6 +365,7 @@ COMPARISON_FIELDS = (
     "fusion_weights",
     "size_tolerance",
     "parts_scale_prior",
+    "parts_extra_scales",
     "parts_scale_steps",
     "parts_min_radii",
     "partial_loop",
