@@ -111,11 +111,11 @@ WORD_SHARE = 50
 WORD_MAX_CANDIDATES = 8192
 #: Shapes each scale's votes put first that are compared coarsely to choose the scale.
 WORD_PROBE = 64
-#: Query scales on either side of the one the inverted file chose that the shortlist tries
-#: (with the preset's four scales to a step of the grid, three quarters of a step: the
-#: whole step agrees with the exhaustive ranking no more often, half of it less often;
-#: docs/decisions.md).
-WORD_SHORTLIST_SCALES = 3
+#: Query scales on either side of the coarse pass's that the shortlist tries (with the
+#: preset's four scales to a step of the grid, three quarters of a step: at 100,000 shapes
+#: the whole step agrees with the exhaustive ranking no more often, half of it less
+#: often; docs/decisions.md).
+SHORTLIST_SCALES = 3
 BOUND_SAFETY = 1.0 - 1e-5  # float32 candidate distances: keep the bound a true lower bound
 
 
@@ -485,8 +485,8 @@ class GalleryIndex:
         ``n / WORD_SHARE`` candidates (from ``WORD_CANDIDATES`` to
         ``WORD_MAX_CANDIDATES``), scored at that scale only (:meth:`_word_candidates`).
         The best ``max(PARTS_SHORTLIST, 2 k)`` by that product are scored with every
-        sample, their scale chosen among them (all scales, or with the inverted file
-        the ``WORD_SHORTLIST_SCALES`` on either side of the chosen one and it).
+        sample, their scale chosen among the chosen one and the ``SHORTLIST_SCALES`` on
+        either side of it.
 
         Parameters
         ----------
@@ -509,30 +509,27 @@ class GalleryIndex:
                 return [], 1.0
             flat = tuple(m for m in weights if m != PARTS)
             few = coarse(profiles, reach, self.store.coarse[:n])
-            step = self.preset.parts_scale_steps
             # The coarse pass at each step of the grid, the best chosen over the candidates.
-            scales = range(0, scale_count(self.preset), step)
-            tried: range | None = None  # the shortlist's scales: all
+            scales = range(0, scale_count(self.preset), self.preset.parts_scale_steps)
             if self.words is not None:
                 count = min(max(WORD_CANDIDATES, n // WORD_SHARE), WORD_MAX_CANDIDATES)
                 scales, found_ids = self._word_candidates(*few[:2], count, excluded)
                 positions = np.sort(self.store.positions(found_ids))
-                tried = range(
-                    max(0, scales.start - WORD_SHORTLIST_SCALES),
-                    min(scale_count(self.preset), scales.stop + WORD_SHORTLIST_SCALES),
-                )
             else:
                 positions = np.flatnonzero(~np.isin(self.store.ids[:n], excluded))
             if not len(positions):
                 return [], 1.0
             per = self.exact_scores(query, positions, flat, "sum")[1] if flat else {}
-            per[PARTS] = self._parts_scores(
-                *few[:2], few[2][positions], scales, rough=True
-            ).dissimilarity
+            rough_parts = self._parts_scores(*few[:2], few[2][positions], scales, rough=True)
+            per[PARTS] = rough_parts.dissimilarity
             rough = np.asarray(fuse(per, "product", dict(weights)), dtype=np.float64)
             short = np.argsort(rough, kind="stable")[: max(PARTS_SHORTLIST, 2 * k)]
             positions = positions[short]
             per = {m: v[short] for m, v in per.items() if m != PARTS}
+            tried = range(
+                max(0, rough_parts.j - SHORTLIST_SCALES),
+                min(scale_count(self.preset), rough_parts.j + SHORTLIST_SCALES + 1),
+            )
             found = self._parts_scores(profiles, reach, self.store.parts_at(positions), tried)
             per[PARTS] = found.dissimilarity
             fused = np.asarray(fuse(per, "product", dict(weights)), dtype=np.float64)

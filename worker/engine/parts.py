@@ -66,10 +66,12 @@ class PartsMatch:
     dissimilarity : (n,) float, one per candidate (``inf`` when no sample of the query
         has enough radii clear of its boundary).
     scale : the query's scale ``s_j`` (1 for a whole).
+    j : its index ``j`` (0 for a whole).
     """
 
     dissimilarity: np.ndarray
     scale: float
+    j: int = 0
 
     @property
     def kept_share(self) -> float:
@@ -296,7 +298,7 @@ def best_scale(scores: np.ndarray, preset: Preset, scales: range | None = None) 
     if scores.size == 0 or not np.isfinite(scores).any():
         return PartsMatch(np.full(scores.shape[1], np.inf), 1.0)
     row = int(np.argmin(scores.min(axis=1)))
-    return PartsMatch(scores[row], _scale(tried[row], preset))
+    return PartsMatch(scores[row], _scale(tried[row], preset), tried[row])
 
 
 def _scale(j: int, preset: Preset) -> float:
@@ -456,4 +458,4 @@ def part_dissimilarity_reference(
     if best is None:
         return PartsMatch(np.full(len(gallery), np.inf), 1.0)
     scale = 2.0 ** (best[2] / (steps * GRID_STEPS_PER_OCTAVE))
-    return PartsMatch(np.asarray(best[1]), scale)
+    return PartsMatch(np.asarray(best[1]), scale, best[2])
