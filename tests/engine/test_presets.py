@@ -35,6 +35,8 @@ def test_inconsistent_presets_are_refused():
         Preset(name="x", version=1, ddt_mass="averaged")
     with pytest.raises(ValueError, match="at least one query scale per step"):
         Preset(name="x", version=1, parts_scale_steps=0)
+    with pytest.raises(ValueError, match="parts_extra_scales: a number of steps"):
+        Preset(name="x", version=1, parts_extra_scales=-1)
 
 
 def test_unknown_preset_names_the_known_ones():

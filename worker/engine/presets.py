@@ -112,8 +112,8 @@ class Preset:
     parts_radii : radii compared per sample.
     parts_scales : the query scales span ``parts_scales - 1`` steps of the profiles' grid
         (up to ``2^(5/8) = 1.54`` at 6: a part down to 42% of its whole's area).
-    parts_extra_scales : steps of the grid past those that a query is also tried at (4
-        more: up to ``2^(9/8) = 2.18``, a part down to 21%); there a sample's largest
+    parts_extra_scales : steps of the grid past those that a query is also tried at (2
+        more: up to ``2^(7/8) = 1.83``, a part down to 30%); there a sample's largest
         radii fall past the profiles' last column and are left out, as those past its
         reach are.
     parts_scale_steps : query scales per step of the grid, ``2^(j/8p)`` (between two of
