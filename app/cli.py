@@ -19,6 +19,7 @@ from worker import cli as engine_cli
 
 from .client import (
     DEFAULT_URL,
+    MESH_SUFFIXES,
     ClientError,
     Interrupted,
     aligned,
@@ -145,7 +146,8 @@ def _import_command(args: argparse.Namespace) -> int:
         files = mesh_files(args.paths)
         labels = read_labels(Path(args.labels)) if args.labels else {}
         if not files:
-            raise ClientError("no mesh files found (.obj .ply .off .stl .glb .gltf, or .gz)")
+            suffixes = " ".join(MESH_SUFFIXES)
+            raise ClientError(f"no mesh files found ({suffixes}, or .gz)")
         result = import_files(
             files,
             url=args.url,

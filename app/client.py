@@ -33,6 +33,8 @@ from typing import Any
 
 import httpx
 
+from worker.engine.formats import MESH_FORMATS
+
 
 def default_url(environ: Mapping[str, str]) -> str:
     """Where the commands find the service: ``SHAPES_URL``, else the address the
@@ -48,7 +50,7 @@ def default_url(environ: Mapping[str, str]) -> str:
 
 
 DEFAULT_URL = default_url(os.environ)
-MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl", ".glb", ".gltf")
+MESH_SUFFIXES = tuple(f".{f}" for f in MESH_FORMATS)
 TIMEOUT = httpx.Timeout(300.0, connect=10.0)
 #: Below this share of the file's surface described, the answer says the rest was left out
 #: (specks and debris are far smaller; the web page uses the same figure).

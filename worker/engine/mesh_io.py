@@ -30,6 +30,7 @@ from .errors import (
     UnreadableMeshError,
 )
 from .formats import DEFAULT_MAX_DECOMPRESSED_BYTES, DEFAULT_MAX_FACES, mesh_format
+from .scans import POINTS_WITHOUT_GRID, read_pcd
 from .tol import TOL
 from .topology import edge_keys, unique_rows, used_vertices
 
@@ -145,6 +146,8 @@ def _parse_triangle_off(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
 def _parse(data: bytes, fmt: str) -> tuple[np.ndarray, np.ndarray]:
     if fmt == "off" and (parsed := _parse_triangle_off(data)) is not None:
         return parsed
+    if fmt == "pcd":
+        return read_pcd(data)
     import trimesh  # heavy import, only needed when a file is actually parsed
 
     try:
@@ -159,10 +162,7 @@ def _parse(data: bytes, fmt: str) -> tuple[np.ndarray, np.ndarray]:
     if not meshes:
         n_points = sum(len(getattr(p, "vertices", ())) for p in parts)
         if n_points:
-            raise PointCloudError(
-                "The file contains points but no triangles; "
-                "upload a triangle mesh, not a point cloud."
-            )
+            raise PointCloudError(POINTS_WITHOUT_GRID)
         return np.empty((0, 3)), np.empty((0, 3), dtype=np.int64)
     vertices, faces, offset = [], [], 0
     for mesh in meshes:
@@ -422,9 +422,7 @@ def _read_arrays(
     if not len(vertices):
         raise EmptyMeshError("The file contains no vertices.")
     if not len(faces):
-        raise PointCloudError(
-            "The file contains points but no triangles; upload a triangle mesh, not a point cloud."
-        )
+        raise PointCloudError(POINTS_WITHOUT_GRID)
     if len(faces) > max_faces:
         raise TooManyFacesError(
             f"The mesh has {len(faces):,} triangles; the limit is {max_faces:,}. "

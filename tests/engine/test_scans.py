@@ -1,0 +1,145 @@
+"""Organized point clouds (a depth camera's PCD): read, triangulated by their grid, the
+gaps between occluding and occluded surfaces left open."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from worker.engine.errors import PointCloudError, UnreadableMeshError
+from worker.engine.mesh_io import read_mesh
+from worker.engine.scans import SHADOW_DEGREES, grid_faces, organized_surface, read_pcd
+from worker.evaluation.samples import pcd_gz_bytes
+
+HEIGHT, WIDTH = 30, 40
+
+
+def camera_grid(depth: np.ndarray) -> np.ndarray:
+    """(h, w, 3) what a pinhole camera at the origin looking along +z sees at ``depth``
+    (h, w) (``nan``: nothing), a pixel's ray ``(u, v, 1)`` 0.02 apart."""
+    height, width = depth.shape
+    v, u = np.mgrid[0:height, 0:width] * 0.02
+    rays = np.stack([u - u.mean(), v - v.mean(), np.ones_like(u)], axis=-1)
+    return rays * depth[..., None]
+
+
+def two_planes() -> tuple[np.ndarray, int]:
+    """A near plane (depth 1) over the left ``near`` columns in front of a far one (depth
+    3): the cloud, and ``near``."""
+    near = 15
+    depth = np.full((HEIGHT, WIDTH), 3.0)
+    depth[:, :near] = 1.0
+    return camera_grid(depth), near
+
+
+def pcd(points: np.ndarray, data: str = "ascii", viewpoint=(0.0, 0.0, 0.0)) -> bytes:
+    """``points`` (h, w, 3) as a PCD file with an extra ``rgb`` field, stored as ``data``."""
+    height, width = points.shape[:2]
+    header = (
+        "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z rgb\nSIZE 4 4 4 4\nTYPE F F F U\n"
+        f"COUNT 1 1 1 1\nWIDTH {width}\nHEIGHT {height}\n"
+        f"VIEWPOINT {' '.join(map(str, viewpoint))} 1 0 0 0\nPOINTS {width * height}\n"
+        f"DATA {data}\n"
+    )
+    flat = points.reshape(-1, 3)
+    if data == "ascii":
+        rows = "".join(f"{x!r} {y!r} {z!r} 4278190080\n" for x, y, z in flat.tolist())
+        return (header + rows).encode()
+    records = np.zeros(len(flat), dtype=[("xyz", "<f4", (3,)), ("rgb", "<u4")])
+    records["xyz"], records["rgb"] = flat, 0xFF000000
+    return header.encode() + records.tobytes()
+
+
+def test_an_occluding_edge_leaves_no_triangle_across_the_gap():
+    points, near = two_planes()
+    vertices, faces = organized_surface(points, np.zeros(3))
+    on_near = np.isclose(vertices[:, 2], 1.0)
+    assert not np.any(on_near[faces].any(axis=1) & ~on_near[faces].all(axis=1))
+    # Every square of either plane is kept: two triangles each.
+    assert len(faces) == 2 * (HEIGHT - 1) * (near - 1 + WIDTH - near - 1)
+    # The grid alone (SHREC'17's range scans) joins the planes by a strip of shortcuts.
+    joined = grid_faces(np.ones((HEIGHT, WIDTH), dtype=bool))
+    assert len(joined) == len(faces) + 2 * (HEIGHT - 1)
+
+
+def test_a_surface_seen_obliquely_keeps_every_triangle():
+    """A plane tilted 45 degrees from the camera's axis: the rays meet it at 24 degrees or
+    more, and only edges within SHADOW_DEGREES of a ray are dropped."""
+    height, width = HEIGHT, WIDTH
+    v, u = np.mgrid[0:height, 0:width] * 0.02
+    u, v = u - u.mean(), v - v.mean()
+    # The plane z = 2 + x tan(45 deg) met by the ray (u, v, 1): t = 2 / (1 - u tan 45).
+    depth = 2.0 / (1.0 - u * np.tan(np.radians(45.0)))
+    assert SHADOW_DEGREES < 20.0
+    vertices, faces = organized_surface(camera_grid(depth), np.zeros(3))
+    assert len(vertices) == height * width
+    assert len(faces) == 2 * (height - 1) * (width - 1)
+
+
+def test_pixels_that_saw_nothing_are_left_out():
+    points, _ = two_planes()
+    points[5:9, 20:30] = np.nan
+    vertices, faces = organized_surface(points, np.zeros(3))
+    assert len(vertices) == HEIGHT * WIDTH - 4 * 10 and np.isfinite(vertices).all()
+    assert faces.max() == len(vertices) - 1
+
+
+@pytest.mark.parametrize("data", ["ascii", "binary"])
+def test_a_pcd_file_is_read_as_its_grid_triangulated_from_its_viewpoint(data):
+    points, _ = two_planes()
+    points[0, 0] = np.nan
+    vertices, faces = read_pcd(pcd(points, data))
+    want_vertices, want_faces = organized_surface(points.astype(np.float32), np.zeros(3))
+    np.testing.assert_allclose(vertices, want_vertices, rtol=1e-6)
+    np.testing.assert_array_equal(faces, want_faces)
+    # The shadows are seen from the file's viewpoint.
+    aside = np.array([0.0, 1e6, 0.0])
+    faces_aside = read_pcd(pcd(points, data, viewpoint=aside))[1]
+    np.testing.assert_array_equal(faces_aside, organized_surface(points, aside)[1])
+    assert len(faces_aside) != len(faces)
+
+
+def test_a_gzipped_pcd_is_read_as_a_mesh():
+    points, _ = two_planes()
+    cleaned = read_mesh(pcd_gz_bytes(points, np.zeros(3)), "scan.pcd.gz")
+    # The larger piece, the far plane (the near one is separate once the gap is open).
+    assert cleaned.mesh.n_vertices == HEIGHT * (WIDTH - 15)
+    assert np.allclose(cleaned.mesh.vertices[:, 2], 3.0, atol=1e-6)
+    assert 0.5 < cleaned.kept_area_fraction < 1.0
+
+
+def test_a_cloud_without_its_grid_is_refused_with_a_sentence():
+    points, _ = two_planes()
+    unorganized = points.reshape(1, -1, 3)
+    with pytest.raises(PointCloudError, match="no sensor grid"):
+        read_pcd(pcd(unorganized))
+    with pytest.raises(PointCloudError, match="organized"):
+        read_mesh(
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n"
+            b"property float y\nproperty float z\nend_header\n0 0 0\n",
+            "points.ply",
+        )
+
+
+@pytest.mark.parametrize(
+    ("damage", "sentence"),
+    [
+        (lambda b: b.replace(b"DATA ascii", b"DATA binary_compressed"), "DATA ascii or binary"),
+        (lambda b: b.replace(b"FIELDS x y z rgb", b"FIELDS a b c rgb"), "no x, y and z"),
+        (lambda b: b[: len(b) // 2], "damaged or truncated"),
+        (lambda b: b.replace(b"WIDTH 40", b"WIDTH forty"), "not a number"),
+        (lambda b: b.split(b"DATA")[0], "no DATA line"),
+        (lambda b: b.replace(b"TYPE F F F U", b"TYPE F F F"), "disagree"),
+    ],
+)
+def test_a_damaged_pcd_is_refused_with_a_sentence(damage, sentence):
+    points, _ = two_planes()
+    with pytest.raises(UnreadableMeshError, match=sentence):
+        read_mesh(damage(pcd(points)), "scan.pcd")
+
+
+def test_a_truncated_binary_pcd_is_refused():
+    points, _ = two_planes()
+    data = pcd(points, "binary")
+    with pytest.raises(UnreadableMeshError, match="damaged or truncated"):
+        read_mesh(data[:-100], "scan.pcd")

@@ -1,0 +1,169 @@
+"""Organized point clouds: a depth camera's grid of points, triangulated by its grid.
+
+A depth camera (or a range scanner) measures one point per pixel of its image, so its
+cloud comes with the neighbours a surface needs: four pixels that see the surface make
+a square of it. PCD files (the Point Cloud Library's format) keep that grid when they
+are *organized* (``HEIGHT`` > 1, one point per pixel in row order, ``NaN`` where the
+pixel saw nothing) and the sensor's position (``VIEWPOINT``). A cloud without its grid
+(``HEIGHT`` 1, or a file of points in other formats) is refused: its surface's
+neighbours are not known, and guessing them fuses touching sheets (docs/decisions.md,
+"Point clouds stay refused").
+
+The grid is triangulated as a scanner's software does: two triangles per square of four
+valid pixels, one per square of three (:func:`grid_faces`). Where the surface seen by two
+neighbouring pixels is interrupted (an occluding edge, a limb in front of the body),
+their triangle runs along the viewing ray over the gap: such a *shadowed* edge, within
+``SHADOW_DEGREES`` of the ray from the sensor, leaves its triangles out, the rule of
+PCL's ``OrganizedFastMesh`` (Holz and Behnke 2012, "Fast range image segmentation and
+smoothing using approximate surface reconstruction and region growing").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import PointCloudError, UnreadableMeshError
+
+#: An edge closer than this to its sensor's viewing ray crosses a gap, not the surface.
+SHADOW_DEGREES = 12.5
+
+#: What a file of points without their grid is told (any format but an organized PCD).
+POINTS_WITHOUT_GRID = (
+    "The file contains points but no triangles; upload a triangle mesh, or the organized "
+    "cloud a depth camera wrote (.pcd, one point per pixel)."
+)
+
+#: PCD field types (``TYPE`` and ``SIZE``) as numpy's little-endian type letters.
+_PCD_TYPES = {"F": "f", "I": "i", "U": "u"}
+
+
+def grid_faces(valid: np.ndarray) -> np.ndarray:
+    """(m, 3) int triangles of an (H, W) grid of pixels, numbered in row order: two per
+    square of four ``valid`` pixels (split along the diagonal from its top left), one per
+    square of three."""
+    height, width = valid.shape
+    index = np.arange(height * width).reshape(height, width)
+    a, b = index[:-1, :-1].ravel(), index[:-1, 1:].ravel()  # a b
+    c, d = index[1:, :-1].ravel(), index[1:, 1:].ravel()  # c d
+    hit = valid.ravel()
+    ha, hb, hc, hd = hit[a], hit[b], hit[c], hit[d]
+    every = ha & hb & hc & hd
+    triangles = [
+        ((a, b, d), every | (ha & hb & hd & ~hc)),
+        ((a, d, c), every | (ha & hd & hc & ~hb)),
+        ((a, b, c), ha & hb & hc & ~hd),
+        ((b, d, c), hb & hd & hc & ~ha),
+    ]
+    return np.concatenate([np.stack(t, axis=1)[keep] for t, keep in triangles])
+
+
+def unshadowed(
+    points: np.ndarray, faces: np.ndarray, viewpoint: np.ndarray, degrees: float = SHADOW_DEGREES
+) -> np.ndarray:
+    """(m,) bool, the ``faces`` none of whose edges lies within ``degrees`` of the ray from
+    ``viewpoint`` (3,) to its first end (:data:`SHADOW_DEGREES`)."""
+    cosine = np.cos(np.radians(degrees))
+    kept = np.ones(len(faces), dtype=bool)
+    for first, second in ((0, 1), (1, 2), (2, 0)):
+        start, end = points[faces[:, first]], points[faces[:, second]]
+        edge, ray = end - start, start - viewpoint
+        length = np.linalg.norm(edge, axis=1) * np.linalg.norm(ray, axis=1)
+        along = np.abs(np.einsum("ij,ij->i", edge, ray))
+        kept &= along < cosine * np.maximum(length, np.finfo(float).tiny)
+    return kept
+
+
+def organized_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """An organized cloud's surface: (n, 3) its valid points and (m, 3) the grid's
+    unshadowed triangles on them.
+
+    Parameters
+    ----------
+    points : (H, W, 3) float, a point per pixel, any coordinate not finite where the
+        pixel saw nothing.
+    viewpoint : (3,) float, the sensor's position in the points' frame.
+    """
+    valid = np.isfinite(points).all(axis=2)
+    flat = points.reshape(-1, 3)
+    faces = grid_faces(valid)
+    faces = faces[unshadowed(np.nan_to_num(flat), faces, viewpoint)]
+    number = np.cumsum(valid.ravel()) - 1
+    return flat[valid.ravel()], number[faces]
+
+
+def read_pcd(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """A PCD file's (n, 3) vertices and (m, 3) triangles: an organized cloud's surface
+    (:func:`organized_surface`, from its ``VIEWPOINT``).
+
+    Raises
+    ------
+    PointCloudError
+        The cloud is not organized (``HEIGHT`` 1): no grid tells its neighbours.
+    UnreadableMeshError
+        Not a PCD file, no x, y, z fields, or data other than ``ascii`` or ``binary``.
+    """
+    header, body = _pcd_header(data)
+    try:
+        width, height = int(header["WIDTH"][0]), int(header["HEIGHT"][0])
+    except ValueError as exc:
+        raise UnreadableMeshError("The PCD header's WIDTH or HEIGHT is not a number.") from exc
+    if height <= 1 or width <= 1:
+        raise PointCloudError(
+            "The point cloud has no sensor grid (PCD HEIGHT 1): its points' neighbours are "
+            "unknown. Upload a triangle mesh, or the organized cloud the depth camera "
+            "wrote (one point per pixel)."
+        )
+    fields = header["FIELDS"]
+    if not {"x", "y", "z"} <= set(fields):
+        raise UnreadableMeshError("The PCD file has no x, y and z fields.")
+    counts = [int(c) for c in header.get("COUNT", ["1"] * len(fields))]
+    if not len(counts) == len(header["SIZE"]) == len(header["TYPE"]) == len(fields):
+        raise UnreadableMeshError("The PCD header's FIELDS, SIZE, TYPE and COUNT disagree.")
+    kind = header["DATA"][0].lower() if header["DATA"] else ""
+    if kind not in ("ascii", "binary"):
+        raise UnreadableMeshError(
+            f"PCD data stored as {kind or 'nothing'} cannot be read here; save the cloud "
+            "with DATA ascii or binary."
+        )
+    n = width * height
+    try:
+        if kind == "ascii":
+            values = np.array(body.split(), dtype=np.float64).reshape(n, sum(counts))
+            column = {name: sum(counts[:i]) for i, name in enumerate(fields)}
+            xyz = values[:, [column["x"], column["y"], column["z"]]]
+        else:
+            dtype = np.dtype(
+                [
+                    (f"{i}", f"<{_PCD_TYPES[t.upper()]}{s}", (c,))
+                    for i, (t, s, c) in enumerate(
+                        zip(header["TYPE"], header["SIZE"], counts, strict=True)
+                    )
+                ]
+            )
+            records = np.frombuffer(body, dtype=dtype, count=n)
+            xyz = np.stack([records[str(fields.index(a))][:, 0] for a in "xyz"], axis=1)
+    except (ValueError, KeyError, TypeError) as exc:
+        raise UnreadableMeshError(
+            "The PCD file's points do not match its header: it is damaged or truncated."
+        ) from exc
+    viewpoint = np.array([float(v) for v in header.get("VIEWPOINT", ["0"] * 7)[:3]])
+    return organized_surface(xyz.astype(np.float64).reshape(height, width, 3), viewpoint)
+
+
+def _pcd_header(data: bytes) -> tuple[dict[str, list[str]], bytes]:
+    """The header's entries (keyword -> its values) and the bytes after its DATA line."""
+    header: dict[str, list[str]] = {}
+    offset = 0
+    while "DATA" not in header:
+        end = data.find(b"\n", offset)
+        if end < 0:
+            raise UnreadableMeshError("The file could not be read as PCD: no DATA line.")
+        line = data[offset:end].decode("ascii", errors="replace").strip()
+        offset = end + 1
+        if line and not line.startswith("#"):
+            keyword, *values = line.split()
+            header[keyword.upper()] = values
+    for needed in ("FIELDS", "SIZE", "TYPE", "WIDTH", "HEIGHT"):
+        if not header.get(needed):
+            raise UnreadableMeshError(f"The file could not be read as PCD: no {needed} line.")
+    return header, data[offset:]
