@@ -13,6 +13,7 @@ from worker.evaluation.partial import (
     SHREC_MIN_VERTICES,
     depth_grid,
     grid_mesh,
+    grid_points,
     noisy_surface,
 )
 from worker.evaluation.variants import make_variant
@@ -25,7 +26,7 @@ def sphere() -> Mesh:
 
 
 def _scan(mesh: Mesh, direction: np.ndarray, pitch: float) -> Mesh:
-    return grid_mesh(*depth_grid(mesh, direction, pitch), direction, pitch)
+    return grid_mesh(grid_points(*depth_grid(mesh, direction, pitch), direction, pitch))
 
 
 def test_a_range_scan_samples_the_visible_side_on_a_grid(sphere):

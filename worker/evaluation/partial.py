@@ -36,6 +36,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from worker.engine.errors import MeshError
 from worker.engine.geodesic import farthest_point_samples
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
+from worker.engine.scans import grid_faces, organized_surface
 from worker.engine.topology import edge_keys
 
 #: Number of discs the ``holes-*`` variants remove.
@@ -227,35 +228,31 @@ def depth_grid(mesh: Mesh, direction: np.ndarray, pitch: float) -> tuple[np.ndar
     return image.reshape(height, width), origin
 
 
-def grid_mesh(image: np.ndarray, origin: np.ndarray, direction: np.ndarray, pitch: float) -> Mesh:
-    """A depth image (:func:`depth_grid`) triangulated as a grid, as a range scanner's
-    software does: two triangles per square of four hit pixels, one per square of
-    three, with no test of the depths (an occlusion edge becomes a shortcut)."""
+def grid_points(
+    image: np.ndarray, origin: np.ndarray, direction: np.ndarray, pitch: float
+) -> np.ndarray:
+    """(h, w, 3) the points a depth image (:func:`depth_grid`) saw, ``nan`` where its ray
+    missed: the organized cloud a depth camera writes."""
     height, width = image.shape
     ys, xs = np.mgrid[0:height, 0:width]
     plane = origin + (np.stack([xs, ys], axis=-1) + 0.5) * pitch
-    local = np.concatenate([plane, np.nan_to_num(image)[..., None]], axis=-1)
-    vertices = local.reshape(-1, 3) @ _view_frame(direction)
-    index = np.arange(height * width).reshape(height, width)
-    a, b = index[:-1, :-1].ravel(), index[:-1, 1:].ravel()  # a b
-    c, d = index[1:, :-1].ravel(), index[1:, 1:].ravel()  # c d
-    hit = ~np.isnan(image.ravel())
-    ha, hb, hc, hd = hit[a], hit[b], hit[c], hit[d]
-    every = ha & hb & hc & hd
-    triangles = [
-        ((a, b, d), every | (ha & hb & hd & ~hc)),
-        ((a, d, c), every | (ha & hd & hc & ~hb)),
-        ((a, b, c), ha & hb & hc & ~hd),
-        ((b, d, c), hb & hd & hc & ~ha),
-    ]
-    faces = np.concatenate([np.stack(t, axis=1)[keep] for t, keep in triangles])
-    return clean_mesh(vertices, faces)
+    local = np.concatenate([plane, image[..., None]], axis=-1)
+    points: np.ndarray = local @ _view_frame(direction)
+    return points
 
 
-def range_scan(mesh: Mesh, rng: np.random.Generator) -> Mesh:
-    """SHREC'17's range scan (module docstring): the depth grid (:func:`depth_grid`) from
-    a random direction with about :func:`random_resolution` pixels hit, triangulated
-    (:func:`grid_mesh`); its largest piece in a random :func:`similarity`."""
+def grid_mesh(points: np.ndarray) -> Mesh:
+    """An organized cloud (:func:`grid_points`) triangulated as a grid, as SHREC'17's range
+    scans were: two triangles per square of four hit pixels, one per square of three,
+    with no test of the depths (an occlusion edge becomes a shortcut)."""
+    faces = grid_faces(np.isfinite(points).all(axis=2))
+    return clean_mesh(np.nan_to_num(points.reshape(-1, 3)), faces)
+
+
+def range_image(mesh: Mesh, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """SHREC'17's range scan (module docstring): the organized cloud (:func:`grid_points`)
+    of a depth grid (:func:`depth_grid`) from a random direction with about
+    :func:`random_resolution` pixels hit, and the direction (3,)."""
     direction = random_direction(rng)
     target = random_resolution(mesh, rng)
     extent = np.ptp(mesh.vertices @ _view_frame(direction).T, axis=0)
@@ -264,7 +261,24 @@ def range_scan(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     for _ in range(2):  # the silhouette's share of the box decides the pixels hit
         pitch *= float(np.sqrt(max(int(np.count_nonzero(~np.isnan(image))), 1) / target))
         image, origin = depth_grid(mesh, direction, pitch)
-    return similarity(grid_mesh(image, origin, direction, pitch), rng)
+    return grid_points(image, origin, direction, pitch), direction
+
+
+def range_scan(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """SHREC'17's range scan: :func:`range_image` triangulated with its shortcuts
+    (:func:`grid_mesh`), its largest piece in a random :func:`similarity`."""
+    return similarity(grid_mesh(range_image(mesh, rng)[0]), rng)
+
+
+def range_cloud(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """The same scan (the same draws as :func:`range_scan`) read as the service reads a
+    depth camera's organized cloud: triangulated without the edges along the viewing ray
+    (:func:`worker.engine.scans.organized_surface`, an orthographic camera's rays from a
+    viewpoint far along the direction), its largest piece in a random similarity."""
+    points, direction = range_image(mesh, rng)
+    far = direction * 1e3 * float(np.ptp(mesh.vertices, axis=0).max())
+    vertices, faces = organized_surface(points, mesh.vertices.mean(axis=0) + far)
+    return similarity(clean_mesh(vertices, faces), rng)
 
 
 def single_view(mesh: Mesh, direction: np.ndarray) -> Mesh:
@@ -321,6 +335,7 @@ PARTIAL_VARIANTS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
     "holes-25": lambda mesh, rng: geodesic_holes(mesh, 0.25, rng),
     "view": lambda mesh, rng: single_view(mesh, random_direction(rng)),
     "range": range_scan,
+    "range-cloud": range_cloud,
     "shrec-holes": shrec_holes,
     "noise-0.25": lambda mesh, rng: noisy_surface(mesh, 0.25, rng),
     "noise-0.5": lambda mesh, rng: noisy_surface(mesh, 0.5, rng),
