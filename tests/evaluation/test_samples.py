@@ -21,6 +21,9 @@ from worker.evaluation.compute import compute_descriptors, descriptor_vectors
 from worker.evaluation.datasets import read_labels
 from worker.evaluation.samples import (
     CROSSING_MARGIN,
+    DEPTH_DIRECTION,
+    DEPTH_PIXELS,
+    DEPTH_SAMPLE,
     FIGURES,
     N_POSES,
     PARTIAL_SAMPLE,
@@ -133,6 +136,25 @@ def test_the_partial_example_is_the_quadruped_without_its_top():
     whole, part = read_off_gz(example("quadruped-3")), read_off_gz(EXAMPLES / PARTIAL_SAMPLE)
     assert not part.is_watertight and 0.6 < part.area / whole.area < 0.95
     assert part.bounds[1, 2] < whole.bounds[1, 2] and part.bounds[0, 2] == whole.bounds[0, 2]
+
+
+def test_the_depth_example_is_the_quadruped_s_left_side_as_a_camera_s_grid():
+    """What a depth camera would write: the side of quadruped-3 facing it, an organized
+    cloud read as the mesh of its grid, every point on the whole's surface."""
+    whole = read_off_gz(example("quadruped-3"))
+    scan = read_mesh(EXAMPLES / DEPTH_SAMPLE)
+    vertices = scan.mesh.vertices
+    assert 0.8 * DEPTH_PIXELS < len(vertices) <= 1.1 * DEPTH_PIXELS
+    extent = np.ptp(whole.vertices, axis=0).max()
+    distance = surface_distance(vertices, whole)  # (its nearest triangles found approximately)
+    assert np.quantile(distance, 0.99) < 1e-3 * extent and distance.max() < 2e-3 * extent
+    # The side facing the camera (+y), and less than half of the whole's area.
+    facing = np.asarray(DEPTH_DIRECTION)
+    assert (vertices @ facing).mean() > whole.vertices @ facing @ np.ones(
+        len(whole.vertices)
+    ) / len(whole.vertices)
+    area = trimesh.Trimesh(vertices, scan.mesh.faces, process=False).area
+    assert 0.2 < area / whole.area < 0.5
 
 
 @pytest.mark.slow

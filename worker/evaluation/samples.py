@@ -365,11 +365,47 @@ def off_gz_bytes(mesh: Mesh) -> bytes:
 PARTIAL_SOURCE = ("quadruped", 3)
 PARTIAL_SHARE = 0.25
 PARTIAL_SAMPLE = Path("partial") / "quadruped-3-top-cut.off.gz"
+#: A depth camera's view of the same sample: its left side seen from afar (an
+#: orthographic depth grid, about DEPTH_PIXELS pixels on it), written as the organized
+#: cloud such a camera writes (ASCII PCD, ``nan`` where a pixel saw nothing).
+DEPTH_SAMPLE = Path("partial") / "quadruped-3-depth.pcd.gz"
+DEPTH_DIRECTION = (0.0, 1.0, 0.0)
+DEPTH_PIXELS = 1500
+
+
+def pcd_gz_bytes(points: np.ndarray, viewpoint: np.ndarray) -> bytes:
+    """An organized cloud (h, w, 3) (``nan`` where a pixel saw nothing) and its sensor's
+    position (3,) as gzip'd ASCII PCD (v0.7); the same cloud always gives the same bytes."""
+    height, width = points.shape[:2]
+    text = io.StringIO()
+    text.write(
+        "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z\n"
+        f"SIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {width}\nHEIGHT {height}\n"
+        f"VIEWPOINT {' '.join(f'{v:.{DECIMALS}f}' for v in viewpoint)} 1 0 0 0\n"
+        f"POINTS {width * height}\nDATA ascii\n"
+    )
+    np.savetxt(text, points.reshape(-1, 3), fmt=f"%.{DECIMALS}f")
+    return gzip.compress(text.getvalue().encode("ascii"), mtime=0)
+
+
+def depth_scan(mesh: Mesh, direction: np.ndarray, pixels: int) -> tuple[np.ndarray, np.ndarray]:
+    """``mesh`` seen along ``-direction`` by an orthographic depth grid with about
+    ``pixels`` pixels on it: the organized cloud (h, w, 3) and a viewpoint far along
+    ``direction`` (3,)."""
+    from .partial import depth_grid, grid_points
+
+    extent = float(np.ptp(mesh.vertices, axis=0).max())
+    image, origin = depth_grid(mesh, direction, extent / 10)
+    pitch = extent / 10 * float(np.sqrt(np.count_nonzero(~np.isnan(image)) / pixels))
+    image, origin = depth_grid(mesh, direction, pitch)
+    far = mesh.vertices.mean(axis=0) + 1e3 * extent * direction
+    return grid_points(image, origin, direction, pitch), far
 
 
 def write_samples(out_dir: str | Path) -> list[Path]:
     """Write every sample (``<class>-<pose>.off.gz``), ``labels.csv`` (columns
-    ``file,class``) and the partial scan ``PARTIAL_SAMPLE`` into ``out_dir``; returns
+    ``file,class``), the partial scan ``PARTIAL_SAMPLE`` and the depth camera's view
+    ``DEPTH_SAMPLE`` into ``out_dir``; returns
     the paths written, labels last."""
     from .partial import planar_cut
 
@@ -386,7 +422,9 @@ def write_samples(out_dir: str | Path) -> list[Path]:
             if (name, pose) == PARTIAL_SOURCE:
                 part = planar_cut(mesh, PARTIAL_SHARE, np.array([0.0, 0.0, 1.0]))
                 (out / PARTIAL_SAMPLE).write_bytes(off_gz_bytes(part))
-                written.append(out / PARTIAL_SAMPLE)
+                scan = depth_scan(mesh, np.array(DEPTH_DIRECTION), DEPTH_PIXELS)
+                (out / DEPTH_SAMPLE).write_bytes(pcd_gz_bytes(*scan))
+                written += [out / PARTIAL_SAMPLE, out / DEPTH_SAMPLE]
     labels = out / "labels.csv"
     with open(labels, "w", newline="") as handle:
         writer = csv.writer(handle, lineterminator="\n")
