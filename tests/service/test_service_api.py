@@ -7,7 +7,7 @@ import gzip
 import numpy as np
 import pytest
 import trimesh
-from conftest import example, with_a_far_half_copy
+from conftest import EXAMPLES, example, with_a_far_half_copy
 
 from app.client import format_matches
 from benchmarks.common import Service
@@ -15,7 +15,7 @@ from worker.engine.mesh_io import load_mesh
 from worker.engine.pipeline import resampled_surface
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.evaluation.partial import planar_cut
-from worker.evaluation.samples import SAMPLE_VERTICES
+from worker.evaluation.samples import DEPTH_SAMPLE, SAMPLE_VERTICES
 
 from .conftest import GALLERY
 
@@ -103,6 +103,26 @@ def test_a_cut_query_is_ranked_by_its_parts_and_says_so(service: Service, galler
     whole = service.query("quadruped-2", k=2).json()
     assert whole["partial"] is None
     assert all("parts" not in m["scores"] for m in whole["matches"])
+
+
+def test_a_depth_camera_s_cloud_is_queried_by_its_grid_and_one_without_it_refused(
+    service: Service, gallery
+):
+    """The example depth scan (an organized PCD of the quadruped's left side) is
+    triangulated by its grid and finds the quadruped by its parts; points with no grid
+    are a 422 that says what to send instead."""
+    data = (EXAMPLES / DEPTH_SAMPLE).read_bytes()
+    response = service.client.post(
+        "/query", files={"file": (DEPTH_SAMPLE.name, data)}, data={"k": "3"}
+    )
+    assert response.status_code == 200, response.text
+    body = response.json()
+    assert body["partial"] is not None
+    assert [m["label"] for m in body["matches"][:2]] == ["quadruped", "quadruped"]
+
+    cloud = trimesh.PointCloud(load_mesh(example("quadruped-2")).vertices).export(file_type="ply")
+    refused = _error(service.client.post("/query", files={"file": ("scan.ply", cloud)}), 422)
+    assert "organized cloud a depth camera wrote (.pcd" in refused["detail"]
 
 
 def test_bytes_already_described_answer_without_a_worker(service: Service, gallery):

@@ -19,7 +19,7 @@ from conftest import example, with_a_far_half_copy
 
 from benchmarks.common import EXAMPLES, Service
 from tests.service.conftest import migrated_service, running
-from worker.evaluation.samples import PARTIAL_SAMPLE
+from worker.evaluation.samples import DEPTH_SAMPLE, PARTIAL_SAMPLE
 
 pytestmark = [pytest.mark.slow, pytest.mark.service]
 
@@ -185,6 +185,24 @@ def test_a_partial_scan_is_ranked_by_its_parts_and_the_page_says_so(page):
     # No confidence, and the card says why rather than leaving it out.
     assert "no confidence (ranked by its parts)" in cards.first.inner_text()
     shoot(page, "partial")
+
+
+def test_a_depth_camera_s_scan_is_searched_and_drawn_beside_its_match(page):
+    """The example organized cloud (.pcd): triangulated by its grid, ranked by its parts,
+    and drawn in 3D beside the quadruped it finds."""
+    page.click("#tab-search")
+    page.set_input_files("#file-search", str(EXAMPLES / DEPTH_SAMPLE))
+    page.wait_for_function(
+        "() => document.getElementById('search-progress').textContent"
+        ".startsWith('quadruped-3-depth.pcd.gz: ')",
+        timeout=180_000,
+    )
+    assert page.locator("#search-results .card .label").first.inner_text() == "quadruped"
+    page.wait_for_function(
+        "() => document.getElementById('view-compare').dataset.models === '2'", timeout=60_000
+    )
+    page.wait_for_function(f"() => ({DRAWN_PIXELS})('view-compare') > 4000", timeout=60_000)
+    shoot(page, "depth")
 
 
 def test_a_partial_answer_says_what_ranked_it_and_what_was_measured(site):
