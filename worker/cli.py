@@ -385,7 +385,8 @@ def add_subcommands(sub: Any) -> None:
         help="whether partial and scanned copies of the meshes find their whole",
         description="Describe every mesh of labels.csv and partial copies of it (a planar cut "
         "of 5, 15 and 30%% of the vertices, geodesic holes of 10 and 25%% of the area, a "
-        "single-view scan, SHREC'17's range scans and holes, Gaussian noise of 0.25, 0.5 "
+        "single-view scan, SHREC'17's range scans (also read as a depth camera's organized "
+        "cloud) and holes, Gaussian noise of 0.25, 0.5 "
         "and 1%% of the diagonal), and query the whole meshes with each copy; report per "
         "modality, for the parts modality, the preset's score and ShapeDNA the own class and "
         "own source at rank 1 and the mAP, and all to all among each variant's copies the "

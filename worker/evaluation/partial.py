@@ -15,6 +15,9 @@ here keeps a part of the surface, its largest connected piece:
   missing parts", 3DOR 2017): an orthographic depth grid shot from a random direction at
   a random resolution (300 vertices .. as many as the mesh has), triangulated as a grid,
   so that occlusion edges become shortcuts, in a random similarity transform;
+* ``range-cloud``: scans drawn as ``range``'s, read as the service reads a depth camera's
+  organized cloud (:mod:`worker.engine.scans`): the grid's triangles along a viewing ray
+  left out, so occlusion edges stay open;
 * ``shrec-holes``: SHREC'17's holes: geodesic discs of random radius (up to 20% of the
   diameter) eroded around some of 70 farthest samples, the rest decimated to a random
   resolution (300 vertices .. as many as the mesh has), in a random similarity transform;
