@@ -127,6 +127,7 @@ def test_a_cloud_without_its_grid_is_refused_with_a_sentence():
         (lambda b: b.replace(b"DATA ascii", b"DATA binary_compressed"), "DATA ascii or binary"),
         (lambda b: b.replace(b"FIELDS x y z rgb", b"FIELDS a b c rgb"), "no x, y and z"),
         (lambda b: b[: len(b) // 2], "damaged or truncated"),
+        (lambda b: b.replace(b" 4278190080\n", b" red\n", 1), "damaged or truncated"),
         (lambda b: b.replace(b"WIDTH 40", b"WIDTH forty"), "not a number"),
         (lambda b: b.split(b"DATA")[0], "no DATA line"),
         (lambda b: b.replace(b"TYPE F F F U", b"TYPE F F F"), "disagree"),

@@ -20,6 +20,8 @@ smoothing using approximate surface reconstruction and region growing").
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from .errors import PointCloudError, UnreadableMeshError
@@ -128,7 +130,10 @@ def read_pcd(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     n = width * height
     try:
         if kind == "ascii":
-            values = np.array(body.split(), dtype=np.float64).reshape(n, sum(counts))
+            with warnings.catch_warnings():  # a token that is not a number warns, or raises
+                warnings.simplefilter("error")
+                numbers = np.fromstring(body.decode("ascii"), sep=" ")
+            values = numbers.reshape(n, sum(counts))
             column = {name: sum(counts[:i]) for i, name in enumerate(fields)}
             xyz = values[:, [column["x"], column["y"], column["z"]]]
         else:
@@ -142,7 +147,7 @@ def read_pcd(data: bytes) -> tuple[np.ndarray, np.ndarray]:
             )
             records = np.frombuffer(body, dtype=dtype, count=n)
             xyz = np.stack([records[str(fields.index(a))][:, 0] for a in "xyz"], axis=1)
-    except (ValueError, KeyError, TypeError) as exc:
+    except (ValueError, KeyError, TypeError, DeprecationWarning) as exc:
         raise UnreadableMeshError(
             "The PCD file's points do not match its header: it is damaged or truncated."
         ) from exc
