@@ -274,10 +274,11 @@ def range_scan(mesh: Mesh, rng: np.random.Generator) -> Mesh:
 
 
 def range_cloud(mesh: Mesh, rng: np.random.Generator) -> Mesh:
-    """The same scan (the same draws as :func:`range_scan`) read as the service reads a
-    depth camera's organized cloud: triangulated without the edges along the viewing ray
-    (:func:`worker.engine.scans.organized_surface`, an orthographic camera's rays from a
-    viewpoint far along the direction), its largest piece in a random similarity."""
+    """A scan drawn as :func:`range_scan`'s (from the variant's own seed) read as the
+    service reads a depth camera's organized cloud: triangulated without the edges along
+    the viewing ray (:func:`worker.engine.scans.organized_surface`, an orthographic
+    camera's rays from a viewpoint far along the direction), its largest piece in a random
+    similarity."""
     points, direction = range_image(mesh, rng)
     far = direction * 1e3 * float(np.ptp(mesh.vertices, axis=0).max())
     vertices, faces = organized_surface(points, mesh.vertices.mean(axis=0) + far)
