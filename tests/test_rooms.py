@@ -10,6 +10,8 @@ from pathlib import Path
 import pytest
 
 import worker
+from app.client import MESH_SUFFIXES
+from worker.engine.formats import MESH_FORMATS
 
 #: What the engine's source may import besides the standard library and itself.
 ENGINE_DEPENDENCIES = {"numpy", "scipy", "trimesh", "tensorly", "fast_simplification"}
@@ -225,6 +227,8 @@ def test_the_cli_client_loads_nothing_of_the_server():
     loaded = modules_loaded_by("import app.client")
     assert {m.split(".")[0] for m in loaded} & {"fastapi", "sqlalchemy", "faiss", "huey"} == set()
     assert {m for m in loaded if m.startswith(("app.", "worker."))} == {"app.client"}
+    # So it keeps its own copy of the file suffixes the engine reads.
+    assert MESH_SUFFIXES == tuple(f".{f}" for f in MESH_FORMATS)
 
 
 #: Packages of the repository that are not installed: the scripts' and the tests'.
