@@ -89,6 +89,17 @@ def shoot(page, name: str) -> None:
         page.screenshot(path=str(Path(SCREENSHOTS) / f"{name}.png"), full_page=True)
 
 
+def search_for(page, path: Path) -> None:
+    """Search the page with the file at ``path`` and wait for its answer's progress line."""
+    page.click("#tab-search")
+    page.set_input_files("#file-search", str(path))
+    page.wait_for_function(
+        "(name) => document.getElementById('search-progress').textContent.startsWith(name + ': ')",
+        arg=Path(path).name,
+        timeout=180_000,
+    )
+
+
 def test_enroll_three_meshes_through_the_page(page, site):
     # Nothing searched or opened yet: no empty 3D panels, no detail with live buttons.
     assert page.locator("#compare").is_hidden() and page.locator("#detail").is_hidden()
@@ -155,13 +166,7 @@ def test_a_search_says_when_part_of_the_file_was_left_out(page, tmp_path):
     _, both = with_a_far_half_copy(example("quadruped-2"))
     path = tmp_path / "quadruped-2-and-a-copy.off"
     path.write_bytes(both)
-    page.click("#tab-search")
-    page.set_input_files("#file-search", str(path))
-    page.wait_for_function(
-        "() => document.getElementById('search-progress').textContent"
-        ".startsWith('quadruped-2-and-a-copy.off: ')",
-        timeout=180_000,
-    )
+    search_for(page, path)
     progress = page.locator("#search-progress").inner_text()
     assert "Only 80% of the file's surface was described" in progress, progress
     assert page.locator("#search-results .card .label").first.inner_text() == "quadruped"
@@ -170,13 +175,7 @@ def test_a_search_says_when_part_of_the_file_was_left_out(page, tmp_path):
 def test_a_partial_scan_is_ranked_by_its_parts_and_the_page_says_so(page):
     """The walk-through's partial example: the page says how much seems missing, and
     every card has the parts bar."""
-    page.click("#tab-search")
-    page.set_input_files("#file-search", str(EXAMPLES / PARTIAL_SAMPLE))
-    page.wait_for_function(
-        "() => document.getElementById('search-progress').textContent"
-        ".startsWith('quadruped-3-top-cut.off.gz: ')",
-        timeout=180_000,
-    )
+    search_for(page, EXAMPLES / PARTIAL_SAMPLE)
     progress = page.locator("#search-progress").inner_text()
     assert "matches are ranked by the parts that are there" in progress, progress
     cards = page.locator("#search-results .card")
@@ -190,13 +189,7 @@ def test_a_partial_scan_is_ranked_by_its_parts_and_the_page_says_so(page):
 def test_a_depth_camera_s_scan_is_searched_and_drawn_beside_its_match(page):
     """The example organized cloud (.pcd): triangulated by its grid, ranked by its parts,
     and drawn in 3D beside the quadruped it finds."""
-    page.click("#tab-search")
-    page.set_input_files("#file-search", str(EXAMPLES / DEPTH_SAMPLE))
-    page.wait_for_function(
-        "() => document.getElementById('search-progress').textContent"
-        ".startsWith('quadruped-3-depth.pcd.gz: ')",
-        timeout=180_000,
-    )
+    search_for(page, EXAMPLES / DEPTH_SAMPLE)
     assert page.locator("#search-results .card .label").first.inner_text() == "quadruped"
     page.wait_for_function(
         "() => document.getElementById('view-compare').dataset.models === '2'", timeout=60_000

@@ -244,6 +244,14 @@ def grid_points(
     return points
 
 
+def far_viewpoint(mesh: Mesh, direction: np.ndarray) -> np.ndarray:
+    """(3,) where an orthographic camera looking along ``-direction`` would stand as a
+    depth camera: a thousand times ``mesh``'s extent away, its rays all but parallel."""
+    extent = float(np.ptp(mesh.vertices, axis=0).max())
+    viewpoint: np.ndarray = mesh.vertices.mean(axis=0) + 1e3 * extent * direction
+    return viewpoint
+
+
 def grid_mesh(points: np.ndarray) -> Mesh:
     """An organized cloud (:func:`grid_points`) triangulated as a grid, as SHREC'17's range
     scans were: two triangles per square of four hit pixels, one per square of three,
@@ -280,8 +288,7 @@ def range_cloud(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     camera's rays from a viewpoint far along the direction), its largest piece in a random
     similarity."""
     points, direction = range_image(mesh, rng)
-    far = direction * 1e3 * float(np.ptp(mesh.vertices, axis=0).max())
-    vertices, faces = organized_surface(points, mesh.vertices.mean(axis=0) + far)
+    vertices, faces = organized_surface(points, far_viewpoint(mesh, direction))
     return similarity(clean_mesh(vertices, faces), rng)
 
 

@@ -392,14 +392,13 @@ def depth_scan(mesh: Mesh, direction: np.ndarray, pixels: int) -> tuple[np.ndarr
     """``mesh`` seen along ``-direction`` by an orthographic depth grid with about
     ``pixels`` pixels on it: the organized cloud (h, w, 3) and a viewpoint far along
     ``direction`` (3,)."""
-    from .partial import depth_grid, grid_points
+    from .partial import depth_grid, far_viewpoint, grid_points
 
     extent = float(np.ptp(mesh.vertices, axis=0).max())
     image, origin = depth_grid(mesh, direction, extent / 10)
     pitch = extent / 10 * float(np.sqrt(np.count_nonzero(~np.isnan(image)) / pixels))
     image, origin = depth_grid(mesh, direction, pitch)
-    far = mesh.vertices.mean(axis=0) + 1e3 * extent * direction
-    return grid_points(image, origin, direction, pitch), far
+    return grid_points(image, origin, direction, pitch), far_viewpoint(mesh, direction)
 
 
 def write_samples(out_dir: str | Path) -> list[Path]:
