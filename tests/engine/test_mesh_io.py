@@ -311,7 +311,8 @@ def test_fast_off_reader_agrees_with_trimesh(header, vertex_extra, note):
     loaded = trimesh.load(io.BytesIO(data), file_type="off", process=False)
     fast = mesh_io._parse_triangle_off(data)
     assert (fast is not None) == (note in ("plain", "normals"))
-    vertices_read, faces_read = mesh_io._parse(data, "off")
+    vertices_read, faces_read, grid = mesh_io._parse(data, "off")
+    assert grid is None
     np.testing.assert_array_equal(vertices_read, loaded.vertices)
     np.testing.assert_array_equal(faces_read, loaded.faces)
 

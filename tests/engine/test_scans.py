@@ -3,12 +3,21 @@ gaps between occluding and occluded surfaces left open."""
 
 from __future__ import annotations
 
+import struct
+
 import numpy as np
 import pytest
 
 from worker.engine.errors import PointCloudError, UnreadableMeshError
 from worker.engine.mesh_io import read_mesh
-from worker.engine.scans import SHADOW_DEGREES, grid_faces, organized_surface, read_pcd
+from worker.engine.scans import (
+    SHADOW_DEGREES,
+    Grid,
+    grid_faces,
+    lzf_decompress,
+    organized_surface,
+    read_pcd,
+)
 from worker.evaluation.samples import pcd_gz_bytes
 
 HEIGHT, WIDTH = 30, 40
@@ -32,8 +41,43 @@ def two_planes() -> tuple[np.ndarray, int]:
     return camera_grid(depth), near
 
 
+#: A 6 x 8 grid's fields in turn (``soa_fields(small_grid())``) as liblzf 3.6 compresses
+#: them (python-lzf 0.2.6's ``lzf.compress``): literal runs, copies of 3 to 183 bytes
+#: from 4 to 296 bytes back, overlapping ones among them.
+LIBLZF_SMALL_GRID = bytes.fromhex(
+    "040000c07f00e012030f295c0fbecdccccbd8fc275bd0ad7a3bc2003003c200b003d2013003d201b003e"
+    "2003e01c1fe00363e02b3f2033e00c7fe00357e00b0b4037e0130320cf40d3e01303003c2023003ce003"
+    "5b400fc003205b003de013034127e01303e00357e00d0b010040e03d03e0035fe03f53604700ff2007e0"
+    "ae030100ff"
+)
+
+
+def small_grid() -> np.ndarray:
+    """(6, 8, 3) a plane seen by a camera, its first row and three pixels saw nothing."""
+    points = camera_grid(np.full((6, 8), 2.0))
+    points[0, :] = np.nan
+    points[3, 2:5] = np.nan
+    return points
+
+
+def soa_fields(points: np.ndarray) -> bytes:
+    """``binary_compressed``'s raw layout: each field's values in turn (x, y, z as float32,
+    then a constant rgb)."""
+    flat = points.reshape(-1, 3).astype("<f4")
+    colour = np.full(len(flat), 0xFF000000, dtype="<u4")
+    return b"".join(np.ascontiguousarray(column).tobytes() for column in flat.T) + colour.tobytes()
+
+
+def lzf_literals(raw: bytes) -> bytes:
+    """``raw`` as a valid LZF stream of literal runs only (32 bytes each at most)."""
+    return b"".join(
+        bytes([len(run) - 1]) + run for run in (raw[a : a + 32] for a in range(0, len(raw), 32))
+    )
+
+
 def pcd(points: np.ndarray, data: str = "ascii", viewpoint=(0.0, 0.0, 0.0)) -> bytes:
-    """``points`` (h, w, 3) as a PCD file with an extra ``rgb`` field, stored as ``data``."""
+    """``points`` (h, w, 3) as a PCD file with an extra ``rgb`` field, stored as ``data``
+    (``binary_compressed`` by literal runs only, :func:`lzf_literals`)."""
     height, width = points.shape[:2]
     header = (
         "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z rgb\nSIZE 4 4 4 4\nTYPE F F F U\n"
@@ -45,6 +89,10 @@ def pcd(points: np.ndarray, data: str = "ascii", viewpoint=(0.0, 0.0, 0.0)) -> b
     if data == "ascii":
         rows = "".join(f"{x!r} {y!r} {z!r} 4278190080\n" for x, y, z in flat.tolist())
         return (header + rows).encode()
+    if data == "binary_compressed":
+        raw = soa_fields(points)
+        compressed = lzf_literals(raw)
+        return header.encode() + struct.pack("<II", len(compressed), len(raw)) + compressed
     records = np.zeros(len(flat), dtype=[("xyz", "<f4", (3,)), ("rgb", "<u4")])
     records["xyz"], records["rgb"] = flat, 0xFF000000
     return header.encode() + records.tobytes()
@@ -84,11 +132,12 @@ def test_pixels_that_saw_nothing_are_left_out():
     assert faces.max() == len(vertices) - 1
 
 
-@pytest.mark.parametrize("data", ["ascii", "binary"])
+@pytest.mark.parametrize("data", ["ascii", "binary", "binary_compressed"])
 def test_a_pcd_file_is_read_as_its_grid_triangulated_from_its_viewpoint(data):
     points, _ = two_planes()
     points[0, 0] = np.nan
-    vertices, faces = read_pcd(pcd(points, data))
+    vertices, faces, grid = read_pcd(pcd(points, data))
+    assert grid == Grid(WIDTH, HEIGHT, WIDTH * HEIGHT - 1)
     want_vertices, want_faces = organized_surface(points.astype(np.float32), np.zeros(3))
     np.testing.assert_allclose(vertices, want_vertices, rtol=1e-6)
     np.testing.assert_array_equal(faces, want_faces)
@@ -99,6 +148,36 @@ def test_a_pcd_file_is_read_as_its_grid_triangulated_from_its_viewpoint(data):
     assert len(faces_aside) != len(faces)
 
 
+def test_lzf_decompresses_what_liblzf_compressed():
+    raw = soa_fields(small_grid())
+    assert lzf_decompress(LIBLZF_SMALL_GRID, len(raw)) == raw
+    for damaged, size in [
+        (LIBLZF_SMALL_GRID, len(raw) - 1),  # more than the header says
+        (LIBLZF_SMALL_GRID, len(raw) + 1),  # fewer
+        (LIBLZF_SMALL_GRID[:-3], len(raw)),  # truncated
+        (bytes([0x20, 0x00]), 3),  # a copy from before the start
+    ]:
+        with pytest.raises((ValueError, IndexError)):
+            lzf_decompress(damaged, size)
+
+
+def test_pcl_binary_compressed_file_is_read():
+    """PCL's layout: the sizes, then liblzf's bytes of each field's values in turn."""
+    points = small_grid()
+    header = pcd(points, "binary").split(b"DATA")[0] + b"DATA binary_compressed\n"
+    raw = len(soa_fields(points))
+    data = header + struct.pack("<II", len(LIBLZF_SMALL_GRID), raw) + LIBLZF_SMALL_GRID
+    vertices, faces, grid = read_pcd(data)
+    assert grid == Grid(8, 6, 48 - 8 - 3)
+    want_vertices, want_faces = organized_surface(points.astype(np.float32), np.zeros(3))
+    np.testing.assert_allclose(vertices, want_vertices, rtol=1e-6)
+    np.testing.assert_array_equal(faces, want_faces)
+    with pytest.raises(UnreadableMeshError, match="damaged or truncated"):
+        read_pcd(data[:-5])
+    with pytest.raises(UnreadableMeshError, match="expands to more than"):
+        read_pcd(data, max_bytes=raw - 1)
+
+
 def test_a_gzipped_pcd_is_read_as_a_mesh():
     points, _ = two_planes()
     cleaned = read_mesh(pcd_gz_bytes(points, np.zeros(3)), "scan.pcd.gz")
@@ -106,6 +185,7 @@ def test_a_gzipped_pcd_is_read_as_a_mesh():
     assert cleaned.mesh.n_vertices == HEIGHT * (WIDTH - 15)
     assert np.allclose(cleaned.mesh.vertices[:, 2], 3.0, atol=1e-6)
     assert 0.5 < cleaned.kept_area_fraction < 1.0
+    assert cleaned.grid == Grid(WIDTH, HEIGHT, WIDTH * HEIGHT)  # the file's, not the piece's
 
 
 def test_a_cloud_without_its_grid_is_refused_with_a_sentence():
@@ -124,7 +204,7 @@ def test_a_cloud_without_its_grid_is_refused_with_a_sentence():
 @pytest.mark.parametrize(
     ("damage", "sentence"),
     [
-        (lambda b: b.replace(b"DATA ascii", b"DATA binary_compressed"), "DATA ascii or binary"),
+        (lambda b: b.replace(b"DATA ascii", b"DATA lzma"), "ascii, binary or binary_compressed"),
         (lambda b: b.replace(b"FIELDS x y z rgb", b"FIELDS a b c rgb"), "no x, y and z"),
         (lambda b: b[: len(b) // 2], "damaged or truncated"),
         (lambda b: b.replace(b" 4278190080\n", b" red\n", 1), "damaged or truncated"),

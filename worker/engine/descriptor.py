@@ -50,6 +50,9 @@ class ShapeDescriptor:
         the cleaned mesh that is described (the kept part) before it is resampled or
         normalized: the size modality (:data:`~worker.engine.presets.SIZE`). None for a
         descriptor stored before this was recorded.
+    input_points, input_grid : when the file was an organized point cloud (a depth
+        camera's, triangulated by its grid: :mod:`~worker.engine.scans`), its points that
+        saw the surface and its grid (width, height); None for a mesh.
     """
 
     preset: str
@@ -66,6 +69,8 @@ class ShapeDescriptor:
     parts_reach: np.ndarray = field(default_factory=lambda: np.zeros(0))
     longest_open_loop: float | None = None
     area: float | None = None
+    input_points: int | None = None
+    input_grid: tuple[int, int] | None = None
 
     def vector(self, modality: str) -> np.ndarray:
         """The modality as the flat vector that eqs. (8) and (9) compare: one of
@@ -110,6 +115,8 @@ class ShapeDescriptor:
             "kept_area_fraction": self.kept_area_fraction,
             "longest_open_loop": self.longest_open_loop,
             "area": self.area,
+            "input_points": self.input_points,
+            "input_grid": None if self.input_grid is None else list(self.input_grid),
         }
 
     @classmethod
@@ -144,6 +151,8 @@ class ShapeDescriptor:
             parts_reach=np.asarray(arrays.get("parts_reach", np.zeros(0)), dtype=np.float64),
             longest_open_loop=meta.get("longest_open_loop"),
             area=meta.get("area"),
+            input_points=meta.get("input_points"),
+            input_grid=None if (grid := meta.get("input_grid")) is None else (grid[0], grid[1]),
         )
 
     def to_npz_bytes(self) -> bytes:

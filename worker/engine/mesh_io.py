@@ -11,7 +11,7 @@ from __future__ import annotations
 import io
 import warnings
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +30,7 @@ from .errors import (
     UnreadableMeshError,
 )
 from .formats import DEFAULT_MAX_DECOMPRESSED_BYTES, DEFAULT_MAX_FACES, mesh_format
-from .scans import POINTS_WITHOUT_GRID, read_pcd
+from .scans import POINTS_WITHOUT_GRID, Grid, read_pcd
 from .tol import TOL
 from .topology import edge_keys, unique_rows, used_vertices
 
@@ -143,11 +143,15 @@ def _parse_triangle_off(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
     return np.ascontiguousarray(vertices), faces[:, 1:].astype(np.int64)
 
 
-def _parse(data: bytes, fmt: str) -> tuple[np.ndarray, np.ndarray]:
+def _parse(
+    data: bytes, fmt: str, max_bytes: int = DEFAULT_MAX_DECOMPRESSED_BYTES
+) -> tuple[np.ndarray, np.ndarray, Grid | None]:
+    """A file's vertices and triangles, and its sensor grid when it is an organized cloud
+    (a compressed one expanding to at most ``max_bytes``)."""
     if fmt == "off" and (parsed := _parse_triangle_off(data)) is not None:
-        return parsed
+        return (*parsed, None)
     if fmt == "pcd":
-        return read_pcd(data)
+        return read_pcd(data, max_bytes)
     import trimesh  # heavy import, only needed when a file is actually parsed
 
     try:
@@ -163,13 +167,13 @@ def _parse(data: bytes, fmt: str) -> tuple[np.ndarray, np.ndarray]:
         n_points = sum(len(getattr(p, "vertices", ())) for p in parts)
         if n_points:
             raise PointCloudError(POINTS_WITHOUT_GRID)
-        return np.empty((0, 3)), np.empty((0, 3), dtype=np.int64)
+        return np.empty((0, 3)), np.empty((0, 3), dtype=np.int64), None
     vertices, faces, offset = [], [], 0
     for mesh in meshes:
         vertices.append(np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3))
         faces.append(np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3) + offset)
         offset += len(vertices[-1])
-    return np.concatenate(vertices), np.concatenate(faces)
+    return np.concatenate(vertices), np.concatenate(faces), None
 
 
 @dataclass(frozen=True)
@@ -182,10 +186,13 @@ class CleanedMesh:
     kept_area_fraction : its share of the source's surface area (after duplicate and
         degenerate triangles are removed); below 1 when the source had other, separate
         parts, which are not described.
+    grid : the sensor grid when the source was an organized point cloud, triangulated
+        by it (:mod:`.scans`); None for a mesh.
     """
 
     mesh: Mesh
     kept_area_fraction: float
+    grid: Grid | None = None
 
 
 def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
@@ -357,8 +364,8 @@ def read_mesh(
     MeshError
         A subclass naming what is wrong, with a sentence for the user.
     """
-    vertices, faces = _read_arrays(source, filename, max_faces, max_decompressed_bytes)
-    cleaned = clean_surface(vertices, faces)
+    vertices, faces, grid = _read_arrays(source, filename, max_faces, max_decompressed_bytes)
+    cleaned = replace(clean_surface(vertices, faces), grid=grid)
     mesh = cleaned.mesh
     if mesh.n_vertices < min_vertices:
         raise TooFewVerticesError(
@@ -392,7 +399,7 @@ def read_numbered_mesh(
     MeshError
         As :func:`read_mesh`, for what is wrong with the file itself.
     """
-    vertices, faces = _read_arrays(source, filename, max_faces, max_decompressed_bytes)
+    vertices, faces, _ = _read_arrays(source, filename, max_faces, max_decompressed_bytes)
     return Mesh(vertices=vertices, faces=faces)
 
 
@@ -401,9 +408,10 @@ def _read_arrays(
     filename: str | None,
     max_faces: int,
     max_decompressed_bytes: int,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, Grid | None]:
     """A file's vertices (n, 3) float and triangles (m, 3) int as it numbers them, after
-    the checks of the file itself (format, size, triangles, indices, coordinates)."""
+    the checks of the file itself (format, size, triangles, indices, coordinates), and
+    its sensor grid when it is an organized cloud."""
     if isinstance(source, bytes | bytearray | memoryview):
         if filename is None:
             raise ValueError("filename is required when the mesh is given as bytes")
@@ -418,7 +426,7 @@ def _read_arrays(
     if not data.strip():
         raise EmptyMeshError("The file is empty.")
 
-    vertices, faces = _parse(data, fmt)
+    vertices, faces, grid = _parse(data, fmt, max_decompressed_bytes)
     if not len(vertices):
         raise EmptyMeshError("The file contains no vertices.")
     if not len(faces):
@@ -435,7 +443,7 @@ def _read_arrays(
         raise NonFiniteCoordinatesError(
             "Some vertex coordinates are not finite numbers (NaN, infinity or too large)."
         )
-    return np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
+    return np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64), grid
 
 
 __all__ = [

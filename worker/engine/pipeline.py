@@ -235,6 +235,9 @@ def load_and_describe(
     load_seconds = time.perf_counter() - start
     descriptor = describe_mesh(cleaned.mesh, preset)
     descriptor.kept_area_fraction = cleaned.kept_area_fraction
+    if cleaned.grid is not None:
+        descriptor.input_points = cleaned.grid.points
+        descriptor.input_grid = (cleaned.grid.width, cleaned.grid.height)
     descriptor.timings = {"load": load_seconds, **descriptor.timings}
     descriptor.timings["total"] = sum(descriptor.timings.values())
     return cleaned.mesh, descriptor

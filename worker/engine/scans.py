@@ -20,11 +20,14 @@ smoothing using approximate surface reconstruction and region growing").
 
 from __future__ import annotations
 
+import struct
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 
 from .errors import PointCloudError, UnreadableMeshError
+from .formats import DEFAULT_MAX_DECOMPRESSED_BYTES
 
 #: An edge closer than this to its sensor's viewing ray crosses a gap, not the surface.
 SHADOW_DEGREES = 12.5
@@ -37,6 +40,16 @@ POINTS_WITHOUT_GRID = (
 
 #: PCD field types (``TYPE`` and ``SIZE``) as numpy's little-endian type letters.
 _PCD_TYPES = {"F": "f", "I": "i", "U": "u"}
+
+
+@dataclass(frozen=True)
+class Grid:
+    """An organized cloud's sensor grid: ``width`` x ``height`` pixels, ``points`` of
+    which saw the surface."""
+
+    width: int
+    height: int
+    points: int
 
 
 def grid_faces(valid: np.ndarray) -> np.ndarray:
@@ -93,16 +106,23 @@ def organized_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.nda
     return flat[valid.ravel()], number[faces]
 
 
-def read_pcd(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+def read_pcd(
+    data: bytes, max_bytes: int = DEFAULT_MAX_DECOMPRESSED_BYTES
+) -> tuple[np.ndarray, np.ndarray, Grid]:
     """A PCD file's (n, 3) vertices and (m, 3) triangles: an organized cloud's surface
-    (:func:`organized_surface`, from its ``VIEWPOINT``).
+    (:func:`organized_surface`, from its ``VIEWPOINT``), and its grid.
+
+    Its data ``ascii``, ``binary`` (a record per point) or ``binary_compressed`` (PCL's
+    default for files it saves: each field's values in turn, compressed by LZF,
+    :func:`lzf_decompress`, to at most ``max_bytes``).
 
     Raises
     ------
     PointCloudError
         The cloud is not organized (``HEIGHT`` 1): no grid tells its neighbours.
     UnreadableMeshError
-        Not a PCD file, no x, y, z fields, or data other than ``ascii`` or ``binary``.
+        Not a PCD file, no x, y, z fields, other data, or points that do not match the
+        header.
     """
     header, body = _pcd_header(data)
     try:
@@ -122,10 +142,10 @@ def read_pcd(data: bytes) -> tuple[np.ndarray, np.ndarray]:
     if not len(counts) == len(header["SIZE"]) == len(header["TYPE"]) == len(fields):
         raise UnreadableMeshError("The PCD header's FIELDS, SIZE, TYPE and COUNT disagree.")
     kind = header["DATA"][0].lower() if header["DATA"] else ""
-    if kind not in ("ascii", "binary"):
+    if kind not in ("ascii", "binary", "binary_compressed"):
         raise UnreadableMeshError(
             f"PCD data stored as {kind or 'nothing'} cannot be read here; save the cloud "
-            "with DATA ascii or binary."
+            "with DATA ascii, binary or binary_compressed."
         )
     n = width * height
     try:
@@ -136,6 +156,8 @@ def read_pcd(data: bytes) -> tuple[np.ndarray, np.ndarray]:
             values = numbers.reshape(n, sum(counts))
             column = {name: sum(counts[:i]) for i, name in enumerate(fields)}
             xyz = values[:, [column["x"], column["y"], column["z"]]]
+        elif kind == "binary_compressed":
+            xyz = _compressed_xyz(header, body, n, counts, max_bytes)
         else:
             dtype = np.dtype(
                 [
@@ -147,12 +169,95 @@ def read_pcd(data: bytes) -> tuple[np.ndarray, np.ndarray]:
             )
             records = np.frombuffer(body, dtype=dtype, count=n)
             xyz = np.stack([records[str(fields.index(a))][:, 0] for a in "xyz"], axis=1)
-    except (ValueError, KeyError, TypeError, DeprecationWarning) as exc:
+    except UnreadableMeshError:
+        raise
+    except (ValueError, KeyError, TypeError, IndexError, struct.error, DeprecationWarning) as exc:
         raise UnreadableMeshError(
             "The PCD file's points do not match its header: it is damaged or truncated."
         ) from exc
     viewpoint = np.array([float(v) for v in header.get("VIEWPOINT", ["0"] * 7)[:3]])
-    return organized_surface(xyz.astype(np.float64).reshape(height, width, 3), viewpoint)
+    points, faces = organized_surface(xyz.astype(np.float64).reshape(height, width, 3), viewpoint)
+    return points, faces, Grid(width, height, len(points))
+
+
+def _compressed_xyz(
+    header: dict[str, list[str]], body: bytes, n: int, counts: list[int], max_bytes: int
+) -> np.ndarray:
+    """(n, 3) the x, y, z of ``binary_compressed`` data: the compressed and the raw sizes
+    (two little-endian uint32), then the compressed bytes of each field's ``n`` values in
+    turn (PCL's ``PCDWriter::writeBinaryCompressed``).
+
+    Raises
+    ------
+    ValueError, KeyError, IndexError, struct.error
+        Data that does not match the header.
+    UnreadableMeshError
+        A cloud larger than ``max_bytes`` once decompressed.
+    """
+    compressed, size = struct.unpack("<II", body[:8])
+    sizes = [int(s) for s in header["SIZE"]]
+    if size != n * sum(s * c for s, c in zip(sizes, counts, strict=True)):
+        raise ValueError("the raw size is not the header's points")
+    if size > max_bytes:
+        raise UnreadableMeshError(
+            f"The PCD cloud expands to more than {max_bytes:,} bytes; save a smaller cloud."
+        )
+    raw = lzf_decompress(body[8 : 8 + compressed], size)
+    fields, offset, columns = header["FIELDS"], 0, {}
+    for name, kind, width, count in zip(fields, header["TYPE"], sizes, counts, strict=True):
+        values = np.frombuffer(
+            raw, dtype=f"<{_PCD_TYPES[kind.upper()]}{width}", count=n * count, offset=offset
+        )
+        columns[name] = values.reshape(n, count)[:, 0]
+        offset += n * count * width
+    return np.stack([columns[a] for a in "xyz"], axis=1)
+
+
+def lzf_decompress(data: bytes, size: int) -> bytes:
+    """LZF-compressed ``data`` (Lehmann's liblzf, ``lzf_decompress``) as the ``size`` bytes
+    it was made from.
+
+    A control byte ``c`` below 32 is followed by ``c + 1`` literal bytes; any other copies
+    ``(c >> 5) + 2`` bytes (plus the next byte when ``c >> 5`` is 7) from
+    ``((c & 31) << 8) + next byte + 1`` bytes back in the output, overlapping it when the
+    copy is longer than that distance.
+
+    Raises
+    ------
+    ValueError, IndexError
+        Damaged data: a copy from before the start, or an output of another size.
+    """
+    out = bytearray()
+    at, end = 0, len(data)
+    while at < end:
+        control = data[at]
+        at += 1
+        if control < 32:
+            run = control + 1
+            if at + run > end:
+                raise ValueError("a literal run past the end")
+            out += data[at : at + run]
+            at += run
+        else:
+            length = control >> 5
+            if length == 7:
+                length += data[at]
+                at += 1
+            back = ((control & 31) << 8) + data[at] + 1
+            at += 1
+            length += 2
+            start = len(out) - back
+            if start < 0:
+                raise ValueError("a copy from before the start")
+            if back >= length:
+                out += out[start : start + length]
+            else:  # the copy repeats the last ``back`` bytes
+                out += (out[start:] * (length // back + 1))[:length]
+        if len(out) > size:
+            raise ValueError("more bytes than the header says")
+    if len(out) != size:
+        raise ValueError("fewer bytes than the header says")
+    return bytes(out)
 
 
 def _pcd_header(data: bytes) -> tuple[dict[str, list[str]], bytes]:
