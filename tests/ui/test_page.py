@@ -131,7 +131,12 @@ def test_search_with_another_pose_shows_the_right_object_in_3d(page):
     cards.first.wait_for(timeout=180_000)
     assert cards.count() == len(ENROLL)
     assert cards.first.locator(".label").inner_text() == "quadruped"
-    assert cards.first.locator("img").evaluate("img => img.complete && img.naturalWidth") == 256
+    # The thumbnail loads after its card is drawn: on a busy machine, some time after.
+    page.wait_for_function(
+        "() => { const img = document.querySelector('#search-results .card img');"
+        " return img && img.complete && img.naturalWidth === 256; }",
+        timeout=60_000,
+    )
     # The best match opens beside the query at once, both in one view.
     page.locator("#compare").wait_for(state="visible")
     page.wait_for_function(
