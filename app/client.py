@@ -340,7 +340,14 @@ def format_matches(body: dict[str, Any]) -> str:
         title += "\nCompared by the collection's learned fusion: " + ", ".join(
             f"{m} by {c}" for m, c in own.items()
         )
-    kept = body.get("query", {}).get("kept_area_fraction")
+    facts = body.get("query", {})
+    if facts.get("input_grid"):
+        width, height = facts["input_grid"]
+        title += (
+            f"\nThe query is a depth camera's point cloud: {facts['input_points']:,} points on "
+            f"a {width} x {height} grid, triangulated by it."
+        )
+    kept = facts.get("kept_area_fraction")
     if _partial(kept):
         title += (
             f"\nOnly {kept:.0%} of the query file's surface was described: it has other, "

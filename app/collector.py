@@ -235,6 +235,8 @@ class JobCollector:
                 vertices=descriptor.vertices,
                 timings=descriptor.timings,
                 kept_area_fraction=descriptor.kept_area_fraction,
+                input_points=descriptor.input_points,
+                input_grid=None if descriptor.input_grid is None else list(descriptor.input_grid),
             ),
         )
         glb, png = preview_bytes(result, "preview"), preview_bytes(result, "thumbnail")

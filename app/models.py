@@ -150,6 +150,10 @@ class Descriptor(Base):
     timings: Mapped[dict[str, float]] = mapped_column(JSON, default=dict)
     # The described part's share of the file's surface (None: made before it was kept).
     kept_area_fraction: Mapped[float | None]
+    # The organized point cloud the file was: its points and grid [width, height] (None:
+    # a mesh, or made before they were kept).
+    input_points: Mapped[int | None]
+    input_grid: Mapped[list[int] | None] = mapped_column(JSON)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
     mesh: Mapped[Mesh] = relationship(back_populates="descriptors")

@@ -128,6 +128,8 @@ def mesh_out(mesh: Mesh, descriptor: Descriptor | None, collection: str) -> Mesh
             vertices=descriptor.vertices,
             timings=descriptor.timings,
             kept_area_fraction=descriptor.kept_area_fraction,
+            input_points=descriptor.input_points,
+            input_grid=descriptor.input_grid,
         ),
         job_id=job.id if job else None,
         created_at=mesh.created_at,

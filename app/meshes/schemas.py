@@ -32,6 +32,14 @@ class DescriptorInfo(BaseModel):
         "when the file has other, separate parts, which are left out (only its largest "
         "connected part is described); null for descriptors made before it was recorded",
     )
+    input_points: int | None = Field(
+        None,
+        description="when the file was a depth camera's organized point cloud (triangulated "
+        "by its grid): its points that saw the surface; null for a mesh",
+    )
+    input_grid: list[int] | None = Field(
+        None, description="that cloud's sensor grid, [width, height] pixels; null for a mesh"
+    )
 
 
 class MeshOut(BaseModel):

@@ -112,11 +112,13 @@ class QueryOut(BaseModel):
     timings: dict[str, float] = Field(
         description="seconds: descriptor stages of the query (if computed), 'search', 'total'"
     )
-    query: dict[str, int | float] = Field(
+    query: dict[str, int | float | list[int]] = Field(
         default_factory=dict,
         description="the query's mesh: input_vertices, input_faces (cleaned), vertices "
         "(described), and kept_area_fraction, the described surface's share of the file's "
-        "surface area (below 1 when the file has other, separate parts, which are left out)",
+        "surface area (below 1 when the file has other, separate parts, which are left out); "
+        "for a depth camera's organized point cloud also input_points (its points that saw "
+        "the surface) and input_grid ([width, height] pixels)",
     )
     partial: PartialOut | None = Field(
         None,

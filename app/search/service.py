@@ -66,15 +66,26 @@ class RankedMatch:
 @dataclass
 class PartialQuery:
     """A query ranked as a part: how partial it looks and how much of its whole it seems
-    to miss (an estimate and its bounds: the parts' scale is measured on a grid)."""
+    to miss (an estimate and its bounds: the parts' scale is measured on a grid), and
+    whether it is one view (a depth camera's organized cloud)."""
 
     partiality: float
     missing_share: float
     missing_range: tuple[float, float]
+    single_view: bool = False
 
     @property
     def note(self) -> str:
         low, high = (round(100 * v) for v in self.missing_range)
+        if self.single_view:
+            # The parts' scale matches what the view shows, not the side it does not see
+            # (docs/service.md, known limits).
+            return (
+                "One view of its object (a depth camera's point cloud): the side it does not "
+                f"see is missing, more than the {low}% to {high}% its parts' best match "
+                "measures; matches are ranked by the parts that are there, so they have no "
+                "confidence."
+            )
         if high >= 10:
             return (
                 f"Between {low}% and {high}% of the surface seems missing (its parts' best "
@@ -97,7 +108,7 @@ class SearchResult:
     gallery_size: int
     matches: list[RankedMatch]
     timings: dict[str, float]
-    query: dict[str, int | float] = field(default_factory=dict)
+    query: dict[str, int | float | list[int]] = field(default_factory=dict)
     #: Where the query's descriptor came from: "computed" by a worker now, the
     #: "enrolled" mesh with the same bytes, a "recent" query's, or "stored" (/similar).
     descriptor_source: DescriptorSource = "computed"
@@ -203,16 +214,20 @@ def parse_options(
     return options
 
 
-def query_facts(descriptor: ShapeDescriptor) -> dict[str, int | float]:
+def query_facts(descriptor: ShapeDescriptor) -> dict[str, int | float | list[int]]:
     """What the answer says of the query's mesh: its size as cleaned and as described,
-    and (when known) the described part's share of the file's surface area."""
-    facts: dict[str, int | float] = {
+    (when known) the described part's share of the file's surface area, and the points
+    and grid of the organized point cloud it was."""
+    facts: dict[str, int | float | list[int]] = {
         "input_vertices": descriptor.input_vertices,
         "input_faces": descriptor.input_faces,
         "vertices": descriptor.vertices,
     }
     if descriptor.kept_area_fraction is not None:
         facts["kept_area_fraction"] = descriptor.kept_area_fraction
+    if descriptor.input_points is not None and descriptor.input_grid is not None:
+        facts["input_points"] = descriptor.input_points
+        facts["input_grid"] = list(descriptor.input_grid)
     return facts
 
 
@@ -241,7 +256,12 @@ def rank(
         kept = stats.kept_share * file_share
         # Rounded: the grid's resolution is some hundredths, not sixteen digits.
         low, high = (round(max(0.0, 1.0 - k * file_share), 2) for k in reversed(stats.kept_range))
-        partial = PartialQuery(stats.partiality, round(max(0.0, 1.0 - kept), 2), (low, high))
+        partial = PartialQuery(
+            stats.partiality,
+            round(max(0.0, 1.0 - kept), 2),
+            (low, high),
+            single_view=descriptor.input_grid is not None,
+        )
     reference = gallery.reference
     # The calibration is of whole queries' scores; a part's are on another scale.
     calibration = None if partial else _calibration_for(state, gallery, options)

@@ -208,6 +208,14 @@ function partial(kept) {
   return kept != null && kept < PARTIAL_SURFACE;
 }
 
+// The organized point cloud a file was, as a phrase; null for a mesh.
+function pointCloud(facts) {
+  if (!facts || facts.input_points == null || !facts.input_grid) return null;
+  const [width, height] = facts.input_grid;
+  return `a depth camera's point cloud: ${facts.input_points.toLocaleString("en")} points `
+    + `on a ${width} x ${height} grid, triangulated by it`;
+}
+
 function percent(value) {
   return `${(100 * value).toFixed(value < 0.1 ? 1 : 0)}%`;
 }
@@ -384,6 +392,7 @@ async function search(file) {
     progress.textContent = `${file.name}: ${result.matches.length} matches among ${result.gallery_size} `
       + `enrolled (${how[result.descriptor_source] || result.descriptor_source}, `
       + `${((performance.now() - started) / 1000).toFixed(1)} s).`
+      + (pointCloud(result.query) ? ` The query is ${pointCloud(result.query)}.` : "")
       + (partial(result.query.kept_area_fraction)
         ? ` Only ${percent(result.query.kept_area_fraction)} of the file's surface was described: `
           + "it has other, separate parts, which were left out (the largest connected part is described)."
@@ -497,8 +506,9 @@ async function openDetail(mesh) {
     status: mesh.status === "failed" ? `failed: ${mesh.detail}` : mesh.status,
     file: `${mesh.filename} (${(mesh.size_bytes / 1024).toFixed(0)} kB)`,
     vertices: mesh.descriptor
-      ? `${mesh.descriptor.input_vertices.toLocaleString("en")} in the file; the descriptor `
-        + `resampled it to ${mesh.descriptor.vertices.toLocaleString("en")}`
+      ? `${mesh.descriptor.input_vertices.toLocaleString("en")} in the file`
+        + (pointCloud(mesh.descriptor) ? ` (${pointCloud(mesh.descriptor)})` : "")
+        + `; the descriptor resampled it to ${mesh.descriptor.vertices.toLocaleString("en")}`
       : "-",
     surface: mesh.descriptor && mesh.descriptor.kept_area_fraction != null
       ? `${percent(mesh.descriptor.kept_area_fraction)} described`

@@ -14,6 +14,7 @@ from benchmarks.common import Service
 from worker.engine.mesh_io import load_mesh
 from worker.engine.pipeline import resampled_surface
 from worker.engine.presets import DEFAULT_PRESET, get_preset
+from worker.engine.scans import read_pcd
 from worker.evaluation.partial import planar_cut
 from worker.evaluation.samples import DEPTH_SAMPLE, SAMPLE_VERTICES
 
@@ -109,8 +110,9 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_and_one_without_it_refuse
     service: Service, gallery
 ):
     """The example depth scan (an organized PCD of the quadruped's left side) is
-    triangulated by its grid and finds the quadruped by its parts; points with no grid
-    are a 422 that says what to send instead."""
+    triangulated by its grid and finds the quadruped by its parts; the answer, and an
+    enrolled scan's descriptor, say it was a cloud and of how many points; points with no
+    grid are a 422 that says what to send instead."""
     data = (EXAMPLES / DEPTH_SAMPLE).read_bytes()
     response = service.client.post(
         "/query", files={"file": (DEPTH_SAMPLE.name, data)}, data={"k": "3"}
@@ -119,6 +121,26 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_and_one_without_it_refuse
     body = response.json()
     assert body["partial"] is not None
     assert [m["label"] for m in body["matches"][:2]] == ["quadruped", "quadruped"]
+    grid = read_pcd(gzip.decompress(data))[2]  # 56 x 77 pixels, 1,583 on the quadruped
+    width, height, points = grid.width, grid.height, grid.points
+    assert body["query"]["input_grid"] == [width, height]
+    assert body["query"]["input_points"] == points
+    # One view: the note does not claim to measure the side it does not see.
+    assert body["partial"]["note"].startswith("One view of its object")
+    assert (
+        f"depth camera's point cloud: {points:,} points on a {width} x {height} grid"
+        in format_matches(body)
+    )
+    whole = service.query("quadruped-2", k=1).json()
+    assert "input_grid" not in whole["query"] and "point cloud" not in format_matches(whole)
+    assert service.client.post("/collections", json={"name": "scans"}).status_code == 201
+    enrolled = service.client.post(
+        "/collections/scans/meshes", files={"file": (DEPTH_SAMPLE.name, data)}
+    )
+    assert enrolled.status_code == 202, enrolled.text
+    mesh = service.wait_mesh(enrolled.json()["id"], collection="scans")
+    assert mesh["descriptor"]["input_grid"] == [width, height]
+    assert mesh["descriptor"]["input_points"] == points
 
     cloud = trimesh.PointCloud(load_mesh(example("quadruped-2")).vertices).export(file_type="ply")
     refused = _error(service.client.post("/query", files={"file": ("scan.ply", cloud)}), 422)

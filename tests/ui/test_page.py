@@ -8,6 +8,7 @@ screenshots of the search (with the side-by-side view) and the gallery are saved
 
 from __future__ import annotations
 
+import gzip
 import os
 import shutil
 import time
@@ -19,6 +20,7 @@ from conftest import example, with_a_far_half_copy
 
 from benchmarks.common import EXAMPLES, Service
 from tests.service.conftest import migrated_service, running
+from worker.engine.scans import read_pcd
 from worker.evaluation.samples import DEPTH_SAMPLE, PARTIAL_SAMPLE
 
 pytestmark = [pytest.mark.slow, pytest.mark.service]
@@ -196,6 +198,9 @@ def test_a_depth_camera_s_scan_is_searched_and_drawn_beside_its_match(page):
     and drawn in 3D beside the quadruped it finds."""
     search_for(page, EXAMPLES / DEPTH_SAMPLE)
     assert page.locator("#search-results .card .label").first.inner_text() == "quadruped"
+    progress = page.locator("#search-progress").inner_text()
+    assert f"The query is {depth_cloud_phrase()}." in progress, progress
+    assert "One view of its object" in progress
     page.wait_for_function(
         "() => document.getElementById('view-compare').dataset.models === '2'", timeout=60_000
     )
@@ -479,4 +484,33 @@ def test_the_collection_picker_switches_gallery_and_search(page, site):
     best.wait_for(timeout=180_000)
     assert page.locator("#search-results .card").count() == 1
     assert best.get_attribute("data-mesh-id") == str(mesh_id)
+    page.select_option("#collection", "default")  # as the page was before this test
+
+
+def depth_cloud_phrase() -> str:
+    """How the page names the example depth scan (its grid as the file has it)."""
+    grid = read_pcd(gzip.decompress((EXAMPLES / DEPTH_SAMPLE).read_bytes()))[2]
+    return (
+        f"a depth camera's point cloud: {grid.points:,} points on a {grid.width} x "
+        f"{grid.height} grid, triangulated by it"
+    )
+
+
+def test_an_enrolled_scan_says_it_was_a_point_cloud(page, site):
+    assert site.client.post("/collections", json={"name": "scans"}).status_code == 201
+    data = (EXAMPLES / DEPTH_SAMPLE).read_bytes()
+    enrolled = site.client.post(
+        "/collections/scans/meshes", files={"file": (DEPTH_SAMPLE.name, data)}
+    )
+    assert enrolled.status_code == 202, enrolled.text
+    assert site.wait_mesh(enrolled.json()["id"], collection="scans")["status"] == "ready"
+    page.reload()
+    page.locator('#collection option[value="scans"]').wait_for(state="attached")
+    page.select_option("#collection", "scans")
+    page.click("#tab-gallery")
+    page.wait_for_function("() => document.querySelectorAll('#gallery-grid .card').length === 1")
+    page.locator("#gallery-grid .card").first.press("Enter")
+    page.locator("#detail").wait_for(state="visible")
+    facts = page.locator("#detail-meta").inner_text()
+    assert f"in the file ({depth_cloud_phrase()}); the descriptor resampled it" in facts, facts
     page.select_option("#collection", "default")  # as the page was before this test
