@@ -88,8 +88,9 @@ MESH_FILE: dict[str, Any] = {
     "contentMediaType": "application/octet-stream",
     "format": "mesh",
     "minLength": 1,  # an empty file is 422 empty_mesh
-    "description": "a triangle mesh file, or the organized point cloud a depth camera "
-    "writes (.pcd: one point per pixel, triangulated by its grid): "
+    "description": "a triangle mesh file, the organized point cloud a depth camera "
+    "writes (.pcd: one point per pixel, triangulated by its grid), or a laser scanner's "
+    "structured scan (.e57, one scan: its points' rows and columns are its grid): "
     + " ".join(f".{f}" for f in MESH_FORMATS)
     + ", optionally .gz-compressed, told by the file name's extension (any other is "
     "415 `unsupported_format`); a file that is not a readable surface of at least 10 "

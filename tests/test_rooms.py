@@ -13,8 +13,9 @@ import worker
 from app.client import MESH_SUFFIXES
 from worker.engine.formats import MESH_FORMATS
 
-#: What the engine's source may import besides the standard library and itself.
-ENGINE_DEPENDENCIES = {"numpy", "scipy", "trimesh", "tensorly", "fast_simplification"}
+#: What the engine's source may import besides the standard library and itself (trimesh
+#: and pye57 read files).
+ENGINE_DEPENDENCIES = {"numpy", "scipy", "trimesh", "tensorly", "fast_simplification", "pye57"}
 #: Libraries of the service, the queue and the evaluation harness: never loaded with the
 #: engine. (threadpoolctl is not listed: scipy.io loads it, not the engine.)
 NOT_IN_ENGINE = {

@@ -142,6 +142,46 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_and_one_without_it_refuse
     assert mesh["descriptor"]["input_grid"] == [width, height]
     assert mesh["descriptor"]["input_points"] == points
 
+
+def test_a_laser_scanner_s_structured_e57_scan_is_queried_by_its_grid(
+    service: Service, gallery, tmp_path
+):
+    """The depth example's points as a structured E57 scan (rows and columns, the
+    scanner's position in its pose): the same grid, the quadruped found."""
+    pye57 = pytest.importorskip("pye57")
+    text = gzip.decompress((EXAMPLES / DEPTH_SAMPLE).read_bytes()).decode()
+    header, body = text.split("DATA ascii\n")
+    fields = dict(line.split(" ", 1) for line in header.splitlines() if " " in line)
+    width, height = int(fields["WIDTH"]), int(fields["HEIGHT"])
+    viewpoint = np.array([float(v) for v in fields["VIEWPOINT"].split()[:3]])
+    xyz = np.array(body.split(), dtype=float).reshape(-1, 3)
+    seen = np.isfinite(xyz).all(axis=1)
+    rows, columns = np.divmod(np.arange(height * width), width)
+    local = np.nan_to_num(xyz - viewpoint)  # in the scan's frame, placed by its pose
+    path = tmp_path / "quadruped-3-side.e57"
+    out = pye57.E57(str(path), mode="w")
+    out.write_scan_raw(
+        {
+            "cartesianX": local[:, 0],
+            "cartesianY": local[:, 1],
+            "cartesianZ": local[:, 2],
+            "cartesianInvalidState": (~seen).astype(np.int8),
+            "rowIndex": rows.astype(np.int32),
+            "columnIndex": columns.astype(np.int32),
+        },
+        rotation=np.array([1.0, 0.0, 0.0, 0.0]),
+        translation=viewpoint,
+    )
+    out.close()
+    response = service.client.post(
+        "/query", files={"file": (path.name, path.read_bytes())}, data={"k": "3"}
+    )
+    assert response.status_code == 200, response.text
+    body = response.json()
+    assert body["query"]["input_grid"] == [width, height]
+    assert body["query"]["input_points"] == int(seen.sum())
+    assert [m["label"] for m in body["matches"][:2]] == ["quadruped", "quadruped"]
+
     cloud = trimesh.PointCloud(load_mesh(example("quadruped-2")).vertices).export(file_type="ply")
     refused = _error(service.client.post("/query", files={"file": ("scan.ply", cloud)}), 422)
     assert "organized cloud a depth camera wrote (.pcd" in refused["detail"]

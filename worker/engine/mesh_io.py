@@ -30,7 +30,7 @@ from .errors import (
     UnreadableMeshError,
 )
 from .formats import DEFAULT_MAX_DECOMPRESSED_BYTES, DEFAULT_MAX_FACES, mesh_format
-from .scans import POINTS_WITHOUT_GRID, Grid, read_pcd
+from .scans import POINTS_WITHOUT_GRID, Grid, read_e57, read_pcd
 from .tol import TOL
 from .topology import edge_keys, unique_rows, used_vertices
 
@@ -152,6 +152,8 @@ def _parse(
         return (*parsed, None)
     if fmt == "pcd":
         return read_pcd(data, max_bytes)
+    if fmt == "e57":
+        return read_e57(data, max_bytes)
     import trimesh  # heavy import, only needed when a file is actually parsed
 
     try:

@@ -4,10 +4,12 @@ A depth camera (or a range scanner) measures one point per pixel of its image, s
 cloud comes with the neighbours a surface needs: four pixels that see the surface make
 a square of it. PCD files (the Point Cloud Library's format) keep that grid when they
 are *organized* (``HEIGHT`` > 1, one point per pixel in row order, ``NaN`` where the
-pixel saw nothing) and the sensor's position (``VIEWPOINT``). A cloud without its grid
-(``HEIGHT`` 1, or a file of points in other formats) is refused: its surface's
-neighbours are not known, and guessing them fuses touching sheets (docs/decisions.md,
-"Point clouds stay refused").
+pixel saw nothing) and the sensor's position (``VIEWPOINT``); E57 files (laser
+scanners') keep it in a *structured* scan, each point's row and column index on the
+scanner's angular grid, and the scanner's position in the scan's pose. A cloud without
+its grid (``HEIGHT`` 1, an E57 scan without indices, or a file of points in other
+formats) is refused: its surface's neighbours are not known, and guessing them fuses
+touching sheets (docs/decisions.md, "Point clouds stay refused").
 
 The grid is triangulated as a scanner's software does: two triangles per square of four
 valid pixels, one per square of three (:func:`grid_faces`). Where the surface seen by two
@@ -21,8 +23,10 @@ smoothing using approximate surface reconstruction and region growing").
 from __future__ import annotations
 
 import struct
+import tempfile
 import warnings
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -34,8 +38,8 @@ SHADOW_DEGREES = 12.5
 
 #: What a file of points without their grid is told (any format but an organized PCD).
 POINTS_WITHOUT_GRID = (
-    "The file contains points but no triangles; upload a triangle mesh, or the organized "
-    "cloud a depth camera wrote (.pcd, one point per pixel)."
+    "The file contains points but no triangles; upload a triangle mesh, the organized "
+    "cloud a depth camera wrote (.pcd, one point per pixel), or a structured .e57 scan."
 )
 
 #: PCD field types (``TYPE`` and ``SIZE``) as numpy's little-endian type letters.
@@ -178,6 +182,106 @@ def read_pcd(
     viewpoint = np.array([float(v) for v in header.get("VIEWPOINT", ["0"] * 7)[:3]])
     points, faces = organized_surface(xyz.astype(np.float64).reshape(height, width, 3), viewpoint)
     return points, faces, Grid(width, height, len(points))
+
+
+def read_e57(
+    data: bytes, max_bytes: int = DEFAULT_MAX_DECOMPRESSED_BYTES
+) -> tuple[np.ndarray, np.ndarray, Grid]:
+    """An E57 file's scan (ASTM E2807, laser scanners' exchange format) as an organized
+    cloud: a *structured* scan's points put on their grid by their ``rowIndex`` and
+    ``columnIndex`` (the scanner's angular grid), in the file's global frame, and
+    triangulated by it seen from the scan's position (:func:`organized_surface`).
+
+    Raises
+    ------
+    PointCloudError
+        The scan has no grid (no row and column indices, or one row or column).
+    UnreadableMeshError
+        Not an E57 file, no scan or several, a grid over ``max_bytes`` as points, or no
+        E57 library for this platform (pye57's builds).
+    """
+    try:
+        import pye57
+    except ImportError as exc:
+        raise UnreadableMeshError(
+            "E57 files cannot be read on this server (the pye57 library has no build for "
+            "its platform); export the scan as an organized PCD."
+        ) from exc
+    with tempfile.NamedTemporaryFile(suffix=".e57") as handle:
+        handle.write(data)
+        handle.flush()
+        try:
+            e57 = pye57.E57(handle.name)
+        except Exception as exc:  # libE57's own error types, and pye57's
+            raise UnreadableMeshError(
+                "The file could not be read as E57: it is damaged or not an E57 file."
+            ) from exc
+        try:
+            return _structured_scan(e57, max_bytes)
+        except pye57.libe57.E57Exception as exc:
+            raise UnreadableMeshError(
+                "The E57 file's scan could not be read: it is damaged or truncated."
+            ) from exc
+        finally:
+            e57.close()
+
+
+def _structured_scan(e57: Any, max_bytes: int) -> tuple[np.ndarray, np.ndarray, Grid]:
+    """:func:`read_e57`'s scan from an open ``pye57.E57``."""
+    if e57.scan_count != 1:
+        raise UnreadableMeshError(
+            f"The E57 file holds {e57.scan_count} scans; upload one scan per file (each is "
+            "one view, triangulated by its own grid)."
+        )
+    header = e57.get_header(0)
+    if not {"rowIndex", "columnIndex"} <= set(header.point_fields):
+        raise PointCloudError(
+            "The E57 scan has no grid (no row and column index per point): its points' "
+            "neighbours are unknown. Upload a triangle mesh, or a structured scan."
+        )
+    if header.point_count * 48 > max_bytes:  # x, y, z, row and column as read
+        raise UnreadableMeshError(
+            f"The E57 scan has {header.point_count:,} points, too many to read here; subsample it."
+        )
+    scan = e57.read_scan(0, row_column=True, ignore_missing_fields=True)
+    rows = np.asarray(scan["rowIndex"], dtype=np.int64)
+    columns = np.asarray(scan["columnIndex"], dtype=np.int64)
+    if not len(rows):
+        raise UnreadableMeshError("The E57 scan has no valid point.")
+    # The scan's grid: its index bounds (the pixels that saw nothing are not read).
+    first_row, last_row = _bounds(header, "row", rows)
+    first_column, last_column = _bounds(header, "column", columns)
+    rows, columns = rows - first_row, columns - first_column
+    height, width = last_row - first_row + 1, last_column - first_column + 1
+    if height <= 1 or width <= 1:
+        raise PointCloudError(
+            "The E57 scan's points lie on one row or column of its grid: no surface joins "
+            "them. Upload a triangle mesh, or a structured scan."
+        )
+    if height * width * 24 > max_bytes:
+        raise UnreadableMeshError(
+            f"The E57 scan's grid has {height:,} x {width:,} cells, too many to read here; "
+            "subsample it."
+        )
+    grid = np.full((height, width, 3), np.nan)
+    grid[rows, columns] = np.stack([scan[f"cartesian{a}"] for a in "XYZ"], axis=1)
+    viewpoint = np.asarray(e57.scan_position(0), dtype=np.float64).reshape(3)
+    points, faces = organized_surface(grid, viewpoint)
+    return points, faces, Grid(width, height, len(points))
+
+
+def _bounds(header: Any, axis: str, indices: np.ndarray) -> tuple[int, int]:
+    """The first and last ``axis`` ("row" or "column") index of an E57 scan's grid: its
+    ``indexBounds``, widened to every point's (a file may leave them out)."""
+    from pye57.libe57 import E57Exception
+
+    first, last = int(indices.min()), int(indices.max())
+    try:
+        first = min(first, int(getattr(header, f"{axis}Minimum")))
+        last = max(last, int(getattr(header, f"{axis}Maximum")))
+    except E57Exception:  # no indexBounds
+        pass
+    return first, last
 
 
 def _compressed_xyz(
