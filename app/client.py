@@ -344,7 +344,7 @@ def format_matches(body: dict[str, Any]) -> str:
     if facts.get("input_grid"):
         width, height = facts["input_grid"]
         title += (
-            f"\nThe query is a depth camera's point cloud: {facts['input_points']:,} points on "
+            f"\nThe query is a scanner's point cloud: {facts['input_points']:,} points on "
             f"a {width} x {height} grid, triangulated by it."
         )
     kept = facts.get("kept_area_fraction")

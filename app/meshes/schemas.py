@@ -34,8 +34,9 @@ class DescriptorInfo(BaseModel):
     )
     input_points: int | None = Field(
         None,
-        description="when the file was a depth camera's organized point cloud (triangulated "
-        "by its grid): its points that saw the surface; null for a mesh",
+        description="when the file was a scanner's organized point cloud (a PCD or a "
+        "structured E57 scan, triangulated by its grid): its points that saw the surface; "
+        "null for a mesh",
     )
     input_grid: list[int] | None = Field(
         None, description="that cloud's sensor grid, [width, height] pixels; null for a mesh"

@@ -117,8 +117,8 @@ class QueryOut(BaseModel):
         description="the query's mesh: input_vertices, input_faces (cleaned), vertices "
         "(described), and kept_area_fraction, the described surface's share of the file's "
         "surface area (below 1 when the file has other, separate parts, which are left out); "
-        "for a depth camera's organized point cloud also input_points (its points that saw "
-        "the surface) and input_grid ([width, height] pixels)",
+        "for a scanner's organized point cloud (a PCD or a structured E57 scan) also "
+        "input_points (its points that saw the surface) and input_grid ([width, height])",
     )
     partial: PartialOut | None = Field(
         None,

@@ -67,7 +67,7 @@ class RankedMatch:
 class PartialQuery:
     """A query ranked as a part: how partial it looks and how much of its whole it seems
     to miss (an estimate and its bounds: the parts' scale is measured on a grid), and
-    whether it is one view (a depth camera's organized cloud)."""
+    whether it is one view (a scanner's organized cloud)."""
 
     partiality: float
     missing_share: float
@@ -81,7 +81,7 @@ class PartialQuery:
             # The parts' scale matches what the view shows, not the side it does not see
             # (docs/service.md, known limits).
             return (
-                "One view of its object (a depth camera's point cloud): the side it does not "
+                "One view of its object (a scanner's point cloud): the side it does not "
                 f"see is missing, more than the {low}% to {high}% its parts' best match "
                 "measures; matches are ranked by the parts that are there, so they have no "
                 "confidence."

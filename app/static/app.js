@@ -212,7 +212,7 @@ function partial(kept) {
 function pointCloud(facts) {
   if (!facts || facts.input_points == null || !facts.input_grid) return null;
   const [width, height] = facts.input_grid;
-  return `a depth camera's point cloud: ${facts.input_points.toLocaleString("en")} points `
+  return `a scanner's point cloud: ${facts.input_points.toLocaleString("en")} points `
     + `on a ${width} x ${height} grid, triangulated by it`;
 }
 

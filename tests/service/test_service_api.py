@@ -128,7 +128,7 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_and_one_without_it_refuse
     # One view: the note does not claim to measure the side it does not see.
     assert body["partial"]["note"].startswith("One view of its object")
     assert (
-        f"depth camera's point cloud: {points:,} points on a {width} x {height} grid"
+        f"scanner's point cloud: {points:,} points on a {width} x {height} grid"
         in format_matches(body)
     )
     whole = service.query("quadruped-2", k=1).json()

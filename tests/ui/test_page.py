@@ -491,7 +491,7 @@ def depth_cloud_phrase() -> str:
     """How the page names the example depth scan (its grid as the file has it)."""
     grid = read_pcd(gzip.decompress((EXAMPLES / DEPTH_SAMPLE).read_bytes()))[2]
     return (
-        f"a depth camera's point cloud: {grid.points:,} points on a {grid.width} x "
+        f"a scanner's point cloud: {grid.points:,} points on a {grid.width} x "
         f"{grid.height} grid, triangulated by it"
     )
 

@@ -51,8 +51,9 @@ class ShapeDescriptor:
         normalized: the size modality (:data:`~worker.engine.presets.SIZE`). None for a
         descriptor stored before this was recorded.
     input_points, input_grid : when the file was an organized point cloud (a depth
-        camera's, triangulated by its grid: :mod:`~worker.engine.scans`), its points that
-        saw the surface and its grid (width, height); None for a mesh.
+        camera's PCD or a laser scanner's structured E57 scan, triangulated by its grid:
+        :mod:`~worker.engine.scans`), its points that saw the surface and its grid
+        (width, height); None for a mesh.
     """
 
     preset: str
