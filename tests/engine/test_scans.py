@@ -7,6 +7,7 @@ import struct
 
 import numpy as np
 import pytest
+from conftest import e57_scan
 
 from worker.engine.errors import PointCloudError, UnreadableMeshError
 from worker.engine.mesh_io import read_mesh
@@ -138,10 +139,7 @@ def test_a_pcd_file_is_read_as_its_grid_triangulated_from_its_viewpoint(data):
     points, _ = two_planes()
     points[0, 0] = np.nan
     vertices, faces, grid = read_pcd(pcd(points, data))
-    assert grid == Grid(WIDTH, HEIGHT, WIDTH * HEIGHT - 1)
-    want_vertices, want_faces = organized_surface(points.astype(np.float32), np.zeros(3))
-    np.testing.assert_allclose(vertices, want_vertices, rtol=1e-6)
-    np.testing.assert_array_equal(faces, want_faces)
+    assert_read_as(points, vertices, faces, grid)
     # The shadows are seen from the file's viewpoint.
     aside = np.array([0.0, 1e6, 0.0])
     faces_aside = read_pcd(pcd(points, data, viewpoint=aside))[1]
@@ -177,6 +175,16 @@ def test_pcl_binary_compressed_file_is_read():
         read_pcd(data[:-5])
     with pytest.raises(UnreadableMeshError, match="expands to more than"):
         read_pcd(data, max_bytes=raw - 1)
+
+
+def assert_read_as(points: np.ndarray, vertices, faces, grid) -> np.ndarray:
+    """That a file's surface is ``points``' (stored in single precision, the first pixel
+    blank) triangulated from the origin; returns the triangles."""
+    assert grid == Grid(WIDTH, HEIGHT, WIDTH * HEIGHT - 1)
+    want_vertices, want_faces = organized_surface(points.astype(np.float32), np.zeros(3))
+    np.testing.assert_allclose(vertices, want_vertices, rtol=1e-6)
+    np.testing.assert_array_equal(faces, want_faces)
+    return want_faces
 
 
 def test_a_gzipped_pcd_is_read_as_a_mesh():
@@ -227,59 +235,31 @@ def test_a_truncated_binary_pcd_is_refused():
         read_mesh(data[:-100], "scan.pcd")
 
 
-def e57(tmp_path, points: np.ndarray, *, grid=True, scans=1, translation=(0.0, 0.0, 0.0)) -> bytes:
-    """``points`` (h, w, 3) as an E57 file of ``scans`` structured scans (rows and columns
-    kept unless not ``grid``; the pixels that saw nothing marked invalid), in a scan frame
-    at ``translation`` (no rotation)."""
-    pye57 = pytest.importorskip("pye57")
-    height, width = points.shape[:2]
-    flat = points.reshape(-1, 3)
-    seen = np.isfinite(flat).all(axis=1)
-    data = {
-        "cartesianX": np.nan_to_num(flat[:, 0]),
-        "cartesianY": np.nan_to_num(flat[:, 1]),
-        "cartesianZ": np.nan_to_num(flat[:, 2]),
-        "cartesianInvalidState": (~seen).astype(np.int8),
-    }
-    if grid:
-        rows, columns = np.mgrid[0:height, 0:width]
-        data["rowIndex"] = rows.ravel().astype(np.int32)
-        data["columnIndex"] = columns.ravel().astype(np.int32)
-    path = tmp_path / "scan.e57"
-    out = pye57.E57(str(path), mode="w")
-    for _ in range(scans):
-        out.write_scan_raw(
-            data, rotation=np.array([1.0, 0, 0, 0]), translation=np.array(translation)
-        )
-    out.close()
-    return path.read_bytes()
-
-
 def test_a_structured_e57_scan_is_read_as_its_grid_from_the_scanner_s_position(tmp_path):
     points, _ = two_planes()
     points[0, 0] = np.nan
-    vertices, faces, grid = read_e57(e57(tmp_path, points))
-    assert grid == Grid(WIDTH, HEIGHT, WIDTH * HEIGHT - 1)
-    # pye57 writes the coordinates in single precision.
-    want_vertices, want_faces = organized_surface(points.astype(np.float32), np.zeros(3))
-    np.testing.assert_allclose(vertices, want_vertices, rtol=1e-6)
-    np.testing.assert_array_equal(faces, want_faces)
+    path = tmp_path / "scan.e57"
+    vertices, faces, grid = read_e57(e57_scan(path, points))
+    want_faces = assert_read_as(points, vertices, faces, grid)
     # The scan's pose places its points, and its origin is where the scanner stood: the
     # same shadows, the whole moved.
     moved = np.array([5.0, -2.0, 1.0])
-    vertices, faces, _ = read_e57(e57(tmp_path, points, translation=moved))
-    np.testing.assert_allclose(vertices, want_vertices + moved, rtol=1e-6)
+    vertices, faces, _ = read_e57(e57_scan(path, points + moved, moved))
+    np.testing.assert_allclose(
+        vertices - moved, organized_surface(points, np.zeros(3))[0], atol=1e-6
+    )
     np.testing.assert_array_equal(faces, want_faces)
-    assert read_mesh(e57(tmp_path, points), "scan.e57").grid == grid
+    assert read_mesh(e57_scan(path, points), "scan.e57").grid == grid
 
 
 def test_an_e57_file_that_is_not_one_structured_scan_is_refused_with_a_sentence(tmp_path):
     points, _ = two_planes()
+    path = tmp_path / "scan.e57"
     with pytest.raises(PointCloudError, match="no grid"):
-        read_mesh(e57(tmp_path, points, grid=False), "scan.e57")
+        read_mesh(e57_scan(path, points, grid=False), "scan.e57")
     with pytest.raises(UnreadableMeshError, match="holds 2 scans; upload one scan per file"):
-        read_mesh(e57(tmp_path, points, scans=2), "scan.e57")
-    data = e57(tmp_path, points)
+        read_mesh(e57_scan(path, points, scans=2), "scan.e57")
+    data = e57_scan(path, points)
     for damaged in (b"not an e57 file at all", data[: len(data) // 2]):
         with pytest.raises(UnreadableMeshError, match="E57"):
             read_mesh(damaged, "scan.e57")

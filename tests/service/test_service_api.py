@@ -7,7 +7,7 @@ import gzip
 import numpy as np
 import pytest
 import trimesh
-from conftest import EXAMPLES, example, with_a_far_half_copy
+from conftest import EXAMPLES, e57_scan, example, with_a_far_half_copy
 
 from app.client import format_matches
 from benchmarks.common import Service
@@ -16,7 +16,15 @@ from worker.engine.pipeline import resampled_surface
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.engine.scans import read_pcd
 from worker.evaluation.partial import planar_cut
-from worker.evaluation.samples import DEPTH_SAMPLE, SAMPLE_VERTICES
+from worker.evaluation.samples import (
+    DEPTH_DIRECTION,
+    DEPTH_PIXELS,
+    DEPTH_SAMPLE,
+    PARTIAL_SOURCE,
+    SAMPLE_VERTICES,
+    depth_scan,
+    sample_mesh,
+)
 
 from .conftest import GALLERY
 
@@ -142,49 +150,30 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_and_one_without_it_refuse
     assert mesh["descriptor"]["input_grid"] == [width, height]
     assert mesh["descriptor"]["input_points"] == points
 
+    cloud = trimesh.PointCloud(load_mesh(example("quadruped-2")).vertices).export(file_type="ply")
+    refused = _error(service.client.post("/query", files={"file": ("scan.ply", cloud)}), 422)
+    assert "organized cloud a depth camera wrote (.pcd" in refused["detail"]
+
 
 def test_a_laser_scanner_s_structured_e57_scan_is_queried_by_its_grid(
     service: Service, gallery, tmp_path
 ):
     """The depth example's points as a structured E57 scan (rows and columns, the
     scanner's position in its pose): the same grid, the quadruped found."""
-    pye57 = pytest.importorskip("pye57")
-    text = gzip.decompress((EXAMPLES / DEPTH_SAMPLE).read_bytes()).decode()
-    header, body = text.split("DATA ascii\n")
-    fields = dict(line.split(" ", 1) for line in header.splitlines() if " " in line)
-    width, height = int(fields["WIDTH"]), int(fields["HEIGHT"])
-    viewpoint = np.array([float(v) for v in fields["VIEWPOINT"].split()[:3]])
-    xyz = np.array(body.split(), dtype=float).reshape(-1, 3)
-    seen = np.isfinite(xyz).all(axis=1)
-    rows, columns = np.divmod(np.arange(height * width), width)
-    local = np.nan_to_num(xyz - viewpoint)  # in the scan's frame, placed by its pose
-    path = tmp_path / "quadruped-3-side.e57"
-    out = pye57.E57(str(path), mode="w")
-    out.write_scan_raw(
-        {
-            "cartesianX": local[:, 0],
-            "cartesianY": local[:, 1],
-            "cartesianZ": local[:, 2],
-            "cartesianInvalidState": (~seen).astype(np.int8),
-            "rowIndex": rows.astype(np.int32),
-            "columnIndex": columns.astype(np.int32),
-        },
-        rotation=np.array([1.0, 0.0, 0.0, 0.0]),
-        translation=viewpoint,
+    grid, viewpoint = depth_scan(
+        sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), DEPTH_PIXELS
     )
-    out.close()
+    path = tmp_path / "quadruped-3-side.e57"
+    e57_scan(path, grid, viewpoint)
+    height, width = grid.shape[:2]
     response = service.client.post(
         "/query", files={"file": (path.name, path.read_bytes())}, data={"k": "3"}
     )
     assert response.status_code == 200, response.text
     body = response.json()
     assert body["query"]["input_grid"] == [width, height]
-    assert body["query"]["input_points"] == int(seen.sum())
+    assert body["query"]["input_points"] == int(np.isfinite(grid).all(axis=2).sum())
     assert [m["label"] for m in body["matches"][:2]] == ["quadruped", "quadruped"]
-
-    cloud = trimesh.PointCloud(load_mesh(example("quadruped-2")).vertices).export(file_type="ply")
-    refused = _error(service.client.post("/query", files={"file": ("scan.ply", cloud)}), 422)
-    assert "organized cloud a depth camera wrote (.pcd" in refused["detail"]
 
 
 def test_bytes_already_described_answer_without_a_worker(service: Service, gallery):
