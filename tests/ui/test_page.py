@@ -513,4 +513,5 @@ def test_an_enrolled_scan_says_it_was_a_point_cloud(page, site):
     page.locator("#detail").wait_for(state="visible")
     facts = page.locator("#detail-meta").inner_text()
     assert f"in the file ({depth_cloud_phrase()}); the descriptor resampled it" in facts, facts
+    shoot(page, "scan-detail")
     page.select_option("#collection", "default")  # as the page was before this test
