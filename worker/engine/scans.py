@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import PointCloudError, UnreadableMeshError
+from .errors import MeshError, PointCloudError, UnreadableMeshError
 from .formats import DEFAULT_MAX_DECOMPRESSED_BYTES
 
 #: An edge closer than this to its sensor's viewing ray crosses a gap, not the surface.
@@ -218,9 +218,13 @@ def read_e57(
             ) from exc
         try:
             return _structured_scan(e57, max_bytes)
-        except pye57.libe57.E57Exception as exc:
+        except MeshError:
+            raise
+        except Exception as exc:  # libE57's errors; pye57 raises a plain Exception for a
+            # scan in neither cartesian nor spherical coordinates
             raise UnreadableMeshError(
-                "The E57 file's scan could not be read: it is damaged or truncated."
+                "The E57 file's scan could not be read: it is damaged, truncated, or its "
+                "points are in neither cartesian nor spherical coordinates."
             ) from exc
         finally:
             e57.close()
@@ -264,6 +268,7 @@ def _structured_scan(e57: Any, max_bytes: int) -> tuple[np.ndarray, np.ndarray, 
             "subsample it."
         )
     grid = np.full((height, width, 3), np.nan)
+    # A pixel with several returns keeps the last one listed.
     grid[rows, columns] = np.stack([scan[f"cartesian{a}"] for a in "XYZ"], axis=1)
     viewpoint = np.asarray(e57.scan_position(0), dtype=np.float64).reshape(3)
     points, faces = organized_surface(grid, viewpoint)
