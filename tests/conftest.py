@@ -210,30 +210,10 @@ def with_a_far_half_copy(path: Path) -> tuple[trimesh.Trimesh, bytes]:
     return mesh, trimesh.util.concatenate([mesh, copy]).export(file_type="off").encode()
 
 
-def e57_scan(path: Path, points: np.ndarray, viewpoint=(0.0, 0.0, 0.0), *, grid=True, scans=1):
-    """Write ``points`` (h, w, 3; not finite where the pixel saw nothing) as an E57 file of
-    ``scans`` structured scans (each point's row and column kept unless not ``grid``, the
-    pixels that saw nothing marked invalid), taken from ``viewpoint``: the scan's pose is
-    there (no rotation) and its points relative to it. Returns the file's bytes (skips the
-    test where pye57 has no build)."""
-    pye57 = pytest.importorskip("pye57")
-    height, width = points.shape[:2]
-    origin = np.asarray(viewpoint, dtype=np.float64)
-    local = points.reshape(-1, 3) - origin
-    seen = np.isfinite(local).all(axis=1)
-    local = np.nan_to_num(local)
-    data = {
-        "cartesianX": local[:, 0],
-        "cartesianY": local[:, 1],
-        "cartesianZ": local[:, 2],
-        "cartesianInvalidState": (~seen).astype(np.int8),
-    }
-    if grid:
-        rows, columns = np.divmod(np.arange(height * width), width)
-        data["rowIndex"] = rows.astype(np.int32)
-        data["columnIndex"] = columns.astype(np.int32)
-    out = pye57.E57(str(path), mode="w")
-    for _ in range(scans):
-        out.write_scan_raw(data, rotation=np.array([1.0, 0.0, 0.0, 0.0]), translation=origin)
-    out.close()
-    return path.read_bytes()
+def e57_scan(points: np.ndarray, viewpoint=(0.0, 0.0, 0.0), *, grid=True, scans=1) -> bytes:
+    """:func:`~worker.evaluation.samples.e57_bytes`, the test skipped where pye57 has no
+    build."""
+    pytest.importorskip("pye57")
+    from worker.evaluation.samples import e57_bytes
+
+    return e57_bytes(points, np.asarray(viewpoint, dtype=np.float64), grid=grid, scans=scans)

@@ -235,31 +235,29 @@ def test_a_truncated_binary_pcd_is_refused():
         read_mesh(data[:-100], "scan.pcd")
 
 
-def test_a_structured_e57_scan_is_read_as_its_grid_from_the_scanner_s_position(tmp_path):
+def test_a_structured_e57_scan_is_read_as_its_grid_from_the_scanner_s_position():
     points, _ = two_planes()
     points[0, 0] = np.nan
-    path = tmp_path / "scan.e57"
-    vertices, faces, grid = read_e57(e57_scan(path, points))
+    vertices, faces, grid = read_e57(e57_scan(points))
     want_faces = assert_read_as(points, vertices, faces, grid)
     # The scan's pose places its points, and its origin is where the scanner stood: the
     # same shadows, the whole moved.
     moved = np.array([5.0, -2.0, 1.0])
-    vertices, faces, _ = read_e57(e57_scan(path, points + moved, moved))
+    vertices, faces, _ = read_e57(e57_scan(points + moved, moved))
     np.testing.assert_allclose(
         vertices - moved, organized_surface(points, np.zeros(3))[0], atol=1e-6
     )
     np.testing.assert_array_equal(faces, want_faces)
-    assert read_mesh(e57_scan(path, points), "scan.e57").grid == grid
+    assert read_mesh(e57_scan(points), "scan.e57").grid == grid
 
 
-def test_an_e57_file_that_is_not_one_structured_scan_is_refused_with_a_sentence(tmp_path):
+def test_an_e57_file_that_is_not_one_structured_scan_is_refused_with_a_sentence():
     points, _ = two_planes()
-    path = tmp_path / "scan.e57"
     with pytest.raises(PointCloudError, match="no grid"):
-        read_mesh(e57_scan(path, points, grid=False), "scan.e57")
+        read_mesh(e57_scan(points, grid=False), "scan.e57")
     with pytest.raises(UnreadableMeshError, match="holds 2 scans; upload one scan per file"):
-        read_mesh(e57_scan(path, points, scans=2), "scan.e57")
-    data = e57_scan(path, points)
+        read_mesh(e57_scan(points, scans=2), "scan.e57")
+    data = e57_scan(points)
     for damaged in (b"not an e57 file at all", data[: len(data) // 2]):
         with pytest.raises(UnreadableMeshError, match="E57"):
             read_mesh(damaged, "scan.e57")

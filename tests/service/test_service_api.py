@@ -155,19 +155,16 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_and_one_without_it_refuse
     assert "organized cloud a depth camera wrote (.pcd" in refused["detail"]
 
 
-def test_a_laser_scanner_s_structured_e57_scan_is_queried_by_its_grid(
-    service: Service, gallery, tmp_path
-):
+def test_a_laser_scanner_s_structured_e57_scan_is_queried_by_its_grid(service: Service, gallery):
     """The depth example's points as a structured E57 scan (rows and columns, the
     scanner's position in its pose): the same grid, the quadruped found."""
     grid, viewpoint = depth_scan(
         sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), DEPTH_PIXELS
     )
-    path = tmp_path / "quadruped-3-side.e57"
-    e57_scan(path, grid, viewpoint)
+    data = e57_scan(grid, viewpoint)
     height, width = grid.shape[:2]
     response = service.client.post(
-        "/query", files={"file": (path.name, path.read_bytes())}, data={"k": "3"}
+        "/query", files={"file": ("quadruped-3-side.e57", data)}, data={"k": "3"}
     )
     assert response.status_code == 200, response.text
     body = response.json()

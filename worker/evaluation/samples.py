@@ -373,19 +373,63 @@ DEPTH_DIRECTION = (0.0, 1.0, 0.0)
 DEPTH_PIXELS = 1500
 
 
-def pcd_gz_bytes(points: np.ndarray, viewpoint: np.ndarray) -> bytes:
+def pcd_bytes(points: np.ndarray, viewpoint: np.ndarray, data: str = "ascii") -> bytes:
     """An organized cloud (h, w, 3) (``nan`` where a pixel saw nothing) and its sensor's
-    position (3,) as gzip'd ASCII PCD (v0.7); the same cloud always gives the same bytes."""
+    position (3,) as PCD (v0.7), ``data`` ``ascii`` (``DECIMALS`` decimals) or ``binary``
+    (single precision); the same cloud always gives the same bytes."""
     height, width = points.shape[:2]
-    text = io.StringIO()
-    text.write(
+    header = (
         "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z\n"
         f"SIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {width}\nHEIGHT {height}\n"
         f"VIEWPOINT {' '.join(f'{v:.{DECIMALS}f}' for v in viewpoint)} 1 0 0 0\n"
-        f"POINTS {width * height}\nDATA ascii\n"
+        f"POINTS {width * height}\nDATA {data}\n"
     )
+    if data == "binary":
+        return header.encode("ascii") + points.reshape(-1, 3).astype("<f4").tobytes()
+    text = io.StringIO()
+    text.write(header)
     np.savetxt(text, points.reshape(-1, 3), fmt=f"%.{DECIMALS}f")
-    return gzip.compress(text.getvalue().encode("ascii"), mtime=0)
+    return text.getvalue().encode("ascii")
+
+
+def pcd_gz_bytes(points: np.ndarray, viewpoint: np.ndarray) -> bytes:
+    """:func:`pcd_bytes` as ASCII, gzip'd (the depth example's file)."""
+    return gzip.compress(pcd_bytes(points, viewpoint), mtime=0)
+
+
+def e57_bytes(
+    points: np.ndarray, viewpoint: np.ndarray, *, grid: bool = True, scans: int = 1
+) -> bytes:
+    """An organized cloud (h, w, 3) as an E57 file of ``scans`` structured scans taken
+    from ``viewpoint`` (the scan's pose there, no rotation; its points relative to it):
+    each point's row and column kept unless not ``grid``, the pixels that saw nothing
+    marked invalid. Needs pye57 (a dependency where it has builds)."""
+    import tempfile
+
+    import pye57
+
+    height, width = points.shape[:2]
+    origin = np.asarray(viewpoint, dtype=np.float64)
+    local = points.reshape(-1, 3) - origin
+    seen = np.isfinite(local).all(axis=1)
+    local = np.nan_to_num(local)
+    fields: dict[str, np.ndarray] = {
+        "cartesianX": local[:, 0],
+        "cartesianY": local[:, 1],
+        "cartesianZ": local[:, 2],
+        "cartesianInvalidState": np.logical_not(seen).astype(np.int8),
+    }
+    if grid:
+        rows, columns = np.divmod(np.arange(height * width), width)
+        fields["rowIndex"] = rows.astype(np.int32)
+        fields["columnIndex"] = columns.astype(np.int32)
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "scan.e57"
+        out = pye57.E57(str(path), mode="w")
+        for _ in range(scans):
+            out.write_scan_raw(fields, rotation=np.array([1.0, 0.0, 0.0, 0.0]), translation=origin)
+        out.close()
+        return path.read_bytes()
 
 
 def depth_scan(mesh: Mesh, direction: np.ndarray, pixels: int) -> tuple[np.ndarray, np.ndarray]:
