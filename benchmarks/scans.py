@@ -1,0 +1,85 @@
+"""A scan as a scanner's file against the same surface as a mesh: describe seconds.
+
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.scans [--pixels 1500 30000] [--repeats 5]
+
+For each size, the walk-through's quadruped-3 seen from its left side by an orthographic
+depth grid of about ``--pixels`` pixels on it (as ``examples/partial/quadruped-3-depth``
+was made), written as an organized PCD (ascii, binary) and as a structured E57 scan, and
+its surface (what :func:`~worker.engine.scans.read_pcd` makes of the binary file) as an
+OFF mesh: a mesh of the same size. Each file is described by
+:func:`~worker.engine.pipeline.describe_file` ``--repeats`` times, the files' order
+alternated, in one process; the table gives the median load (read, triangulate, clean)
+and total seconds, and each total over the mesh's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from typing import cast
+
+import numpy as np
+import trimesh
+
+from worker.engine.pipeline import describe_file
+from worker.engine.presets import DEFAULT_PRESET, get_preset
+from worker.engine.scans import read_pcd
+from worker.evaluation.samples import (
+    DEPTH_DIRECTION,
+    PARTIAL_SOURCE,
+    depth_scan,
+    e57_bytes,
+    pcd_bytes,
+    sample_mesh,
+)
+
+
+def scan_files(pixels: int) -> tuple[dict[str, bytes], int, tuple[int, int]]:
+    """The scan's files by name (the mesh first), its points and its grid (width,
+    height)."""
+    points, viewpoint = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), pixels)
+    binary = pcd_bytes(points, viewpoint, "binary")
+    vertices, faces, grid = read_pcd(binary)
+    mesh = cast(str, trimesh.Trimesh(vertices, faces, process=False).export(file_type="off"))
+    files = {
+        "mesh.off": mesh.encode(),
+        "scan.pcd (ascii)": pcd_bytes(points, viewpoint),
+        "scan.pcd (binary)": binary,
+        "scan.e57": e57_bytes(points, viewpoint),
+    }
+    return files, grid.points, (grid.width, grid.height)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--pixels", type=int, nargs="+", default=[1500, 30000])
+    parser.add_argument("--repeats", type=int, default=5)
+    args = parser.parse_args()
+    preset = get_preset(DEFAULT_PRESET)
+    print(f"preset {preset.name}; medians of {args.repeats} describes, files alternated\n")
+    print("| scan | file | load ms | total s | total / mesh's |")
+    print("|---|---|---:|---:|---:|")
+    for pixels in args.pixels:
+        files, points, (width, height) = scan_files(pixels)
+        load: dict[str, list[float]] = {name: [] for name in files}
+        total: dict[str, list[float]] = {name: [] for name in files}
+        for repeat in range(args.repeats):
+            order = list(files) if repeat % 2 == 0 else list(files)[::-1]
+            for name in order:
+                start = time.perf_counter()
+                descriptor = describe_file(files[name], preset, name.split(" ")[0])
+                total[name].append(time.perf_counter() - start)
+                load[name].append(descriptor.timings["load"])
+        mesh_total = statistics.median(total["mesh.off"])
+        for name in files:
+            seconds = statistics.median(total[name])
+            print(
+                f"| {points:,} points, {width} x {height} | {name} | "
+                f"{1000 * statistics.median(load[name]):.1f} | {seconds:.3f} | "
+                f"{seconds / mesh_total:.2f} |"
+            )
+
+
+if __name__ == "__main__":
+    main()
