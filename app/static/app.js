@@ -389,10 +389,11 @@ async function search(file) {
     const result = await api(`${base()}/query`, { method: "POST", body: form });
     result.queryName = file.name;
     const how = { computed: "described now", enrolled: "enrolled already", recent: "searched recently" };
+    const cloud = pointCloud(result.query);
     progress.textContent = `${file.name}: ${result.matches.length} matches among ${result.gallery_size} `
       + `enrolled (${how[result.descriptor_source] || result.descriptor_source}, `
       + `${((performance.now() - started) / 1000).toFixed(1)} s).`
-      + (pointCloud(result.query) ? ` The query is ${pointCloud(result.query)}.` : "")
+      + (cloud ? ` The query is ${cloud}.` : "")
       + (partial(result.query.kept_area_fraction)
         ? ` Only ${percent(result.query.kept_area_fraction)} of the file's surface was described: `
           + "it has other, separate parts, which were left out (the largest connected part is described)."
@@ -501,13 +502,14 @@ async function openDetail(mesh) {
   $("detail").hidden = false;
   $("detail").scrollIntoView({ block: "start" });
   $("detail-name").textContent = `#${mesh.id} ${mesh.name}`;
+  const cloud = mesh.descriptor && pointCloud(mesh.descriptor);
   const facts = {
     label: mesh.label || "(none)",
     status: mesh.status === "failed" ? `failed: ${mesh.detail}` : mesh.status,
     file: `${mesh.filename} (${(mesh.size_bytes / 1024).toFixed(0)} kB)`,
     vertices: mesh.descriptor
       ? `${mesh.descriptor.input_vertices.toLocaleString("en")} in the file`
-        + (pointCloud(mesh.descriptor) ? ` (${pointCloud(mesh.descriptor)})` : "")
+        + (cloud ? ` (${cloud})` : "")
         + `; the descriptor resampled it to ${mesh.descriptor.vertices.toLocaleString("en")}`
       : "-",
     surface: mesh.descriptor && mesh.descriptor.kept_area_fraction != null
