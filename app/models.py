@@ -154,6 +154,8 @@ class Descriptor(Base):
     # a mesh, or made before they were kept).
     input_points: Mapped[int | None]
     input_grid: Mapped[list[int] | None] = mapped_column(JSON)
+    # The largest share of the surface facing one way (None: made before it was kept).
+    facing_share: Mapped[float | None]
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
     mesh: Mapped[Mesh] = relationship(back_populates="descriptors")

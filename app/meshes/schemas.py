@@ -41,6 +41,13 @@ class DescriptorInfo(BaseModel):
     input_grid: list[int] | None = Field(
         None, description="that cloud's sensor grid, [width, height] pixels; null for a mesh"
     )
+    facing_share: float | None = Field(
+        None,
+        description="the largest share of the described surface's area facing one way: "
+        "about 0.5 for a whole object, a cut or a holed copy of one, at least 0.95 for one "
+        "view of a scanner (the faces a camera sees); null for descriptors made before it "
+        "was recorded",
+    )
 
 
 class MeshOut(BaseModel):

@@ -177,6 +177,7 @@ def query_out(result: service.SearchResult) -> QueryOut:
             partiality=result.partial.partiality,
             missing_share=result.partial.missing_share,
             missing_share_range=result.partial.missing_range,
+            single_view=result.partial.single_view,
             note=result.partial.note,
         ),
         preview=result.preview,

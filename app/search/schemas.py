@@ -48,6 +48,12 @@ class PartialOut(BaseModel):
     missing_share_range: tuple[float, float] = Field(
         description="its bounds: the scale is measured on a grid of steps of 2^(1/8)"
     )
+    single_view: bool = Field(
+        False,
+        description="the query is one view of its object (a scanner's organized point "
+        "cloud, or a surface facing one way: query.facing_share at least 0.95), so the side "
+        "it does not see is missing too, beyond missing_share",
+    )
     note: str = Field(description="the same, as a sentence for the user")
 
 
@@ -116,7 +122,9 @@ class QueryOut(BaseModel):
         default_factory=dict,
         description="the query's mesh: input_vertices, input_faces (cleaned), vertices "
         "(described), and kept_area_fraction, the described surface's share of the file's "
-        "surface area (below 1 when the file has other, separate parts, which are left out); "
+        "surface area (below 1 when the file has other, separate parts, which are left out), "
+        "facing_share, the largest share of its surface facing one way (about 0.5 for a "
+        "whole, a cut or a holed copy, near 1 for one view); "
         "for a scanner's organized point cloud (a PCD or a structured E57 scan) also "
         "input_points (its points that saw the surface) and input_grid ([width, height])",
     )

@@ -67,12 +67,14 @@ class RankedMatch:
 class PartialQuery:
     """A query ranked as a part: how partial it looks and how much of its whole it seems
     to miss (an estimate and its bounds: the parts' scale is measured on a grid), and
-    whether it is one view (a scanner's organized cloud)."""
+    whether it is one view (:attr:`ShapeDescriptor.single_view`: a scanner's organized
+    cloud, or a surface facing one way)."""
 
     partiality: float
     missing_share: float
     missing_range: tuple[float, float]
     single_view: bool = False
+    cloud: bool = False
 
     @property
     def note(self) -> str:
@@ -80,8 +82,9 @@ class PartialQuery:
         if self.single_view:
             # The parts' scale matches what the view shows, not the side it does not see
             # (docs/service.md, known limits).
+            seen = "a scanner's point cloud" if self.cloud else "its faces all face one way"
             return (
-                "One view of its object (a scanner's point cloud): the side it does not "
+                f"One view of its object ({seen}): the side it does not "
                 f"see is missing, more than the {low}% to {high}% its parts' best match "
                 "measures; matches are ranked by the parts that are there, so they have no "
                 "confidence."
@@ -216,8 +219,9 @@ def parse_options(
 
 def query_facts(descriptor: ShapeDescriptor) -> dict[str, int | float | list[int]]:
     """What the answer says of the query's mesh: its size as cleaned and as described,
-    (when known) the described part's share of the file's surface area, and the points
-    and grid of the organized point cloud it was."""
+    (when known) the described part's share of the file's surface area and the share of
+    its surface facing one way, and the points and grid of the organized point cloud it
+    was."""
     facts: dict[str, int | float | list[int]] = {
         "input_vertices": descriptor.input_vertices,
         "input_faces": descriptor.input_faces,
@@ -225,6 +229,8 @@ def query_facts(descriptor: ShapeDescriptor) -> dict[str, int | float | list[int
     }
     if descriptor.kept_area_fraction is not None:
         facts["kept_area_fraction"] = descriptor.kept_area_fraction
+    if descriptor.facing_share is not None:
+        facts["facing_share"] = round(descriptor.facing_share, 3)
     if descriptor.input_points is not None and descriptor.input_grid is not None:
         facts["input_points"] = descriptor.input_points
         facts["input_grid"] = list(descriptor.input_grid)
@@ -260,7 +266,8 @@ def rank(
             stats.partiality,
             round(max(0.0, 1.0 - kept), 2),
             (low, high),
-            single_view=descriptor.input_grid is not None,
+            single_view=descriptor.single_view,
+            cloud=descriptor.input_grid is not None,
         )
     reference = gallery.reference
     # The calibration is of whole queries' scores; a part's are on another scale.

@@ -1,4 +1,5 @@
-"""Closing small holes: which loops close, and the closed surface is a clean one."""
+"""Closing small holes: which loops close, and the closed surface is a clean one; and how
+much of a surface faces one way (one view of a scanner)."""
 
 from __future__ import annotations
 
@@ -6,9 +7,16 @@ import numpy as np
 import pytest
 import trimesh
 
-from worker.engine.holes import close_small_holes
-from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
+from tests.conftest import example
+from worker.engine.holes import (
+    ONE_VIEW_FACING,
+    close_small_holes,
+    facing_share,
+    fibonacci_directions,
+)
+from worker.engine.mesh_io import Mesh, clean_mesh, face_areas, load_mesh
 from worker.engine.topology import euler_and_boundary
+from worker.evaluation.partial import planar_cut, random_direction, single_view
 
 
 def area(mesh: Mesh) -> float:
@@ -107,3 +115,69 @@ def test_two_holes_touching_at_a_vertex_stay_open(sphere):
     second = next(f for f in around[1:] if len(set(faces[f]) & set(faces[first])) == 1)
     holed = clean_mesh(sphere.vertices, np.delete(faces, [first, second], axis=0))
     assert close_small_holes(holed, 0.5) is holed
+
+
+# ------------------------------------------------------------ facing one way
+
+
+def facing_share_reference(mesh: Mesh, directions: int = 20_000) -> float:
+    """The largest area share facing one of ``directions`` spread over the sphere, by
+    direct sums."""
+    v, f = mesh.vertices, mesh.faces
+    normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    weights = np.linalg.norm(normals, axis=1)
+    lattice = fibonacci_directions(directions)
+    best = 0.0
+    for start in range(0, directions, 500):
+        facing = normals @ lattice[start : start + 500].T > 0.0
+        best = max(best, float((weights @ facing).max() / weights.sum()))
+    return best
+
+
+def height_field(rng: np.random.Generator, size: int = 30) -> Mesh:
+    """A rough grid of heights, its squares cut in two: every face faces up."""
+    x, y = np.meshgrid(np.arange(size, dtype=float), np.arange(size, dtype=float))
+    z = rng.normal(scale=2.0, size=x.shape)
+    vertices = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    corner = (np.arange(size - 1)[:, None] * size + np.arange(size - 1)[None, :]).ravel()
+    faces = np.concatenate(
+        [
+            np.column_stack([corner, corner + 1, corner + size + 1]),
+            np.column_stack([corner, corner + size + 1, corner + size]),
+        ]
+    )
+    return clean_mesh(vertices, faces)
+
+
+def test_a_height_field_faces_one_way_and_a_closed_surface_half():
+    rng = np.random.default_rng(3)
+    field = height_field(rng)
+    assert facing_share(field) == 1.0
+    assert facing_share_reference(field) == pytest.approx(1.0)
+    # Wound every other way, half of it faces the other way: the winding is read as it is.
+    flipped = Mesh(
+        field.vertices,
+        np.where((np.arange(field.n_faces) % 2)[:, None] == 1, field.faces[:, ::-1], field.faces),
+    )
+    assert facing_share(flipped) < 0.75
+    s = trimesh.creation.icosphere(subdivisions=3)
+    bumpy = clean_mesh(s.vertices * rng.uniform(0.8, 1.2, size=(len(s.vertices), 1)), s.faces)
+    share = facing_share(bumpy)
+    assert facing_share_reference(bumpy) - 0.05 <= share < 0.6
+
+
+@pytest.mark.slow
+def test_a_view_of_a_figure_faces_one_way_and_its_cuts_do_not():
+    """One view (the faces a camera sees) is called one view, the whole and its cuts are
+    not; the search finds a view's direction within 0.01 of the direct search's best (or
+    better: it refines past the lattice's spacing), a cut's within 0.05."""
+    figure = load_mesh(example("quadruped-0"))
+    assert facing_share(figure) < 0.6
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        view = single_view(figure, random_direction(rng))
+        share = facing_share(view)
+        assert share >= ONE_VIEW_FACING
+        assert share >= facing_share_reference(view) - 0.01
+        cut = planar_cut(figure, 0.3, random_direction(rng))
+        assert facing_share_reference(cut) - 0.05 <= facing_share(cut) < ONE_VIEW_FACING

@@ -15,7 +15,7 @@ from worker.engine.mesh_io import load_mesh
 from worker.engine.pipeline import resampled_surface
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.engine.scans import read_pcd
-from worker.evaluation.partial import planar_cut
+from worker.evaluation.partial import planar_cut, single_view
 from worker.evaluation.samples import (
     DEPTH_DIRECTION,
     DEPTH_PIXELS,
@@ -104,6 +104,7 @@ def test_a_cut_query_is_ranked_by_its_parts_and_says_so(service: Service, galler
     assert body["partial"]["partiality"] > 0
     assert 0 <= body["partial"]["missing_share"] < 1
     assert "ranked by the parts that are there" in body["partial"]["note"]
+    assert not body["partial"]["single_view"] and body["query"]["facing_share"] < 0.95
     assert body["matches"][0]["label"] == "quadruped"
     for m in body["matches"]:
         assert "parts" in m["scores"] and m["confidence"] is None
@@ -112,6 +113,25 @@ def test_a_cut_query_is_ranked_by_its_parts_and_says_so(service: Service, galler
     whole = service.query("quadruped-2", k=2).json()
     assert whole["partial"] is None
     assert all("parts" not in m["scores"] for m in whole["matches"])
+
+
+def test_a_view_sent_as_a_mesh_is_called_one_view(service: Service, gallery):
+    """The faces a camera sees of another pose of the quadruped, sent as a mesh: its
+    faces face one way, so the answer calls it one view (not a cut missing a few
+    percent), as it does a scanner's cloud; the enrolled mesh's descriptor says how much
+    of it faces one way."""
+    view = single_view(load_mesh(example("quadruped-2")), np.array([0.0, 1.0, 0.0]))
+    data = trimesh.Trimesh(view.vertices, view.faces, process=False).export(file_type="off")
+    response = service.client.post("/query", files={"file": ("view.off", data)}, data={"k": "3"})
+    assert response.status_code == 200, response.text
+    body = response.json()
+    assert body["query"]["facing_share"] >= 0.95 and body["partial"]["single_view"]
+    assert body["partial"]["note"].startswith(
+        "One view of its object (its faces all face one way): the side it does not see is missing"
+    )
+    assert body["partial"]["note"] in format_matches(body)
+    enrolled = service.client.get(f"/meshes/{gallery['quadruped-1']}").json()
+    assert enrolled["descriptor"]["facing_share"] < 0.6
 
 
 def test_a_depth_camera_s_cloud_is_queried_by_its_grid_and_one_without_it_refused(
@@ -134,7 +154,8 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_and_one_without_it_refuse
     assert body["query"]["input_grid"] == [width, height]
     assert body["query"]["input_points"] == points
     # One view: the note does not claim to measure the side it does not see.
-    assert body["partial"]["note"].startswith("One view of its object")
+    assert body["partial"]["single_view"]
+    assert body["partial"]["note"].startswith("One view of its object (a scanner's point cloud)")
     assert (
         f"scanner's point cloud: {points:,} points on a {width} x {height} grid"
         in format_matches(body)

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from .holes import ONE_VIEW_FACING
 from .presets import MODALITIES, PARTS, SIZE
 
 #: Every array a descriptor stores: the vector modalities, the parts and their reach.
@@ -54,6 +55,10 @@ class ShapeDescriptor:
         camera's PCD or a laser scanner's structured E57 scan, triangulated by its grid:
         :mod:`~worker.engine.scans`), its points that saw the surface and its grid
         (width, height); None for a mesh.
+    facing_share : the largest share of the described surface's area whose faces face
+        one direction (:func:`~worker.engine.holes.facing_share`): about a half for a
+        whole, a cut or a holed copy, near 1 for one view of a scanner. None for a
+        descriptor stored before this was recorded.
     """
 
     preset: str
@@ -72,6 +77,15 @@ class ShapeDescriptor:
     area: float | None = None
     input_points: int | None = None
     input_grid: tuple[int, int] | None = None
+    facing_share: float | None = None
+
+    @property
+    def single_view(self) -> bool:
+        """Whether it is one view of its object: a scanner's organized cloud, or a surface
+        facing one way (:data:`~worker.engine.holes.ONE_VIEW_FACING`)."""
+        if self.input_grid is not None:
+            return True
+        return self.facing_share is not None and self.facing_share >= ONE_VIEW_FACING
 
     def vector(self, modality: str) -> np.ndarray:
         """The modality as the flat vector that eqs. (8) and (9) compare: one of
@@ -118,6 +132,7 @@ class ShapeDescriptor:
             "area": self.area,
             "input_points": self.input_points,
             "input_grid": None if self.input_grid is None else list(self.input_grid),
+            "facing_share": self.facing_share,
         }
 
     @classmethod
@@ -154,6 +169,7 @@ class ShapeDescriptor:
             area=meta.get("area"),
             input_points=meta.get("input_points"),
             input_grid=None if (grid := meta.get("input_grid")) is None else (grid[0], grid[1]),
+            facing_share=meta.get("facing_share"),
         )
 
     def to_npz_bytes(self) -> bytes:

@@ -106,6 +106,94 @@ def longest_open_loop(mesh: Mesh, area: float | None = None) -> float:
     return float(loops.perimeter.max()) / float(np.sqrt(area))
 
 
+#: :func:`facing_share`'s search, on at most ``FACING_SAMPLES`` faces drawn by area
+#: (seeded): a lattice of ``FACING_DIRECTIONS`` directions over the sphere (about 0.14
+#: radians apart), its best ``FACING_STARTS`` and the mean normal each refined by
+#: ``FACING_MOVES`` moves to the best of its 3 x 3 neighbours at every step from half the
+#: lattice's spacing down to ``FACING_FINEST`` radians.
+FACING_SAMPLES = 4000
+FACING_DIRECTIONS = 600
+FACING_STARTS = 8
+FACING_MOVES = 2
+FACING_FINEST = 0.002
+#: A surface facing one way this much is one view of its object (a height field over the
+#: view: the faces a camera sees), not a cut or a holed copy of a whole (at most 0.89 of
+#: the partiality protocol's cut-30 copies of TOSCA and SCAPE, its single views at least 0.998).
+ONE_VIEW_FACING = 0.95
+
+
+def facing_share(mesh: Mesh) -> float:
+    """The largest share of the surface's area whose faces all face one direction ``d``
+    (``n . d > 0``, by the faces' winding): about a half for a closed surface, a cut or
+    holed copy of one, and 1 for a height field, such as a single view of a scanner (the
+    faces a camera sees). Faces wound inconsistently lower it.
+
+    ``d`` is searched on the faces, or ``FACING_SAMPLES`` of them drawn with probability
+    proportional to their area: the best directions of a lattice (a Fibonacci lattice)
+    and the mean normal, each moved to the best of its neighbours on ever finer steps (a
+    pattern search, all starts at once). The share of the best is then measured on every
+    face: a lower bound of the largest. Near 1 it is within 0.01 of a lattice of 20,000
+    directions (the tests' views, and the partiality protocol's range scans); a cut's best
+    directions are scattered, and its share can be a few hundredths under.
+    """
+    vertices, faces = mesh.vertices, mesh.faces
+    normals = np.cross(
+        vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]]
+    )
+    weights = np.linalg.norm(normals, axis=1)
+    total = float(weights.sum())
+    if total == 0.0:
+        return 0.0
+    if len(faces) > FACING_SAMPLES:
+        chosen = np.random.default_rng(0).choice(len(faces), FACING_SAMPLES, p=weights / total)
+        drawn, mass = normals[chosen], np.full(FACING_SAMPLES, 1.0 / FACING_SAMPLES)
+    else:
+        drawn, mass = normals, weights / total
+    lattice = fibonacci_directions(FACING_DIRECTIONS)
+    coarse = mass @ (drawn @ lattice.T > 0.0)
+    starts = [lattice[np.argsort(-coarse, kind="stable")[:FACING_STARTS]]]
+    mean = normals.sum(axis=0)
+    if np.linalg.norm(mean) > 1e-9 * total:
+        starts.append(mean[None, :] / np.linalg.norm(mean))
+    current = np.concatenate(starts)  # (s, 3) unit
+    step = 0.5 * float(np.sqrt(4.0 * np.pi / FACING_DIRECTIONS))
+    offsets = np.array([(i, j) for i in (-1.0, 0.0, 1.0) for j in (-1.0, 0.0, 1.0)])
+    while step >= FACING_FINEST:
+        for _ in range(FACING_MOVES):
+            first, second = _across(current)
+            tried = (
+                current[:, None, :]
+                + step * offsets[None, :, 0, None] * first[:, None, :]
+                + step * offsets[None, :, 1, None] * second[:, None, :]
+            )
+            tried /= np.linalg.norm(tried, axis=2, keepdims=True)
+            shares = (mass @ (drawn @ tried.reshape(-1, 3).T > 0.0)).reshape(len(current), 9)
+            current = tried[np.arange(len(current)), np.argmax(shares, axis=1)]
+        step /= 2.0
+    best = current[int(np.argmax(mass @ (drawn @ current.T > 0.0)))]
+    return float(weights[normals @ best > 0.0].sum()) / total
+
+
+def _across(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors across each of (s, 3) unit ``directions``, and across each other."""
+    helper = np.where(
+        np.abs(directions[:, :1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]])
+    )
+    first = np.cross(directions, helper)
+    first /= np.linalg.norm(first, axis=1, keepdims=True)
+    return first, np.cross(directions, first)
+
+
+def fibonacci_directions(count: int) -> np.ndarray:
+    """(count, 3) unit vectors spread evenly over the sphere (a Fibonacci lattice)."""
+    i = np.arange(count) + 0.5
+    polar = np.arccos(1.0 - 2.0 * i / count)
+    azimuth = np.pi * (1.0 + np.sqrt(5.0)) * i
+    return np.stack(
+        [np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)], axis=1
+    )
+
+
 def close_small_holes(mesh: Mesh, max_perimeter: float, area: float | None = None) -> Mesh:
     """Close every boundary loop shorter than ``max_perimeter * sqrt(area)``.
 

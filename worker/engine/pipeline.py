@@ -18,7 +18,7 @@ from .diffusion import (
 )
 from .formats import DEFAULT_MAX_FACES
 from .geodesic import farthest_point_samples, geodesic_distance_matrix, sample_distances
-from .holes import boundary_loops, close_small_holes, longest_open_loop
+from .holes import boundary_loops, close_small_holes, facing_share, longest_open_loop
 from .intrinsic import surface_operators
 from .mesh_io import (
     CANONICAL_AREA,
@@ -139,6 +139,7 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
     area = float(face_areas(mesh.vertices, mesh.faces).sum())
     surface = canonical_frame(mesh)
     open_loop = longest_open_loop(surface, CANONICAL_AREA)
+    facing = facing_share(surface)
     described = surface if resampled else _resampled(surface, preset)
     lap("resample")
     intrinsic, ops = surface_operators(described.vertices, described.faces)
@@ -201,6 +202,7 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
         parts_reach=reach,
         longest_open_loop=open_loop,
         area=area,
+        facing_share=facing,
     )
 
 
