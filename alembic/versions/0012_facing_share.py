@@ -22,7 +22,7 @@ def upgrade() -> None:
     # NULL for the descriptors made before it was recorded: their searches read it from
     # the descriptor, where it is missing too, so they are not called one view.
     with op.batch_alter_table("descriptors", schema=None) as batch_op:
-        batch_op.add_column(sa.Column("facing_share", sa.Float(), nullable=True))
+        batch_op.add_column(sa.Column("facing_share", sa.Double(), nullable=True))
 
 
 def downgrade() -> None:
