@@ -339,12 +339,8 @@ class GalleryIndex:
             self.words = build_words(self.store.ids[:n], self.store.coarse[:n])
         else:
             assert self.words is not None
-            self.words = self.words.refiled(self._present)
+            self.words = self.words.refiled(self.store.contains)
 
-    def _present(self, ids: np.ndarray) -> np.ndarray:
-        """Which of ``ids`` are in the gallery."""
-        pos = self.store.pos
-        return np.fromiter((int(i) in pos for i in ids), dtype=bool, count=len(ids))
 
     def compare_with(self, preset: Preset) -> None:
         """Rank with ``preset`` (the same descriptors; other fusion weights or
@@ -559,7 +555,7 @@ class GalleryIndex:
         the probe). Its candidates are that scale's ``count`` best by votes.
         """
         assert self.words is not None
-        words, present = self.words, self._present
+        words, present = self.words, self.store.contains
         best, chosen = np.inf, 0
         chosen_votes: tuple[np.ndarray, np.ndarray] | None = None  # the chosen scale's only
         for j in range(0, scale_count(self.preset), self.preset.parts_scale_steps):

@@ -240,9 +240,22 @@ class GalleryVectors:
 
     def positions(self, ids: np.ndarray) -> np.ndarray:
         """Positions of enrolled ``ids`` (a dense id -> position table, rebuilt after changes)."""
+        positions: np.ndarray = self._position_table()[ids]
+        return positions
+
+    def contains(self, ids: np.ndarray) -> np.ndarray:
+        """(len(ids),) bool: which of ``ids`` (any non-negative ints) are enrolled."""
+        table = self._position_table()
+        ids = np.asarray(ids, dtype=np.int64)
+        inside = ids < len(table)
+        found = np.zeros(len(ids), dtype=bool)
+        found[inside] = table[ids[inside]] >= 0
+        return found
+
+    def _position_table(self) -> np.ndarray:
+        """The dense id -> position table (-1: not enrolled), up to the largest id."""
         if self._pos_table is None:
             table = np.full(int(self.ids[: self.n].max(initial=-1)) + 1, -1, dtype=np.int64)
             table[self.ids[: self.n]] = np.arange(self.n)
             self._pos_table = table
-        positions: np.ndarray = self._pos_table[ids]
-        return positions
+        return self._pos_table

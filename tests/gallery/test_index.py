@@ -105,6 +105,9 @@ def test_adds_and_deletes_keep_sigma_and_results_current():
     for m in MODALITIES:
         np.testing.assert_allclose(index.sigma()[m], gallery_sigma(current[m]), rtol=1e-8)
     assert index.refits > 1
+    # Which ids are enrolled, as the partial search asks (past the largest id too).
+    asked = np.array([0, 1, 7, 398, 399, 400, 10**6])
+    assert index.store.contains(asked).tolist() == [int(i) in keep for i in asked]
     query = {m: gallery[m][0] for m in MODALITIES}  # a deleted shape as the query
     expected, _ = _exhaustive(SHREC, current, query, 10)
     assert [m.id for m in index.search(query, 10)] == [keep[i] for i in expected]
