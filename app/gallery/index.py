@@ -341,7 +341,6 @@ class GalleryIndex:
             assert self.words is not None
             self.words = self.words.refiled(self.store.contains)
 
-
     def compare_with(self, preset: Preset) -> None:
         """Rank with ``preset`` (the same descriptors; other fusion weights or
         comparisons) from now on, refitting the candidates of every modality whose
