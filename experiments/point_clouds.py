@@ -21,6 +21,7 @@ import argparse
 
 import numpy as np
 import scipy.sparse.linalg as sla
+import trimesh
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
@@ -29,21 +30,30 @@ from worker.engine.mesh_io import Mesh, canonical_frame, face_areas, load_mesh
 from worker.evaluation.partial import edge_graph
 
 NEAR, FAR, SOURCES, EIGENVALUES = 3.0, 15.0, 300, 10
+ONE_SPACING, SPACING_SOURCES = 1.0, 1000
 
 
-def joined_share(mesh: Mesh) -> float:
-    """Share of vertex pairs within ``NEAR`` edge lengths in space that are more than
-    ``FAR`` apart along the edges (sampled from up to ``SOURCES`` of their vertices)."""
+def joined_pairs(mesh: Mesh, near: float, sources: int) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex pairs within ``near`` median edge lengths in space (sampled from up to
+    ``sources`` of their vertices, seed 0): (p, 2) the pairs and (p,) bool, those more
+    than ``FAR`` apart along the edges."""
     graph = edge_graph(mesh)
     edge = float(np.median(graph.data))
-    pairs = cKDTree(mesh.vertices).query_pairs(NEAR * edge, output_type="ndarray")
-    sources = np.unique(pairs[:, 0])
-    chosen = np.random.default_rng(0).choice(sources, min(SOURCES, len(sources)), replace=False)
+    pairs = cKDTree(mesh.vertices).query_pairs(near * edge, output_type="ndarray")
+    starts = np.unique(pairs[:, 0])
+    chosen = np.random.default_rng(0).choice(starts, min(sources, len(starts)), replace=False)
     along = dijkstra(graph, directed=False, indices=chosen, limit=2 * FAR * edge)
     row = np.full(mesh.n_vertices, -1)
     row[chosen] = np.arange(len(chosen))
     sampled = pairs[row[pairs[:, 0]] >= 0]
-    return float(np.mean(along[row[sampled[:, 0]], sampled[:, 1]] > FAR * edge))
+    return sampled, along[row[sampled[:, 0]], sampled[:, 1]] > FAR * edge
+
+
+def normals_agreeing(mesh: Mesh, pairs: np.ndarray) -> np.ndarray:
+    """(p,) bool: the pairs whose vertex normals (the faces' area-weighted) agree."""
+    normals = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).vertex_normals
+    agree: np.ndarray = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]) > 0
+    return agree
 
 
 def eigenvalue_errors(mesh: Mesh) -> np.ndarray:
@@ -63,19 +73,28 @@ def eigenvalue_errors(mesh: Mesh) -> np.ndarray:
 
 def contacts() -> None:
     labels = tosca_labels()
-    shares: dict[str, list[float]] = {}
+    shares: dict[str, list[tuple[float, float, float]]] = {}
     for name, label in labels.items():
-        shares.setdefault(label, []).append(joined_share(load_mesh(TOSCA / name)))
+        mesh = load_mesh(TOSCA / name)
+        far = joined_pairs(mesh, NEAR, SOURCES)[1]
+        pairs, close_far = joined_pairs(mesh, ONE_SPACING, SPACING_SOURCES)
+        agree = normals_agreeing(mesh, pairs[close_far])
+        shares.setdefault(label, []).append(
+            (float(far.mean()), float(close_far.mean()), float(agree.mean()) if len(agree) else 0.0)
+        )
     errors = {labels[n]: eigenvalue_errors(load_mesh(TOSCA / n)) for n in first_of_each_class()}
     print(
         "| class | meshes | near pairs far along the surface, median % | largest % "
+        "| within one spacing: far along, largest % | of those, normals agreeing, largest % "
         "| first mesh: point-cloud eigenvalues' error |"
     )
-    print("|---|---:|---:|---:|---|")
+    print("|---|---:|---:|---:|---:|---:|---|")
     for label, values in shares.items():
+        near, close, agree = (np.array(v) for v in zip(*values, strict=True))
         e = errors[label]
         print(
-            f"| {label} | {len(values)} | {100 * np.median(values):.2f} | {100 * max(values):.2f} "
+            f"| {label} | {len(values)} | {100 * np.median(near):.2f} | {100 * near.max():.2f} "
+            f"| {100 * close.max():.2f} | {100 * agree.max():.1f} "
             f"| median {100 * np.median(e):.1f}%, largest {100 * e.max():.1f}% |"
         )
 
