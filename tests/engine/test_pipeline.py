@@ -24,9 +24,18 @@ from conftest import (
 
 from worker.engine.compare import mean_normalized_manhattan
 from worker.engine.descriptor import ShapeDescriptor
-from worker.engine.mesh_io import Mesh, clean_mesh, face_areas, load_mesh, read_mesh
+from worker.engine.mesh_io import (
+    Mesh,
+    clean_mesh,
+    clean_surface,
+    face_areas,
+    load_mesh,
+    read_mesh,
+)
 from worker.engine.pipeline import describe_file, describe_mesh
 from worker.engine.presets import DEFAULT_PRESET, SIZE, get_preset
+from worker.engine.scans import organized_surface
+from worker.evaluation.partial import far_viewpoint, grid_mesh, range_image
 
 pytestmark = pytest.mark.slow  # whole pipelines on the examples and generated meshes
 
@@ -198,6 +207,28 @@ def test_a_file_of_separate_parts_describes_its_largest_and_says_so(small_preset
     assert d.kept_area_fraction == pytest.approx(0.8, rel=1e-6)  # 1 / (1 + 0.5^2)
     for m in MODALITIES:
         assert _difference(d, alone, m) < 1e-6
+
+
+def test_a_range_scan_written_as_a_mesh_describes_as_its_organized_cloud(small_preset):
+    """SHREC'17 wrote its range scans as meshes, the depth grid triangulated with the
+    shortcuts that span each occlusion gap: such a mesh is described without them, its
+    largest piece, as the same scan read as a depth camera's organized cloud is."""
+    mesh = load_mesh(example("quadruped-0"))
+    points, direction = range_image(mesh, np.random.default_rng(1))
+    as_mesh = grid_mesh(points)
+    cloud = clean_surface(*organized_surface(points, far_viewpoint(mesh, direction)))
+    assert as_mesh.n_faces > cloud.mesh.n_faces and cloud.kept_area_fraction < 0.95
+    d = describe_mesh(as_mesh, small_preset)
+    read_as_cloud = describe_mesh(cloud.mesh, small_preset)
+    for m in MODALITIES:
+        assert _difference(d, read_as_cloud, m) < EXACT
+    assert d.area == pytest.approx(read_as_cloud.area, rel=AREA)
+    assert d.kept_area_fraction == pytest.approx(cloud.kept_area_fraction, rel=1e-9)
+    assert describe_mesh(mesh, small_preset).kept_area_fraction is None  # not a grid
+    # Uploaded as a file (its coordinates as text): the share is of the file's surface.
+    off = trimesh.Trimesh(as_mesh.vertices, as_mesh.faces, process=False).export(file_type="off")
+    uploaded = describe_file(off.encode(), small_preset, "scan.off")
+    assert uploaded.kept_area_fraction == pytest.approx(cloud.kept_area_fraction, rel=1e-6)
 
 
 def _bumpy_ellipsoid(sphere: trimesh.Trimesh, axes=(3.0, 2.0, 1.0)) -> Mesh:

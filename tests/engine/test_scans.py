@@ -7,7 +7,8 @@ import struct
 
 import numpy as np
 import pytest
-from conftest import e57_scan
+import trimesh
+from conftest import e57_scan, random_rotation
 
 from worker.engine.errors import PointCloudError, UnreadableMeshError
 from worker.engine.mesh_io import read_mesh
@@ -15,10 +16,12 @@ from worker.engine.scans import (
     SHADOW_DEGREES,
     Grid,
     grid_faces,
+    grid_sight,
     lzf_decompress,
     organized_surface,
     read_e57,
     read_pcd,
+    unshadowed,
 )
 from worker.evaluation.samples import pcd_gz_bytes
 
@@ -124,6 +127,44 @@ def test_a_surface_seen_obliquely_keeps_every_triangle():
     vertices, faces = organized_surface(camera_grid(depth), np.zeros(3))
     assert len(vertices) == height * width
     assert len(faces) == 2 * (height - 1) * (width - 1)
+
+
+def orthographic_two_planes(rotation: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """:func:`two_planes` seen by an orthographic camera along +z (pixels 0.02 apart), in
+    a ``rotation``: the grid's points (h * w, 3), its triangles with the shortcuts across
+    the gap (as SHREC'17's range scans were written) and the near plane's columns."""
+    near = 15
+    v, u = np.mgrid[0:HEIGHT, 0:WIDTH] * 0.02
+    depth = np.where(np.arange(WIDTH)[None, :] < near, 1.0, 3.0) * np.ones((HEIGHT, 1))
+    points = np.stack([u, v, depth], axis=-1).reshape(-1, 3) @ rotation.T + 5.0
+    return points, grid_faces(np.ones((HEIGHT, WIDTH), dtype=bool)), near
+
+
+def test_a_range_scan_written_as_a_mesh_has_its_line_of_sight():
+    """Every triangle of an orthographic grid projects to half a pixel along the rays:
+    its line of sight is found from the triangles alone, and the rule along it leaves
+    the shortcuts out as an organized cloud's viewpoint does."""
+    rotation = random_rotation(np.random.default_rng(3))
+    points, faces, near = orthographic_two_planes(rotation)
+    sight = grid_sight(points, faces)
+    assert sight is not None
+    assert abs(float(sight @ rotation[:, 2])) == pytest.approx(1.0, abs=1e-9)
+    kept = unshadowed(points, faces, sight=sight)
+    assert np.count_nonzero(~kept) == 2 * (HEIGHT - 1)  # the strip across the gap
+    far_viewpoint = points.mean(axis=0) + 1e3 * rotation[:, 2]
+    assert np.array_equal(kept, unshadowed(points, faces, far_viewpoint))
+
+
+def test_meshes_that_are_not_an_orthographic_grid_have_no_line_of_sight():
+    sphere = trimesh.creation.icosphere(subdivisions=3)
+    upper = sphere.faces[sphere.triangles_center[:, 2] > 0.2]  # faces one way, unevenly
+    perspective, _ = two_planes()  # a pinhole camera's pixels grow with their depth
+    for points, faces in (
+        (sphere.vertices, sphere.faces),
+        (sphere.vertices, upper),
+        (perspective.reshape(-1, 3), grid_faces(np.ones((HEIGHT, WIDTH), dtype=bool))),
+    ):
+        assert grid_sight(np.asarray(points), np.asarray(faces)) is None
 
 
 def test_pixels_that_saw_nothing_are_left_out():

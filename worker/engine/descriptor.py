@@ -35,8 +35,10 @@ class ShapeDescriptor:
     timings : seconds per stage.
     kept_area_fraction : the described part's share of the file's surface area (below 1
         when the file has other, separate parts, which are left out;
-        :func:`~worker.engine.mesh_io.read_mesh`); None when the mesh did not come from
-        a file, or for a descriptor stored before this was recorded.
+        :func:`~worker.engine.mesh_io.read_mesh`; or a range scan's pieces its shortcuts
+        joined, :func:`~worker.engine.pipeline.without_grid_shortcuts`); None when the
+        mesh did not come from a file and kept every piece, or for a descriptor stored
+        before this was recorded.
     parts : (m, C) float16, the parts modality (:mod:`~worker.engine.parts`): each
         sample's log geodesic-ball area profile on the preset's grid of radii, at half
         precision (its rounding, under 0.004, is far below the differences compared);

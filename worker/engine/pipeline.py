@@ -22,8 +22,10 @@ from .holes import boundary_loops, close_small_holes, facing_share, longest_open
 from .intrinsic import surface_operators
 from .mesh_io import (
     CANONICAL_AREA,
+    CleanedMesh,
     Mesh,
     canonical_frame,
+    clean_surface,
     face_areas,
     read_mesh,
 )
@@ -38,16 +40,19 @@ from .modal import (
 from .parts import ball_area_profiles, boundary_reach, grid_radii
 from .presets import Preset
 from .resample import resample_mesh
+from .scans import grid_sight, unshadowed
 
 
 def resampled_surface(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Mesh:
-    """The mesh every descriptor of ``mesh`` is computed on: in its canonical frame
+    """The mesh every descriptor of ``mesh`` is computed on: a range scan's shortcuts left
+    out (:func:`without_grid_shortcuts`), in its canonical frame
     (:func:`~worker.engine.mesh_io.canonical_frame`), its small holes closed if the
     preset says so (:func:`~worker.engine.holes.close_small_holes`), resampled to the
     preset's vertex count, its edges bounded if the preset says so; only moved to its
     canonical frame when it is ``resampled`` already (:func:`describe_mesh`)."""
-    surface = canonical_frame(mesh)
-    return surface if resampled else _resampled(surface, preset)
+    if resampled:
+        return canonical_frame(mesh)
+    return _resampled(canonical_frame(without_grid_shortcuts(mesh).mesh), preset)
 
 
 def _resampled(surface: Mesh, preset: Preset) -> Mesh:
@@ -111,6 +116,18 @@ def ddt_descriptor(
     return core_diagonal(core) if preset.ddt_elements == "diagonal" else core
 
 
+def without_grid_shortcuts(mesh: Mesh) -> CleanedMesh:
+    """A range scan triangulated as an orthographic depth grid without the triangles that
+    run along its line of sight over an occlusion gap (:func:`~.scans.grid_sight`,
+    :func:`~.scans.unshadowed`: the rule a depth camera's organized cloud is read by), its
+    largest piece and that piece's share of the rest; any other mesh as it is (share 1)."""
+    sight = grid_sight(mesh.vertices, mesh.faces)
+    kept = None if sight is None else unshadowed(mesh.vertices, mesh.faces, sight=sight)
+    if kept is None or kept.all():
+        return CleanedMesh(mesh, 1.0)
+    return clean_surface(mesh.vertices, mesh.faces[kept])
+
+
 def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> ShapeDescriptor:
     """Compute all modalities of a cleaned mesh, and record its area (the size).
 
@@ -135,9 +152,11 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
         timings[stage] = now - clock
         clock = now
 
-    # The size, in the file's units: everything below is in the canonical frame.
-    area = float(face_areas(mesh.vertices, mesh.faces).sum())
-    surface = canonical_frame(mesh)
+    # A range scan's shortcuts are no surface. The size, in the file's units: everything
+    # below is in the canonical frame.
+    scanned = CleanedMesh(mesh, 1.0) if resampled else without_grid_shortcuts(mesh)
+    area = float(face_areas(scanned.mesh.vertices, scanned.mesh.faces).sum())
+    surface = canonical_frame(scanned.mesh)
     open_loop = longest_open_loop(surface, CANONICAL_AREA)
     facing = facing_share(surface)
     described = surface if resampled else _resampled(surface, preset)
@@ -203,6 +222,7 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
         longest_open_loop=open_loop,
         area=area,
         facing_share=facing,
+        kept_area_fraction=scanned.kept_area_fraction if scanned.mesh is not mesh else None,
     )
 
 
@@ -236,7 +256,10 @@ def load_and_describe(
     cleaned = read_mesh(source, filename, max_faces=max_faces)
     load_seconds = time.perf_counter() - start
     descriptor = describe_mesh(cleaned.mesh, preset)
-    descriptor.kept_area_fraction = cleaned.kept_area_fraction
+    # Of the file's surface: a range scan's shortcuts may leave pieces apart (describe_mesh).
+    descriptor.kept_area_fraction = cleaned.kept_area_fraction * (
+        descriptor.kept_area_fraction or 1.0
+    )
     if cleaned.grid is not None:
         descriptor.input_points = cleaned.grid.points
         descriptor.input_grid = (cleaned.grid.width, cleaned.grid.height)

@@ -18,6 +18,10 @@ their triangle runs along the viewing ray over the gap: such a *shadowed* edge, 
 ``SHADOW_DEGREES`` of the ray from the sensor, leaves its triangles out, the rule of
 PCL's ``OrganizedFastMesh`` (Holz and Behnke 2012, "Fast range image segmentation and
 smoothing using approximate surface reconstruction and region growing").
+
+A range scan written as a mesh (SHREC'17's range scans) keeps those shortcuts, and has
+no viewpoint; when it is an orthographic grid, its line of sight is found from its
+triangles (:func:`grid_sight`) and the same rule applies along it.
 """
 
 from __future__ import annotations
@@ -77,19 +81,58 @@ def grid_faces(valid: np.ndarray) -> np.ndarray:
 
 
 def unshadowed(
-    points: np.ndarray, faces: np.ndarray, viewpoint: np.ndarray, degrees: float = SHADOW_DEGREES
+    points: np.ndarray,
+    faces: np.ndarray,
+    viewpoint: np.ndarray | None = None,
+    degrees: float = SHADOW_DEGREES,
+    *,
+    sight: np.ndarray | None = None,
 ) -> np.ndarray:
     """(m,) bool, the ``faces`` none of whose edges lies within ``degrees`` of the ray from
-    ``viewpoint`` (3,) to its first end (:data:`SHADOW_DEGREES`)."""
+    ``viewpoint`` (3,) to its first end (:data:`SHADOW_DEGREES`), or of the orthographic
+    rays along ``sight`` (3,) (:func:`grid_sight`)."""
     cosine = np.cos(np.radians(degrees))
     kept = np.ones(len(faces), dtype=bool)
     for first, second in ((0, 1), (1, 2), (2, 0)):
         start, end = points[faces[:, first]], points[faces[:, second]]
-        edge, ray = end - start, start - viewpoint
+        edge = end - start
+        ray = np.broadcast_to(sight, start.shape) if sight is not None else start - viewpoint
         length = np.linalg.norm(edge, axis=1) * np.linalg.norm(ray, axis=1)
         along = np.abs(np.einsum("ij,ij->i", edge, ray))
         kept &= along < cosine * np.maximum(length, np.finfo(float).tiny)
     return kept
+
+
+#: :func:`grid_sight`: how far a mesh's triangles' areas along one direction may spread
+#: (their standard deviation over their mean) for it to be an orthographic depth grid.
+GRID_SPREAD = 0.01
+
+
+def grid_sight(points: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
+    """The line of sight (3,) of a mesh triangulated as an orthographic depth grid (a range
+    scan written as a mesh, as SHREC'17's were), or None for any other mesh.
+
+    Every triangle of such a grid covers half a pixel, so along the scanner's rays ``d``
+    each projects to the same area: ``(b - a) x (c - a) . d`` is one constant for every
+    face ``abc``, a shortcut across an occlusion gap included (its projection is a
+    pixel's too). The least-squares solution of ``N v = 1`` over the faces' doubled area
+    vectors ``N`` finds ``d = v / |v|``; the mesh is such a grid when the projected areas
+    then spread by at most :data:`GRID_SPREAD` of their mean, all positive (a whole, a
+    cut or a view made of a mesh's own faces spread far more).
+    """
+    corners = points[faces]
+    doubled = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    size = np.linalg.norm(doubled, axis=1)
+    doubled = doubled[size > 1e-12 * max(float(size.max(initial=0.0)), np.finfo(float).tiny)]
+    if len(doubled) < 3:
+        return None
+    solution = np.linalg.lstsq(doubled, np.ones(len(doubled)), rcond=None)[0]
+    projected = doubled @ solution
+    mean = float(projected.mean())
+    if mean <= 0.0 or projected.min() <= 0.0 or projected.std() > GRID_SPREAD * mean:
+        return None
+    sight: np.ndarray = solution / np.linalg.norm(solution)
+    return sight
 
 
 def organized_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
