@@ -104,8 +104,11 @@ def unshadowed(
 
 
 #: :func:`grid_sight`: how far a mesh's triangles' areas along one direction may spread
-#: (their standard deviation over their mean) for it to be an orthographic depth grid.
+#: (their standard deviation over their mean) for it to be an orthographic depth grid,
+#: and the fewest triangles that can tell (the direction has 3 unknowns: a few triangles
+#: fit any).
 GRID_SPREAD = 0.01
+GRID_MIN_FACES = 20
 
 
 def grid_sight(points: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
@@ -117,14 +120,15 @@ def grid_sight(points: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
     face ``abc``, a shortcut across an occlusion gap included (its projection is a
     pixel's too). The least-squares solution of ``N v = 1`` over the faces' doubled area
     vectors ``N`` finds ``d = v / |v|``; the mesh is such a grid when the projected areas
-    then spread by at most :data:`GRID_SPREAD` of their mean, all positive (a whole, a
-    cut or a view made of a mesh's own faces spread far more).
+    then spread by at most :data:`GRID_SPREAD` of their mean, all positive, over at least
+    :data:`GRID_MIN_FACES` faces (a whole, a cut or a view made of a mesh's own faces
+    spread far more).
     """
     corners = points[faces]
     doubled = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     size = np.linalg.norm(doubled, axis=1)
     doubled = doubled[size > 1e-12 * max(float(size.max(initial=0.0)), np.finfo(float).tiny)]
-    if len(doubled) < 3:
+    if len(doubled) < GRID_MIN_FACES:
         return None
     solution = np.linalg.lstsq(doubled, np.ones(len(doubled)), rcond=None)[0]
     projected = doubled @ solution
