@@ -109,6 +109,10 @@ def unshadowed(
 #: fit any).
 GRID_SPREAD = 0.01
 GRID_MIN_FACES = 20
+#: A mesh of more than ``4 GRID_TRIAL`` triangles is first tried on a seeded sample of
+#: ``GRID_TRIAL`` of them: most meshes are no grid, and the sample tells in a fraction of
+#: the time the whole does (30 ms at 105,000 triangles).
+GRID_TRIAL = 256
 
 
 def grid_sight(points: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
@@ -122,8 +126,18 @@ def grid_sight(points: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
     vectors ``N`` finds ``d = v / |v|``; the mesh is such a grid when the projected areas
     then spread by at most :data:`GRID_SPREAD` of their mean, all positive, over at least
     :data:`GRID_MIN_FACES` faces (a whole, a cut or a view made of a mesh's own faces
-    spread far more).
+    spread far more). A grid's every triangle projects alike, so a sample of them
+    (:data:`GRID_TRIAL`) refuses most other meshes first.
     """
+    if len(faces) > 4 * GRID_TRIAL:
+        trial = np.random.default_rng(0).choice(len(faces), GRID_TRIAL, replace=False)
+        if _sight_of(points, faces[trial]) is None:
+            return None
+    return _sight_of(points, faces)
+
+
+def _sight_of(points: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
+    """:func:`grid_sight` on every one of ``faces``."""
     corners = points[faces]
     doubled = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     size = np.linalg.norm(doubled, axis=1)
