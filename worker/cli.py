@@ -19,7 +19,6 @@ from typing import Any
 
 from .engine.presets import DEFAULT_PRESET, PRESETS, UNITS, Preset, get_preset, with_units
 from .evaluation.datasets import DEFAULT_CACHE, RESAMPLINGS
-from .evaluation.partial import PARTIAL_VARIANTS
 from .recognition.fusion import FOLDS
 
 
@@ -400,8 +399,9 @@ def add_subcommands(sub: Any) -> None:
     )
     partial.add_argument(
         "--variants",
-        help="comma-separated subset of the partial copies: "
-        f"{', '.join(PARTIAL_VARIANTS)} (default: all)",
+        help="comma-separated subset of the partial copies: cut-5, cut-15, cut-30, holes-10, "
+        "holes-25, view, range, range-cloud, shrec-holes, noise-0.25, noise-0.5, noise-1 "
+        "(default: all)",
     )
     partial.add_argument(
         "--out", help="report directory (default: evaluation-out/partiality/PRESET)"

@@ -10,12 +10,23 @@ import numpy as np
 import pytest
 from conftest import EXAMPLES
 
+from app.cli import build_parser
 from worker.engine.parts import compared_profiles, grid_radii, part_dissimilarity
 from worker.engine.presets import DEFAULT_PRESET, PARTS, get_preset
+from worker.evaluation.partial import PARTIAL_VARIANTS
 from worker.evaluation.partiality import parts_matrix, ranking_scores
 from worker.evaluation.robustness import PRESET_ROW
 from worker.evaluation.run import run_partiality
 from worker.evaluation.shapedna import BASELINE
+
+
+def test_the_partiality_command_s_help_names_every_variant(capsys, monkeypatch):
+    """Typed out (the command starts without the engine's dependencies), so checked."""
+    monkeypatch.setenv("COLUMNS", "1000")  # no line wrapped, at a hyphen or not
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["partiality", "--help"])
+    listed = " ".join(capsys.readouterr().out.split())
+    assert f"partial copies: {', '.join(PARTIAL_VARIANTS)} (default: all)" in listed
 
 
 def test_ranking_scores_count_own_class_own_source_and_average_precision():
