@@ -33,20 +33,28 @@ NEAR, FAR, SOURCES, EIGENVALUES = 3.0, 15.0, 300, 10
 ONE_SPACING, SPACING_SOURCES = 1.0, 1000
 
 
-def joined_pairs(mesh: Mesh, near: float, sources: int) -> tuple[np.ndarray, np.ndarray]:
-    """Vertex pairs within ``near`` median edge lengths in space (sampled from up to
-    ``sources`` of their vertices, seed 0): (p, 2) the pairs and (p,) bool, those more
-    than ``FAR`` apart along the edges."""
-    graph = edge_graph(mesh)
-    edge = float(np.median(graph.data))
-    pairs = cKDTree(mesh.vertices).query_pairs(near * edge, output_type="ndarray")
-    starts = np.unique(pairs[:, 0])
-    chosen = np.random.default_rng(0).choice(starts, min(sources, len(starts)), replace=False)
-    along = dijkstra(graph, directed=False, indices=chosen, limit=2 * FAR * edge)
-    row = np.full(mesh.n_vertices, -1)
-    row[chosen] = np.arange(len(chosen))
-    sampled = pairs[row[pairs[:, 0]] >= 0]
-    return sampled, along[row[sampled[:, 0]], sampled[:, 1]] > FAR * edge
+class Contacts:
+    """A mesh's edge graph and vertex tree, built once for :meth:`joined_pairs`."""
+
+    def __init__(self, mesh: Mesh) -> None:
+        self.graph = edge_graph(mesh)
+        self.edge = float(np.median(self.graph.data))
+        self.tree = cKDTree(mesh.vertices)
+        self.n_vertices = mesh.n_vertices
+
+    def joined_pairs(self, near: float, sources: int) -> tuple[np.ndarray, np.ndarray]:
+        """Vertex pairs within ``near`` median edge lengths in space (sampled from up to
+        ``sources`` of their vertices, seed 0): (p, 2) the pairs and (p,) bool, those more
+        than ``FAR`` apart along the edges."""
+        pairs = self.tree.query_pairs(near * self.edge, output_type="ndarray")
+        starts = np.unique(pairs[:, 0])
+        rng = np.random.default_rng(0)
+        chosen = rng.choice(starts, min(sources, len(starts)), replace=False)
+        along = dijkstra(self.graph, directed=False, indices=chosen, limit=2 * FAR * self.edge)
+        row = np.full(self.n_vertices, -1)
+        row[chosen] = np.arange(len(chosen))
+        sampled = pairs[row[pairs[:, 0]] >= 0]
+        return sampled, along[row[sampled[:, 0]], sampled[:, 1]] > FAR * self.edge
 
 
 def normals_agreeing(mesh: Mesh, pairs: np.ndarray) -> np.ndarray:
@@ -76,8 +84,9 @@ def contacts() -> None:
     shares: dict[str, list[tuple[float, float, float]]] = {}
     for name, label in labels.items():
         mesh = load_mesh(TOSCA / name)
-        far = joined_pairs(mesh, NEAR, SOURCES)[1]
-        pairs, close_far = joined_pairs(mesh, ONE_SPACING, SPACING_SOURCES)
+        contacts = Contacts(mesh)
+        far = contacts.joined_pairs(NEAR, SOURCES)[1]
+        pairs, close_far = contacts.joined_pairs(ONE_SPACING, SPACING_SOURCES)
         agree = normals_agreeing(mesh, pairs[close_far])
         shares.setdefault(label, []).append(
             (float(far.mean()), float(close_far.mean()), float(agree.mean()) if len(agree) else 0.0)
