@@ -219,20 +219,18 @@ class SampleWords:
         shape is filed under it, over the shape's norm."""
         assigned = np.asarray(assigned, dtype=np.int64).ravel()
         # Each word's weight times the query vectors assigned to it, given to every shape
-        # filed under it: the entries of the words assigned, gathered at once.
+        # filed under it: the entries of the words assigned, one slice of the inverted
+        # file each (a query's 128 words, but 400,000 entries at a million shapes).
         per_word = np.bincount(assigned, minlength=self.size) * self.idf
         used = np.flatnonzero(per_word)
-        starts = self.bounds[used]
-        lengths = self.bounds[used + 1] - starts
-        entries = np.repeat(starts - np.cumsum(lengths) + lengths, lengths) + np.arange(
-            lengths.sum()
+        starts, ends = self.bounds[used], self.bounds[used + 1]
+        slots = np.concatenate(
+            [self.slots[a:b] for a, b in zip(starts.tolist(), ends.tolist(), strict=True)]
+            + [np.zeros(0, dtype=np.int32)]
         )
-        votes = (
-            np.bincount(
-                self.slots[entries], np.repeat(per_word[used], lengths), minlength=len(self.ids)
-            )
-            / self.norms
-        )
+        weights = np.repeat(per_word[used], ends - starts)
+        votes = np.bincount(slots, weights, minlength=len(self.ids)).astype(float, copy=False)
+        np.divide(votes, self.norms, out=votes)
         ids = self.ids
         if self.added:
             added_ids, added_words, lengths = self._added_arrays()

@@ -119,9 +119,10 @@ def test_candidates_scored_in_blocks_choose_the_same_scale():
 def test_a_rough_pass_scores_as_the_exact_one_to_single_precision():
     """The index's shortlisting passes take the single-precision expansion as it comes:
     on float16 profiles as a gallery keeps them, every scale's scores within 1e-4 of the
-    exact ones, at every scale including those where few radii are clear."""
+    exact ones, at every scale including those where few radii are clear, over enough
+    candidates that the rough pass converts them in three blocks, the last one short."""
     rng = np.random.default_rng(4)
-    gallery = compared_profiles(_profiles(rng, 9, 64), DEFAULT).astype(np.float16)
+    gallery = compared_profiles(_profiles(rng, 150, 64), DEFAULT).astype(np.float16)
     query = _profiles(rng, 1, 64)[0]
     reach = np.where(rng.random(64) < 0.3, np.inf, rng.uniform(0.05, 1.5, size=64))
     exact = scale_scores(query, reach, gallery, DEFAULT)

@@ -244,19 +244,22 @@ def scale_scores(
     whole = np.ascontiguousarray(gallery)
     n, per_shape = whole.shape[:2]
     flat = whole.reshape(n * per_shape, -1)
-    rows = _RoughRows(flat) if rough else _GalleryRows(flat)
     tried = range(scale_count(preset)) if scales is None else scales
     out = np.full((len(tried), n), np.inf)
-    for row, j in enumerate(tried):
-        query, within = samples_at_scale(profiles, reach, j, preset)
-        if not len(query) or n == 0:
-            continue
-        valid = within.astype(np.float64)
-        used = valid.sum(axis=1)
-        if isinstance(rows, _RoughRows):
-            nearest = _nearest_squared_rough(query, valid, rows, per_shape)
-        else:
-            nearest = _nearest_squared(query, valid, rows, n, per_shape)
+    at_scales = [
+        (row, j, *samples_at_scale(profiles, reach, j, preset)) for row, j in enumerate(tried)
+    ]
+    compared = [(row, j, query, within) for row, j, query, within in at_scales if len(query)]
+    if n == 0 or not compared:
+        return out
+    asked = [(query, within.astype(np.float64)) for _, _, query, within in compared]
+    if rough:
+        found = _nearest_squared_rough(flat, asked, per_shape)
+    else:
+        rows = _GalleryRows(flat)
+        found = [_nearest_squared(query, valid, rows, n, per_shape) for query, valid in asked]
+    for (row, j, _, within), nearest in zip(compared, found, strict=True):
+        used = within.sum(axis=1).astype(np.float64)
         rms = np.sqrt(np.maximum(nearest, 0.0) / used[:, None])
         out[row] = used @ rms / used.sum() + prior * np.log(_scale(j, preset))
     return out
@@ -370,42 +373,45 @@ def _nearest_squared(
     return unsorted
 
 
-class _RoughRows:
-    """Candidates' samples as :func:`_nearest_squared_rough` reads them: (N, 2K) single
-    precision, each row's values and their squares."""
-
-    def __init__(self, rows: np.ndarray) -> None:
-        count = rows.shape[1]
-        self.values = np.empty((len(rows), 2 * count), dtype=np.float32)
-        single = self.values[:, :count]
-        single[...] = rows
-        np.multiply(single, single, out=self.values[:, count:])
-
-
 def _nearest_squared_rough(
-    query: np.ndarray, valid: np.ndarray, rows: _RoughRows, per_shape: int
-) -> np.ndarray:
-    """(q, n) :func:`_nearest_squared`'s result as the single-precision expansion gives it,
-    without computing it again: ``|q|^2 + min_y (-2 q.y + |y|^2)`` over the valid radii,
-    one product per block (the query row ``[-2 valid q, valid]`` against ``[y, y^2]``, so
-    no grouping by valid radii) and each candidate's minimum over its rows. A shape's
-    rows are the product's consecutive rows, so the minimum runs along whole rows of
-    query values; the rounding, about 1e-5 of the squared distance for profiles of a few
-    units, is far below what a shortlist tells apart."""
-    count = query.shape[1]
-    picks = np.empty((2 * count, len(query)), dtype=np.float32)
-    picks[:count] = (-2.0 * valid * query).T
-    picks[count:] = valid.T
-    n = len(rows.values) // per_shape
-    out = np.empty((n, len(query)), dtype=np.float32)
-    shapes_per_block = max(1, _BLOCK_ENTRIES // (len(query) * per_shape))
+    rows: np.ndarray, asked: list[tuple[np.ndarray, np.ndarray]], per_shape: int
+) -> list[np.ndarray]:
+    """For each scale's (query, valid) in ``asked``, (q, n) :func:`_nearest_squared`'s
+    result as the single-precision expansion gives it, without computing it again:
+    ``|q|^2 + min_y (-2 q.y + |y|^2)`` over the valid radii, one product per block and
+    scale (the query row ``[-2 valid q, valid]`` against ``[y, y^2]``, so no grouping by
+    valid radii) and each candidate's minimum over its rows. A shape's rows are the
+    product's consecutive rows, so the minimum runs along whole rows of query values; the
+    rounding, about 1e-5 of the squared distance for profiles of a few units, is far below
+    what a shortlist tells apart.
+
+    The candidates' (N, K) rows (float16 as a gallery keeps them) are made single
+    precision, with their squares, a block at a time into one buffer that stays in the
+    processor's cache, and every scale is scored on the block: a million rows converted
+    at once would be written to memory and read back for each scale."""
+    count = rows.shape[1]
+    n = len(rows) // per_shape
+    picks, squares, out = [], [], []
+    for query, valid in asked:
+        pick = np.empty((2 * count, len(query)), dtype=np.float32)
+        pick[:count] = (-2.0 * valid * query).T
+        pick[count:] = valid.T
+        picks.append(pick)
+        squares.append(np.einsum("qk,qk->q", valid, query * query))
+        out.append(np.empty((n, len(query)), dtype=np.float32))
+    widest = max(len(query) for query, _ in asked)
+    shapes_per_block = max(1, _BLOCK_ENTRIES // (widest * per_shape))
+    buffer = np.empty((shapes_per_block * per_shape, 2 * count), dtype=np.float32)
     for first in range(0, n, shapes_per_block):
         last = min(n, first + shapes_per_block)
-        product = rows.values[first * per_shape : last * per_shape] @ picks
-        out[first:last] = product.reshape(last - first, per_shape, len(query)).min(axis=1)
-    squares = np.einsum("qk,qk->q", valid, query * query)
-    nearest: np.ndarray = out.T + squares[:, None]
-    return nearest
+        block = buffer[: (last - first) * per_shape]
+        single = block[:, :count]
+        single[...] = rows[first * per_shape : last * per_shape]
+        np.multiply(single, single, out=block[:, count:])
+        for pick, nearest in zip(picks, out, strict=True):
+            product = block @ pick
+            nearest[first:last] = product.reshape(last - first, per_shape, -1).min(axis=1)
+    return [nearest.T + square[:, None] for nearest, square in zip(out, squares, strict=True)]
 
 
 def part_dissimilarity_reference(
