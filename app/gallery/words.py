@@ -220,7 +220,7 @@ class SampleWords:
         assigned = np.asarray(assigned, dtype=np.int64).ravel()
         # Each word's weight times the query vectors assigned to it, given to every shape
         # filed under it: the entries of the words assigned, one slice of the inverted
-        # file each (a query's 128 words, but 400,000 entries at a million shapes).
+        # file each (a query's 128 words, but about 400,000 entries at a million shapes).
         per_word = np.bincount(assigned, minlength=self.size) * self.idf
         used = np.flatnonzero(per_word)
         starts, ends = self.bounds[used], self.bounds[used + 1]
