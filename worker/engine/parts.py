@@ -387,8 +387,8 @@ def _nearest_squared_rough(
 
     The candidates' (N, K) rows (float16 as a gallery keeps them) are made single
     precision, with their squares, a block at a time into one buffer that stays in the
-    processor's cache, and every scale is scored on the block: a million rows converted
-    at once would be written to memory and read back for each scale."""
+    processor's cache, and every scale is scored on the block, rather than all rows at
+    once, written to memory and read back for each scale."""
     count = rows.shape[1]
     n = len(rows) // per_shape
     picks, squares, out = [], [], []
