@@ -16,7 +16,13 @@ from worker.engine.compare import (
     gallery_sigma,
     query_weights,
 )
-from worker.engine.parts import COARSE_SAMPLES, compared_profiles, grid_radii, part_dissimilarity
+from worker.engine.parts import (
+    COARSE_SAMPLES,
+    compared_profiles,
+    grid_radii,
+    part_dissimilarity,
+    scale_count,
+)
 from worker.engine.presets import (
     DEFAULT_PRESET,
     MODALITIES,
@@ -425,6 +431,33 @@ def test_the_inverted_file_chooses_the_scale_every_shape_compared_chooses(monkey
     found, scale = index.partial_search(*query)
     assert scale == 2.0 ** (j / 8) and found[0].id % 40 == 7
     assert ([m.id for m in found], scale) == _every_shape_compared(index, *query)
+
+
+@pytest.mark.parametrize(("candidates", "probed"), [(256, 64), (1600, 200), (4000, 256)])
+def test_each_scale_s_probe_is_an_eighth_of_the_candidates_within_its_bounds(
+    monkeypatch, candidates, probed
+):
+    """The scale is chosen on each scale's ``count / 8`` most voted shapes, at least
+    ``WORD_PROBE`` and at most ``WORD_MAX_PROBE``: every step of the grid compares that
+    many coarsely, and the answer stays the one every shape compared gives."""
+    rng = np.random.default_rng(11)
+    index, pose, _ = _posed_index(monkeypatch, rng)
+    monkeypatch.setattr(index_module, "WORD_CANDIDATES", candidates)
+    probes: list[int] = []
+    scored = index._parts_scores
+
+    def spy(profiles, reach, gallery, scales=None, rough=False):
+        if rough and scales is not None and len(scales) == 1:
+            probes.append(len(gallery))
+        return scored(profiles, reach, gallery, scales, rough)
+
+    monkeypatch.setattr(index, "_parts_scores", spy)
+    query = ({}, pose(3)[:150], np.full(150, np.inf), {PARTS: 1.0}, 10)
+    found, _ = index.partial_search(*query)
+    steps = range(0, scale_count(DEFAULT), DEFAULT.parts_scale_steps)
+    assert probes[: len(steps)] == [probed] * len(steps)  # then the candidates' pass
+    assert found[0].id % 40 == 3
+    assert [m.id for m in found] == _every_shape_compared(index, *query)[0]
 
 
 @pytest.mark.parametrize("quarters", [3, 10, 18])
