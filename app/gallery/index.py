@@ -111,8 +111,8 @@ WORD_SHARE = 50
 WORD_MAX_CANDIDATES = 8192
 #: Shapes each scale's votes put first that are compared coarsely to choose the scale:
 #: an eighth of the candidates, from WORD_PROBE to WORD_MAX_PROBE (docs/decisions.md,
-#: "The scale is chosen on 256 of each scale's most voted": the more shapes a gallery
-#: holds, the more of them crowd the top votes at a wrong scale).
+#: "A partial query's scale is chosen on an eighth of its candidates": the more shapes a
+#: gallery holds, the more of them crowd the top votes at a wrong scale).
 WORD_PROBE = 64
 WORD_MAX_PROBE = 256
 #: Query scales on either side of the coarse pass's that the shortlist tries (with the
