@@ -110,10 +110,10 @@ WORD_CANDIDATES = 256
 WORD_SHARE = 50
 WORD_MAX_CANDIDATES = 8192
 #: Shapes each scale's votes put first that are compared coarsely to choose the scale:
-#: an eighth of the candidates, from WORD_PROBE to WORD_MAX_PROBE (docs/decisions.md,
+#: an eighth of the candidates, from WORD_MIN_PROBE to WORD_MAX_PROBE (docs/decisions.md,
 #: "A partial query's scale is chosen on an eighth of its candidates": the more shapes a
 #: gallery holds, the more of them crowd the top votes at a wrong scale).
-WORD_PROBE = 64
+WORD_MIN_PROBE = 64
 WORD_MAX_PROBE = 256
 #: Query scales on either side of the coarse pass's that the shortlist tries (with the
 #: preset's four scales to a step of the grid, three quarters of a step: at 100,000 shapes
@@ -552,7 +552,7 @@ class GalleryIndex:
         """A partial query's scale and its ``count`` candidates from the inverted file.
 
         The samples vote at each step of the grid apart (``profiles``, ``reach``: the
-        coarse pass's samples); each scale's best ``count / 8`` (``WORD_PROBE`` to
+        coarse pass's samples); each scale's best ``count / 8`` (``WORD_MIN_PROBE`` to
         ``WORD_MAX_PROBE``) are compared coarsely at it, and the scale of the best match
         is the query's, as the exhaustive pass chooses it over every shape (it can only
         be missed when no shape near that best is among the probe). Its candidates are
@@ -560,7 +560,7 @@ class GalleryIndex:
         """
         assert self.words is not None
         words, present = self.words, self.store.contains
-        depth = min(max(WORD_PROBE, count // 8), WORD_MAX_PROBE)
+        depth = min(max(WORD_MIN_PROBE, count // 8), WORD_MAX_PROBE)
         best, chosen = np.inf, 0
         chosen_votes: tuple[np.ndarray, np.ndarray] | None = None  # the chosen scale's only
         for j in range(0, scale_count(self.preset), self.preset.parts_scale_steps):

@@ -438,7 +438,7 @@ def test_each_scale_s_probe_is_an_eighth_of_the_candidates_within_its_bounds(
     monkeypatch, candidates, probed
 ):
     """The scale is chosen on each scale's ``count / 8`` most voted shapes, at least
-    ``WORD_PROBE`` and at most ``WORD_MAX_PROBE``: every step of the grid compares that
+    ``WORD_MIN_PROBE`` and at most ``WORD_MAX_PROBE``: every step of the grid compares that
     many coarsely, and the answer stays the one every shape compared gives."""
     rng = np.random.default_rng(11)
     index, pose, _ = _posed_index(monkeypatch, rng)
