@@ -7,6 +7,7 @@ import pytest
 from lapy.shapedna import compute_distance, reweight_ev
 
 from worker.engine.compare import (
+    D1_BLOCK,
     dissimilarity,
     fuse,
     fused_dissimilarity,
@@ -48,6 +49,20 @@ def test_d1_is_symmetric_and_scale_free():
     np.testing.assert_allclose(d, d.T)
     np.testing.assert_allclose(np.diag(d), 0.0)
     np.testing.assert_allclose(mean_normalized_manhattan(3 * x, 3 * x), d)
+
+
+def test_d1_in_blocks_is_the_pairwise_formula_for_every_row():
+    """More gallery rows than a block, single precision as a gallery stores them, zeros in
+    both: each entry equals eq. (8) computed pair by pair."""
+    rng = np.random.default_rng(1)
+    gallery = rng.random((2 * D1_BLOCK + 7, 12)).astype(np.float32)
+    queries = rng.random((3, 12))
+    gallery[:9, :4] = 0.0
+    queries[0, :2] = 0.0
+    d = mean_normalized_manhattan(queries, gallery)
+    for i, row in enumerate(queries):
+        pairwise = paired_dissimilarity(np.broadcast_to(row, gallery.shape), gallery, "D1")
+        np.testing.assert_array_equal(d[i], pairwise)
 
 
 def test_d2_hand_computed():
