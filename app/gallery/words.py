@@ -256,27 +256,27 @@ class SampleWords:
     def _assign(self, queries: np.ndarray, valid: np.ndarray) -> np.ndarray:
         """(q, ASSIGN) each query vector's nearest words over its valid radii only.
 
-        A sample's valid radii are its first ones (those within its reach), so the vectors
-        are taken by their count ``L`` of them: the squared distance over the first ``L``
-        is ``|q|^2 - 2 q.c + sum_{k<L} c_k^2``, one product per count (single precision:
-        a near tie between two words goes either way, and both are assigned)."""
+        A sample's valid radii are its first ones (those within its reach), ``L`` of them:
+        the squared distance over them is ``|q|^2 - 2 q.c + sum_{k<L} c_k^2``. With the
+        radii past ``L`` set to 0, ``q.c`` is one matrix product for every vector, and each
+        adds the words' sums of squares for its ``L`` (single precision: a near tie between
+        two words goes either way, and both are assigned)."""
         if self._cumulative is None:
             self._cumulative = np.cumsum(self.centroids**2, axis=1).T.copy()  # (K, V)
         lengths = valid.sum(axis=1)
+        rows = np.flatnonzero(lengths > 0)
         k = min(ASSIGN, self.size)
-        nearest = np.empty((len(queries), k), dtype=np.int64)
-        for length in np.unique(lengths):
-            if length == 0:
-                continue
-            rows = np.flatnonzero(lengths == length)
-            head = np.asarray(queries[rows, :length], dtype=np.float32)
-            distances = self._cumulative[length - 1] - 2.0 * (head @ self.centroids[:, :length].T)
-            for column in range(k):  # the k smallest, one argmin at a time
-                found = distances.argmin(axis=1)
-                nearest[rows, column] = found
-                distances[np.arange(len(rows)), found] = np.inf
-        assigned: np.ndarray = nearest[lengths > 0]
-        return assigned
+        heads = np.where(valid[rows], queries[rows], 0.0).astype(np.float32)
+        distances = heads @ self.centroids.T
+        distances *= -2.0
+        distances += self._cumulative[lengths[rows] - 1]
+        nearest = np.empty((len(rows), k), dtype=np.int64)
+        within = np.arange(len(rows))
+        for column in range(k):  # the k smallest, one argmin at a time
+            found = distances.argmin(axis=1)
+            nearest[:, column] = found
+            distances[within, found] = np.inf
+        return nearest
 
 
 def largest(values: np.ndarray, count: int) -> np.ndarray:

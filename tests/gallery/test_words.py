@@ -105,6 +105,23 @@ def test_samples_vote_by_their_valid_radii_only_and_the_removed_are_left_out(mon
     assert best(valid, lambda i: i != 8, 4) == []
 
 
+def test_each_sample_is_assigned_its_nearest_words_over_its_valid_radii():
+    """Samples with every count of valid radii (none: not assigned) in one call: the words
+    are those of the masked distance computed sample by sample in double precision."""
+    rng = np.random.default_rng(4)
+    centroids = rng.normal(size=(WORDS, 6))
+    words = SampleWords.of_words(centroids, np.arange(50), _matrix(_words_of(rng, 50)))
+    queries = rng.normal(size=(40, 6))
+    lengths = np.arange(40) % 7
+    valid = np.arange(6)[None, :] < lengths[:, None]
+    nearest = [
+        np.argsort(((queries[i, :n] - centroids[:, :n]) ** 2).sum(axis=1))[:2]
+        for i, n in enumerate(lengths)
+        if n > 0
+    ]
+    np.testing.assert_array_equal(words._assign(queries, valid), np.stack(nearest))
+
+
 def test_the_vocabulary_is_fitted_again_when_the_gallery_doubles():
     rng = np.random.default_rng(2)
     samples = rng.normal(size=(300, 8, 4)).astype(np.float32)
