@@ -38,8 +38,8 @@ def mean_normalized_manhattan(queries: np.ndarray, gallery: np.ndarray) -> np.nd
     g = np.atleast_2d(np.asarray(gallery))
     out = np.empty((len(q), len(g)))
     # One query and D1_BLOCK gallery rows at a time, in three buffers that stay in the
-    # processor's cache: a search scores thousands of candidates, and whole-gallery
-    # temporaries were written to memory and read back by each operation.
+    # processor's cache: a search scores thousands of candidates, and temporaries the size
+    # of the gallery would be written to memory and read back by each operation.
     rows = max(1, min(D1_BLOCK, len(g)))
     num, den, ratio = (np.empty((rows, g.shape[1])) for _ in range(3))
     for i, row in enumerate(q):
