@@ -116,6 +116,21 @@ def test_candidates_scored_in_blocks_choose_the_same_scale():
     assert joined.scale == whole.scale
 
 
+def test_the_exact_pass_over_several_blocks_matches_the_plain_reference():
+    """Float16 candidates, as a gallery keeps them, enough of them with enough samples
+    that the exact pass finds their nearest rows in three blocks (the last one short)
+    before computing the distances again for all of them at once."""
+    rng = np.random.default_rng(5)
+    gallery = compared_profiles(_profiles(rng, 30, 300), DEFAULT).astype(np.float16)
+    query = _profiles(rng, 1, 64)[0]
+    reach = np.where(rng.random(64) < 0.3, np.inf, rng.uniform(0.05, 1.5, size=64))
+    scales = range(2, 6)
+    fast = part_dissimilarity(query, reach, gallery, DEFAULT, scales)
+    plain = part_dissimilarity_reference(query, reach, gallery, DEFAULT, scales)
+    np.testing.assert_allclose(fast.dissimilarity, plain.dissimilarity, rtol=1e-9)
+    assert fast.scale == plain.scale
+
+
 def test_a_rough_pass_scores_as_the_exact_one_to_single_precision():
     """The index's shortlisting passes take the single-precision expansion as it comes:
     on float16 profiles as a gallery keeps them, every scale's scores within 1e-4 of the

@@ -356,7 +356,7 @@ def _nearest_squared(
         (int(a), int(b), rows.squares(int(counts[a])))
         for a, b in zip(starts, np.append(starts[1:], len(counts)), strict=True)
     ]
-    out = np.empty((len(query), n))
+    nearest = np.empty((len(query), n), dtype=np.int64)
     shapes_per_block = max(1, _BLOCK_ENTRIES // (len(query) * per_shape))
     for first in range(0, n, shapes_per_block):
         last = min(n, first + shapes_per_block)
@@ -364,13 +364,12 @@ def _nearest_squared(
         squared = weighted @ rows.single[block].T
         for a, b, squares in groups:
             squared[a:b] += squares[block]
-        nearest = squared.reshape(len(query), last - first, per_shape).argmin(axis=2)
-        chosen = rows.exact[first * per_shape + nearest + per_shape * np.arange(last - first)]
-        difference = np.asarray(chosen, dtype=np.float64) - query[:, None, :]
-        out[:, first:last] = np.einsum("qsk,qk->qs", difference * difference, valid)
-    unsorted = np.empty_like(out)
-    unsorted[order] = out
-    return unsorted
+        nearest[:, first:last] = squared.reshape(len(query), last - first, per_shape).argmin(axis=2)
+    nearest += per_shape * np.arange(n)
+    difference = np.asarray(rows.exact[nearest], dtype=np.float64) - query[:, None, :]
+    out = np.empty((len(query), n))
+    out[order] = np.einsum("qsk,qk->qs", difference * difference, valid)
+    return out
 
 
 def _nearest_squared_rough(
