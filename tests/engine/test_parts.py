@@ -15,6 +15,7 @@ from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.mesh_io import Mesh, clean_mesh, load_mesh
 from worker.engine.parts import (
     GRID_STEPS_PER_OCTAVE,
+    _to_single,
     ball_area_profiles,
     ball_area_profiles_reference,
     best_scale,
@@ -129,6 +130,16 @@ def test_the_exact_pass_over_several_blocks_matches_the_plain_reference():
     plain = part_dissimilarity_reference(query, reach, gallery, DEFAULT, scales)
     np.testing.assert_allclose(fast.dissimilarity, plain.dissimilarity, rtol=1e-9)
     assert fast.scale == plain.scale
+
+
+def test_float16_rows_are_widened_exactly():
+    """Every finite float16 (normal, subnormal, both zeros) becomes the float32 numpy's
+    cast gives, bit for bit, into a buffer of the rough pass's shape."""
+    every = np.arange(1 << 16, dtype=np.uint16).view(np.float16)
+    rows = every[np.isfinite(every)].reshape(-1, 16)
+    out = np.empty(rows.shape, dtype=np.float32)
+    _to_single(rows, out, np.empty(rows.shape, dtype=np.uint32))
+    np.testing.assert_array_equal(out.view(np.uint32), rows.astype(np.float32).view(np.uint32))
 
 
 def test_a_rough_pass_scores_as_the_exact_one_to_single_precision():

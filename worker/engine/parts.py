@@ -314,6 +314,29 @@ def _scale(j: int, preset: Preset) -> float:
 _BLOCK_ENTRIES = 1 << 18
 
 
+#: A float16's magnitude bits moved to a float32's place are its value times 2^-112.
+_HALF_TO_SINGLE = np.float32(2.0**112)
+
+
+def _to_single(rows: np.ndarray, out: np.ndarray, signs: np.ndarray) -> None:
+    """``out[...] = rows`` (out: float32, contiguous; ``signs``: a uint32 buffer of its
+    shape). Float16 rows, as a gallery keeps them, are widened by their bits: each
+    value's sign and magnitude moved to a float32's places and the magnitude scaled by
+    ``_HALF_TO_SINGLE``, exact for every finite value, normal or subnormal (the profiles
+    are finite); numpy's own cast from float16 took twice as long (2 ns a value)."""
+    if rows.dtype != np.float16:
+        np.copyto(out, rows)
+        return
+    bits = out.view(np.uint32)
+    np.copyto(signs, rows.view(np.uint16))
+    np.bitwise_and(signs, 0x7FFF, out=bits)
+    np.left_shift(bits, 13, out=bits)
+    np.multiply(out, _HALF_TO_SINGLE, out=out)
+    np.bitwise_and(signs, 0x8000, out=signs)
+    np.left_shift(signs, 16, out=signs)
+    np.bitwise_or(bits, signs, out=bits)
+
+
 class _GalleryRows:
     """Candidates' samples as :func:`_nearest_squared` reads them at every scale: (N, K)
     as stored (float16 or wider: the exact distances are computed from these values in
@@ -322,7 +345,8 @@ class _GalleryRows:
 
     def __init__(self, rows: np.ndarray) -> None:
         self.exact = rows
-        self.single = rows.astype(np.float32)
+        self.single = np.empty(rows.shape, dtype=np.float32)
+        _to_single(rows, self.single, np.empty(rows.shape, dtype=np.uint32))
         self._squares: dict[int, np.ndarray] = {}
 
     def squares(self, count: int) -> np.ndarray:
@@ -401,11 +425,14 @@ def _nearest_squared_rough(
     widest = max(len(query) for query, _ in asked)
     shapes_per_block = max(1, _BLOCK_ENTRIES // (widest * per_shape))
     buffer = np.empty((shapes_per_block * per_shape, 2 * count), dtype=np.float32)
+    wide = np.empty((shapes_per_block * per_shape, count), dtype=np.float32)
+    signs = np.empty(wide.shape, dtype=np.uint32)
     for first in range(0, n, shapes_per_block):
         last = min(n, first + shapes_per_block)
-        block = buffer[: (last - first) * per_shape]
-        single = block[:, :count]
-        single[...] = rows[first * per_shape : last * per_shape]
+        size = (last - first) * per_shape
+        block, single = buffer[:size], wide[:size]
+        _to_single(rows[first * per_shape : last * per_shape], single, signs[:size])
+        block[:, :count] = single
         np.multiply(single, single, out=block[:, count:])
         for pick, nearest in zip(picks, out, strict=True):
             product = block @ pick
