@@ -51,8 +51,9 @@ class PartialOut(BaseModel):
     single_view: bool = Field(
         False,
         description="the query is one view of its object (a scanner's organized point "
-        "cloud, or a surface facing one way: query.facing_share at least 0.95), so the side "
-        "it does not see is missing too, beyond missing_share",
+        "cloud, or a surface facing one way: query.facing_share at least 0.95), described with "
+        "its unseen side taken as the mirror image of the side it sees, so missing_share is "
+        "what the two sides together seem to miss",
     )
     note: str = Field(description="the same, as a sentence for the user")
 

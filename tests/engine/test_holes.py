@@ -1,5 +1,5 @@
-"""Closing small holes: which loops close, and the closed surface is a clean one; and how
-much of a surface faces one way (one view of a scanner)."""
+"""Closing small holes: which loops close, and the closed surface is a clean one; how
+much of a surface faces one way (one view of a scanner); a view glued to its image."""
 
 from __future__ import annotations
 
@@ -8,11 +8,14 @@ import pytest
 import trimesh
 
 from tests.conftest import example
+from worker.engine.geodesic import farthest_point_samples
 from worker.engine.holes import (
     ONE_VIEW_FACING,
     close_small_holes,
     facing_share,
     fibonacci_directions,
+    sheets_apart,
+    two_sided,
 )
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas, load_mesh
 from worker.engine.topology import euler_and_boundary
@@ -181,3 +184,37 @@ def test_a_view_of_a_figure_faces_one_way_and_its_cuts_do_not():
         assert share >= facing_share_reference(view) - 0.01
         cut = planar_cut(figure, 0.3, random_direction(rng))
         assert facing_share_reference(cut) - 0.05 <= facing_share(cut) < ONE_VIEW_FACING
+
+
+def test_a_view_glued_to_its_image_is_a_closed_surface_of_twice_its_area(sphere):
+    """The upper half of a sphere, two-sided: every edge between two faces wound opposite
+    ways, the topology of a sphere, twice the area, the boundary's vertices shared."""
+    upper = sphere.vertices[sphere.faces].mean(axis=1)[:, 2] > 0.0
+    half = clean_mesh(sphere.vertices, sphere.faces[upper])
+    euler, boundary_edges = topology(half)
+    assert (euler, boundary_edges > 0) == (1, True)
+
+    closed = two_sided(half)
+
+    assert topology(closed) == (2, 0)
+    assert consistently_oriented(closed)
+    assert area(closed) == pytest.approx(2.0 * area(half), rel=1e-12)
+    assert closed.n_vertices == 2 * half.n_vertices - boundary_edges  # a loop: as many
+    assert np.array_equal(closed.vertices[: half.n_vertices], half.vertices)
+    assert two_sided(sphere) is sphere
+
+
+def test_samples_spread_over_both_sheets_of_a_two_sided_view(sphere):
+    """In place, farthest-point sampling would reach a vertex's twin only once every
+    other vertex is as near a sample as it: with the sheets apart, each gets half."""
+    upper = sphere.vertices[sphere.faces].mean(axis=1)[:, 2] > 0.0
+    closed = two_sided(clean_mesh(sphere.vertices, sphere.faces[upper]))
+    front = np.zeros(closed.n_vertices, dtype=bool)
+    front[closed.faces[: closed.n_faces // 2].ravel()] = True
+    mass = np.ones(closed.n_vertices)
+
+    in_place = farthest_point_samples(closed.vertices, 200, mass)
+    apart = farthest_point_samples(sheets_apart(closed), 200, mass)
+
+    assert np.count_nonzero(~front[in_place]) == 0
+    assert 80 <= np.count_nonzero(~front[apart]) <= 120

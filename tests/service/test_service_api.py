@@ -127,7 +127,8 @@ def test_a_view_sent_as_a_mesh_is_called_one_view(service: Service, gallery):
     body = response.json()
     assert body["query"]["facing_share"] >= 0.95 and body["partial"]["single_view"]
     assert body["partial"]["note"].startswith(
-        "One view of its object (its faces all face one way): the side it does not see is missing"
+        "One view of its object (its faces all face one way): its unseen side is taken as the "
+        "mirror image of the side it sees"
     )
     assert body["partial"]["note"] in format_matches(body)
     enrolled = service.client.get(f"/meshes/{gallery['quadruped-1']}").json()
@@ -153,7 +154,7 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_and_one_without_it_refuse
     width, height, points = grid.width, grid.height, grid.points
     assert body["query"]["input_grid"] == [width, height]
     assert body["query"]["input_points"] == points
-    # One view: the note does not claim to measure the side it does not see.
+    # One view: described with its unseen side as the mirror image of the seen one.
     assert body["partial"]["single_view"]
     assert body["partial"]["note"].startswith("One view of its object (a scanner's point cloud)")
     assert (

@@ -239,3 +239,48 @@ def close_small_holes(mesh: Mesh, max_perimeter: float, area: float | None = Non
         vertices=np.concatenate([vertices, centroids[closed]]),
         faces=np.concatenate([faces, fan_faces]),
     )
+
+
+def two_sided(mesh: Mesh) -> Mesh:
+    """``mesh`` glued along its open boundary to a copy of itself wound the other way: a
+    closed surface, its unseen side taken as the image of the side it has.
+
+    What a single view (:data:`ONE_VIEW_FACING`) misses is mostly the side facing away
+    from the camera, and a body's far side is close to the near one's mirror image (a limb
+    seen from one side is half of its round section, a head's far half its near half's):
+    intrinsically, a hemisphere glued to its copy along the equator is the round sphere,
+    the near half of a cylinder so glued the whole cylinder. Every operator here is
+    intrinsic, so the two coincident sheets are told apart by their connectivity alone.
+
+    Returns
+    -------
+    Mesh with the vertices of ``mesh`` followed by a copy of those off its boundary, and
+    its faces followed by their copies wound the other way (a boundary vertex is shared
+    by both sheets); ``mesh`` itself when it is closed.
+    """
+    loops = boundary_loops(mesh)
+    if len(loops.start) == 0:
+        return mesh
+    n = mesh.n_vertices
+    inner = np.ones(n, dtype=bool)
+    inner[loops.start] = False
+    inner[loops.end] = False
+    other = np.arange(n)
+    other[inner] = n + np.arange(np.count_nonzero(inner))
+    return Mesh(
+        vertices=np.concatenate([mesh.vertices, mesh.vertices[inner]]),
+        faces=np.concatenate([mesh.faces, other[mesh.faces][:, ::-1]]),
+    )
+
+
+def sheets_apart(mesh: Mesh) -> np.ndarray:
+    """(n, 3) the vertices of a :func:`two_sided` surface with its second sheet's own
+    vertices moved three extents away: where the two sheets are as far apart as they are
+    along the surface, so farthest-point sampling
+    (:func:`~worker.engine.geodesic.farthest_point_samples`) spreads its samples over
+    both (in place, each vertex's twin would be the last to be chosen)."""
+    front = np.zeros(mesh.n_vertices, dtype=bool)
+    front[mesh.faces[: mesh.n_faces // 2].ravel()] = True
+    apart = np.array(mesh.vertices, dtype=np.float64)
+    apart[~front, 0] += 3.0 * float(np.ptp(apart, axis=0).max())
+    return apart

@@ -18,7 +18,15 @@ from .diffusion import (
 )
 from .formats import DEFAULT_MAX_FACES
 from .geodesic import farthest_point_samples, geodesic_distance_matrix, sample_distances
-from .holes import boundary_loops, close_small_holes, facing_share, longest_open_loop
+from .holes import (
+    ONE_VIEW_FACING,
+    boundary_loops,
+    close_small_holes,
+    facing_share,
+    longest_open_loop,
+    sheets_apart,
+    two_sided,
+)
 from .intrinsic import surface_operators
 from .mesh_io import (
     CANONICAL_AREA,
@@ -48,18 +56,31 @@ def resampled_surface(mesh: Mesh, preset: Preset, *, resampled: bool = False) ->
     out (:func:`without_grid_shortcuts`), in its canonical frame
     (:func:`~worker.engine.mesh_io.canonical_frame`), its small holes closed if the
     preset says so (:func:`~worker.engine.holes.close_small_holes`), resampled to the
-    preset's vertex count, its edges bounded if the preset says so; only moved to its
-    canonical frame when it is ``resampled`` already (:func:`describe_mesh`)."""
+    preset's vertex count, its edges bounded if the preset says so, a single view made
+    two-sided if the preset says so (:func:`~worker.engine.holes.two_sided`); only moved
+    to its canonical frame when it is ``resampled`` already (:func:`describe_mesh`)."""
     if resampled:
         return canonical_frame(mesh)
-    return _resampled(canonical_frame(without_grid_shortcuts(mesh).mesh), preset)
+    surface = canonical_frame(without_grid_shortcuts(mesh).mesh)
+    return _resampled(surface, preset, facing_share(surface))
 
 
-def _resampled(surface: Mesh, preset: Preset) -> Mesh:
-    """:func:`resampled_surface` of a surface already in its canonical frame."""
+def _resampled(surface: Mesh, preset: Preset, facing: float) -> Mesh:
+    """:func:`resampled_surface` of a surface already in its canonical frame that faces
+    one way by the share ``facing`` (:func:`~worker.engine.holes.facing_share`): a single
+    view made two-sided if the preset says so."""
     if preset.max_hole_perimeter is not None:
         surface = close_small_holes(surface, preset.max_hole_perimeter, CANONICAL_AREA)
+    if _made_two_sided(preset, facing):
+        # Each sheet half the vertices, so the operators' cost stays the preset's.
+        return two_sided(resample_mesh(surface, preset.n_vertices // 2, preset.max_edge))
     return resample_mesh(surface, preset.n_vertices, preset.max_edge)
+
+
+def _made_two_sided(preset: Preset, facing: float) -> bool:
+    """Whether a surface facing one way by the share ``facing`` is described as
+    :func:`~worker.engine.holes.two_sided` (a single view, with a preset that says so)."""
+    return preset.two_sided_views and facing >= ONE_VIEW_FACING
 
 
 def parts_descriptor(
@@ -159,7 +180,8 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
     surface = canonical_frame(scanned.mesh)
     open_loop = longest_open_loop(surface, CANONICAL_AREA)
     facing = facing_share(surface)
-    described = surface if resampled else _resampled(surface, preset)
+    described = surface if resampled else _resampled(surface, preset, facing)
+    two_sided_view = not resampled and _made_two_sided(preset, facing)
     lap("resample")
     intrinsic, ops = surface_operators(described.vertices, described.faces)
     on_surface = preset.measure == "surface"
@@ -169,7 +191,8 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
     if preset.gdm_samples is None:
         gdm = geodesic_distance_matrix(intrinsic, ops, preset.heat_time_factor, heat_reference)
     else:
-        samples = farthest_point_samples(described.vertices, preset.gdm_samples, ops.vertex_areas)
+        spread = sheets_apart(described) if two_sided_view else described.vertices
+        samples = farthest_point_samples(spread, preset.gdm_samples, ops.vertex_areas)
         gdm = sample_distances(intrinsic, ops, samples, preset.heat_time_factor, heat_reference)
         sample_areas = voronoi_areas(gdm, ops.vertex_areas)
     lap("gdm")

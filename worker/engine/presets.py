@@ -83,6 +83,11 @@ class Preset:
         ``max_hole_perimeter^2 / (4 pi)`` of the area;
         :func:`worker.engine.holes.close_small_holes`). None: describe the surface
         with its holes, as the paper does.
+    two_sided_views : a surface facing one way (a single view of its object,
+        :data:`worker.engine.holes.ONE_VIEW_FACING`) is resampled to half of
+        ``n_vertices`` and glued to its own image along its boundary
+        (:func:`worker.engine.holes.two_sided`) before it is described, its unseen side
+        taken as the mirror of the side it shows; False: described as it is.
     measure : "vertices", the paper's GDM and DDT as matrices over the vertex set
         (slices divided by their sums); or "surface", both weighted by the lumped
         vertex areas so their modal representations approximate the surface's
@@ -166,6 +171,7 @@ class Preset:
     heat_time_factor: float = 1.0
     gdm_samples: int | None = None
     max_hole_perimeter: float | None = None
+    two_sided_views: bool = False
     measure: Measure = "vertices"
     ddt_elements: DdtElements = "core"
     ddt_mix_times: bool = True
@@ -328,9 +334,10 @@ PRESETS: dict[str, Preset] = {
         # Its versions, what each changed and why: docs/decisions.md.
         Preset(
             name="smeets2010-surface",
-            version=11,
+            version=12,
             max_edge=3.0,
             max_hole_perimeter=0.5,
+            two_sided_views=True,
             measure="surface",
             heat_time_factor=12.0,
             gdm_samples=500,
