@@ -40,6 +40,7 @@ def test_ranking_scores_count_own_class_own_source_and_average_precision():
     )
     scores = ranking_scores(d, np.array([0, 1, 2]), labels)
     assert scores["own_class"] == pytest.approx(2 / 3)
+    assert scores["class_mean"] == pytest.approx((1 + 0) / 2)  # a: both; b: none
     assert scores["own_source"] == pytest.approx(1 / 3)
     # APs: 1; a at ranks 1 and 4 -> (1 + 2/4) / 2; b at ranks 2 and 4 -> (1/2 + 2/4) / 2
     assert scores["map"] == pytest.approx((1 + 0.75 + 0.5) / 3)

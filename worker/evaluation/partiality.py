@@ -183,11 +183,16 @@ def weighed_by_partiality(
 
 def ranking_scores(d: np.ndarray, sources: np.ndarray, labels: np.ndarray) -> dict[str, float]:
     """Own class and own source at rank 1 and mAP of queries ``i`` made from gallery
-    shape ``sources[i]`` (labels (n,) of the gallery)."""
+    shape ``sources[i]`` (labels (n,) of the gallery); and own class at rank 1 averaged
+    over the queries' classes (``class_mean``: each class's queries weigh alike, so a
+    large class does not carry it; always answering one class scores one over the
+    number of classes)."""
     nearest = np.argmin(d, axis=1)  # ties -> lower index
     own = labels[sources]
+    hits = labels[nearest] == own
     return {
-        "own_class": float(np.mean(labels[nearest] == own)),
+        "own_class": float(np.mean(hits)),
+        "class_mean": float(np.mean([np.mean(hits[own == c]) for c in np.unique(own)])),
         "own_source": float(np.mean(nearest == sources)),
         "map": metrics.query_mean_average_precision(d, own, labels),
     }
@@ -214,11 +219,13 @@ def partiality_scores(
 
     Returns
     -------
-    {"scores": {row: {variant: {"own_class", "own_source", "map"}}}, "all_to_all": {row:
-    {variant: {"nn", "first_tier", "second_tier", "dcg", "map", ...}}}, "variants":
-    {variant: {"count", "partiality_median", "looks_partial"}}}; ``looks_partial`` is
-    the share of the variant's copies whose partiality is above 0 (weighed by the parts
-    modality). A variant whose copies leave a class with a single copy has no
+    {"scores": {row: {variant: {"own_class", "class_mean", "own_source", "map"}}},
+    "all_to_all": {row: {variant: {"nn", "first_tier", "second_tier", "dcg", "map",
+    ...}}}, "variants": {variant: {"count", "partiality_median", "looks_partial",
+    "largest_class"}}}; ``looks_partial`` is the share of the variant's copies whose
+    partiality is above 0 (weighed by the parts modality), ``largest_class`` the share of
+    its copies in their largest class (the own class of a ranking that always answers
+    it). A variant whose copies leave a class with a single copy has no
     all-to-all scores (nothing relevant to find).
     """
     labels_arr = np.asarray([str(x) for x in labels])
@@ -244,5 +251,7 @@ def partiality_scores(
             "count": len(copies),
             "partiality_median": float(np.median(shares)),
             "looks_partial": float(np.mean(shares > 0)),
+            "largest_class": float(np.unique(copy_labels, return_counts=True)[1].max())
+            / max(len(copies), 1),
         }
     return {"scores": rows, "all_to_all": among, "variants": about}

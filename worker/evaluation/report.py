@@ -448,6 +448,16 @@ def render_partiality_markdown(report: Mapping[str, Any]) -> str:
             report["rows"], report["scores"], variants, ("own_class", "own_source", "map")
         ),
     ]
+    if all("class_mean" in cells[v] for cells in report["scores"].values() for v in cells):
+        lines += [
+            "",
+            "Own class at rank 1 averaged over the queries' classes, each class's copies "
+            "weighing alike, in %: always answering one class scores one over the number "
+            "of classes here, and above its share of the copies (the last table's "
+            "largest class).",
+            "",
+            *_variant_table(report["rows"], report["scores"], variants, ("class_mean",)),
+        ]
     among = report.get("all_to_all") or {}
     ranked = [v for v in variants if any(v in cells for cells in among.values())]
     if ranked:
@@ -464,7 +474,8 @@ def render_partiality_markdown(report: Mapping[str, Any]) -> str:
     lines += [
         "",
         "How partial the copies look (the preset's partiality, 0 a whole, 1 wholly partial): "
-        "median, and the share weighed by the parts modality at all.",
+        "median, and the share weighed by the parts modality at all; the share of the "
+        "copies in their largest class.",
         "",
         "| | " + " | ".join(variants) + " |",
         "|---|" + "---:|" * len(variants),
@@ -476,6 +487,12 @@ def render_partiality_markdown(report: Mapping[str, Any]) -> str:
         + " | ".join(_pct(about[v]["looks_partial"], 0) for v in variants)
         + " |",
     ]
+    if all("largest_class" in about[v] for v in variants):
+        lines.append(
+            "| largest class | "
+            + " | ".join(_pct(about[v]["largest_class"], 1) for v in variants)
+            + " |"
+        )
     failed = report.get("failures") or {}
     if failed:
         lines += ["", "Not described (left out):", ""]
