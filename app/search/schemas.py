@@ -52,8 +52,9 @@ class PartialOut(BaseModel):
         False,
         description="the query is one view of its object (a scanner's organized point "
         "cloud, or a surface facing one way: query.facing_share at least 0.95), described with "
-        "its unseen side taken as the mirror image of the side it sees, so missing_share is "
-        "what the two sides together seem to miss",
+        "its unseen side taken as the mirror image of the side it sees: missing_share is "
+        "then that two-sided surface's, which matches as nearly whole, not what the scan "
+        "misses",
     )
     note: str = Field(description="the same, as a sentence for the user")
 

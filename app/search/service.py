@@ -80,14 +80,14 @@ class PartialQuery:
     def note(self) -> str:
         low, high = (round(100 * v) for v in self.missing_range)
         if self.single_view:
-            # Described two-sided (its unseen side the image of the seen one), so the
-            # parts' scale measures what even both sides together miss.
+            # Described two-sided (its unseen side the image of the seen one), it matches
+            # as nearly whole: the parts' scale does not measure what the scan misses.
             seen = "a scanner's point cloud" if self.cloud else "its faces all face one way"
             return (
                 f"One view of its object ({seen}): its unseen side is taken as the mirror "
-                f"image of the side it sees, and {low}% to {high}% of the surface seems "
-                "missing even so; matches are ranked by the parts that are there, so they "
-                "have no confidence."
+                "image of the side it sees, so how much of the object is missing is not "
+                "measured; matches are ranked by the parts that are there, so they have no "
+                "confidence."
             )
         if high >= 10:
             return (
