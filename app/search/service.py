@@ -78,7 +78,6 @@ class PartialQuery:
 
     @property
     def note(self) -> str:
-        low, high = (round(100 * v) for v in self.missing_range)
         if self.single_view:
             # Described two-sided (its unseen side the image of the seen one), it matches
             # as nearly whole: the parts' scale does not measure what the scan misses.
@@ -89,6 +88,7 @@ class PartialQuery:
                 "measured; matches are ranked by the parts that are there, so they have no "
                 "confidence."
             )
+        low, high = (round(100 * v) for v in self.missing_range)
         if high >= 10:
             return (
                 f"Between {low}% and {high}% of the surface seems missing (its parts' best "
