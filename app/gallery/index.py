@@ -83,6 +83,7 @@ from worker.engine.compare import (
 from worker.engine.parts import (
     PartsMatch,
     best_scale,
+    can_hold,
     coarse,
     samples_at_scale,
     scale_count,
@@ -489,7 +490,8 @@ class GalleryIndex:
         The best ``max(PARTS_SHORTLIST, 2 k)`` by that product are scored with every
         sample, their scale chosen among the chosen one and the ``SHORTLIST_SCALES`` on
         either side of it, or with ``sized``, each shape's near the scale its size and the
-        query's imply (:func:`~worker.engine.parts.sized_dissimilarity`).
+        query's imply (:func:`~worker.engine.parts.sized_dissimilarity`), the shortlist
+        then drawn from the shapes large enough to hold the query.
 
         Parameters
         ----------
@@ -531,13 +533,16 @@ class GalleryIndex:
             rough_parts = self._parts_scores(*few[:2], few[2][positions], scales, rough=True)
             per[PARTS] = rough_parts.dissimilarity
             rough = np.asarray(fuse(per, "product", dict(weights)), dtype=np.float64)
+            if sized:  # the shortlist from the shapes large enough to hold the query
+                sizes = self.store.vectors[SIZE][positions, 0]
+                centres = sized_scales(float(query[SIZE][0]), sizes, self.preset)
+                rough[~can_hold(centres)] = np.inf
             short = np.argsort(rough, kind="stable")[: max(PARTS_SHORTLIST, 2 * k)]
             positions = positions[short]
             per = {m: v[short] for m, v in per.items() if m != PARTS}
             shortlisted = self.store.parts_at(positions)
             if sized:
-                sizes = self.store.vectors[SIZE][positions, 0]
-                centres = sized_scales(float(query[SIZE][0]), sizes, self.preset)
+                centres = centres[short]
                 found = sized_dissimilarity(profiles, reach, shortlisted, self.preset, centres)
             else:
                 tried = range(

@@ -272,6 +272,32 @@ def test_a_partial_search_of_a_metric_collection_scores_each_shape_at_its_size()
     assert {m.id for m in unsized[:2]} == {3, 4}
 
 
+def test_a_metric_partial_search_shortlists_only_shapes_that_can_hold_the_query():
+    """More shapes than the shortlist holds hold the query's profiles exactly, the source
+    (the last) only nearly; but they are too small to hold it, and the shortlist leaves
+    them out, so the source is found."""
+    preset = with_units(DEFAULT, "metric")
+    n = PARTS_SHORTLIST + 8
+    vectors, profiles = _parts_gallery(n, seed=5)
+    exact = profiles[0].copy()
+    profiles[:] = exact
+    profiles[n - 1] += np.random.default_rng(0).normal(scale=0.02, size=exact.shape)
+    for m in MODALITIES:
+        vectors[m][:] = vectors[m][0]
+    vectors[SIZE] = np.where(np.arange(n) < n - 1, 0.5, 1.0)[:, None]
+    index = GalleryIndex(preset, preset.modality_sizes(), parts_shape=preset.parts_shape())
+    index.add_many(
+        (i, {**{m: vectors[m][i] for m in vectors}, PARTS: compared_profiles(profiles[i], preset)})
+        for i in range(n)
+    )
+    part = np.roll(exact[:200], 3, axis=1)
+    query = {m: vectors[m][n - 1] for m in MODALITIES}
+    query[SIZE] = np.array([2.0 ** (-3 / 8)])
+    weights = query_weights(preset, 1.0)
+    found, _ = index.partial_search(query, part, np.full(200, np.inf), weights, 5, sized=True)
+    assert [m.id for m in found] == [n - 1]
+
+
 @pytest.mark.parametrize("in_file", [False, True], ids=["in memory", "in a file"])
 def test_parts_profiles_are_saved_and_loaded(tmp_path, in_file):
     """Every sample's profiles, kept in memory or in a file beside the saved index (read

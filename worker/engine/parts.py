@@ -291,6 +291,13 @@ def sized_scales(query_size: float, sizes: np.ndarray, preset: Preset) -> np.nda
     return centres
 
 
+def can_hold(centres: np.ndarray) -> np.ndarray:
+    """(n,) bool, which candidates of :func:`sized_scales`' ``centres`` are large enough
+    to hold the query: their window of scales reaches ``j = 0`` (a whole)."""
+    held: np.ndarray = centres + SIZED_SCALES >= 0
+    return held
+
+
 def sized_dissimilarity(
     profiles: np.ndarray,
     reach: np.ndarray,
@@ -307,7 +314,7 @@ def sized_dissimilarity(
     part of a metric collection is compared at its size"). The match's ``scale`` is its
     best candidate's."""
     last = scale_count(preset) - 1
-    holds = centres + SIZED_SCALES >= 0
+    holds = can_hold(centres)
     first_scale = np.clip(centres - SIZED_SCALES, 0, last)
     last_scale = np.clip(centres + SIZED_SCALES, 0, last)
     out = np.full(len(gallery), np.inf)
