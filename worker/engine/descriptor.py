@@ -50,9 +50,10 @@ class ShapeDescriptor:
         :func:`~worker.engine.holes.longest_open_loop`): how partial it looks. None for
         a descriptor stored before this was recorded.
     area : the described surface's area in the file's own units (squared), measured on
-        the cleaned mesh that is described (the kept part) before it is resampled or
-        normalized: the size modality (:data:`~worker.engine.presets.SIZE`). None for a
-        descriptor stored before this was recorded.
+        its resampling (one sheet of a view made two-sided;
+        :func:`~worker.engine.pipeline.described_area`): the size modality
+        (:data:`~worker.engine.presets.SIZE`). None for a descriptor stored before this
+        was recorded.
     input_points, input_grid : when the file was an organized point cloud (a depth
         camera's PCD or a laser scanner's structured E57 scan, triangulated by its grid:
         :mod:`~worker.engine.scans`), its points that saw the surface and its grid

@@ -149,6 +149,18 @@ def without_grid_shortcuts(mesh: Mesh) -> CleanedMesh:
     return clean_surface(mesh.vertices, mesh.faces[kept])
 
 
+def described_area(described: Mesh, two_sided_view: bool) -> float:
+    """The area of the surface a descriptor is computed on, in the canonical frame: the
+    size (:attr:`~worker.engine.descriptor.ShapeDescriptor.area`) once in the file's
+    units. One sheet of a view made two-sided.
+
+    Not the file's own area: noise crumples a fine surface, its resampling hardly (TOSCA's
+    copies at noise of 0.5% of the diagonal: a median 6.0 times their source's area, their
+    resampling 1.064 times; docs/decisions.md, "Default v13")."""
+    area = float(face_areas(described.vertices, described.faces).sum())
+    return area / 2 if two_sided_view else area
+
+
 def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> ShapeDescriptor:
     """Compute all modalities of a cleaned mesh, and record its area (the size).
 
@@ -173,15 +185,16 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
         timings[stage] = now - clock
         clock = now
 
-    # A range scan's shortcuts are no surface. The size, in the file's units: everything
-    # below is in the canonical frame.
+    # A range scan's shortcuts are no surface. Everything below is in the canonical
+    # frame, the file's area scaled to CANONICAL_AREA.
     scanned = CleanedMesh(mesh, 1.0) if resampled else without_grid_shortcuts(mesh)
-    area = float(face_areas(scanned.mesh.vertices, scanned.mesh.faces).sum())
+    file_area = float(face_areas(scanned.mesh.vertices, scanned.mesh.faces).sum())
     surface = canonical_frame(scanned.mesh)
     open_loop = longest_open_loop(surface, CANONICAL_AREA)
     facing = facing_share(surface)
     described = surface if resampled else _resampled(surface, preset, facing)
     two_sided_view = not resampled and _made_two_sided(preset, facing)
+    area = described_area(described, two_sided_view) * file_area / CANONICAL_AREA
     lap("resample")
     intrinsic, ops = surface_operators(described.vertices, described.faces)
     on_surface = preset.measure == "surface"
@@ -224,7 +237,7 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
     )
     if not preset.normalize_scale:
         # Sec. 4.1: distances in the file's length unit, not the canonical frame's.
-        singular_values = singular_values * np.sqrt(area / CANONICAL_AREA)
+        singular_values = singular_values * np.sqrt(file_area / CANONICAL_AREA)
     lap("modal")
     parts, reach = np.zeros((0, 0), dtype=np.float16), np.zeros(0)
     if preset.has_parts:

@@ -308,7 +308,7 @@ PRESETS: dict[str, Preset] = {
         # objects share one scale), D1, sum rule.
         Preset(
             name="smeets2010-tosca",
-            version=3,
+            version=4,
             n_vertices=3000,
             normalize_scale=False,
             dissimilarity="D1",
@@ -319,11 +319,11 @@ PRESETS: dict[str, Preset] = {
         ),
         # Sec. 4.2: SHREC 2010, 2,500 vertices, 19 singular values, 20x20x5 core,
         # D2 and the product rule.
-        Preset(name="smeets2010-shrec", version=2, fusion_weights={SIZE: 2.0}),
+        Preset(name="smeets2010-shrec", version=3, fusion_weights={SIZE: 2.0}),
         # Beyond the paper: the Laplace-Beltrami spectrum alone (the third modality), D1.
         Preset(
             name="lb-spectrum",
-            version=2,
+            version=3,
             dissimilarity="D1",
             fusion="sum",
             fused_modalities=("spectrum",),
@@ -334,7 +334,7 @@ PRESETS: dict[str, Preset] = {
         # Its versions, what each changed and why: docs/decisions.md.
         Preset(
             name="smeets2010-surface",
-            version=12,
+            version=13,
             max_edge=3.0,
             max_hole_perimeter=0.5,
             two_sided_views=True,
