@@ -109,13 +109,13 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _run_protocol(
-    args: argparse.Namespace, run: Callable[..., dict[str, Any]], name: str
+    args: argparse.Namespace, run: Callable[..., dict[str, Any]], name: str, units: str = "any"
 ) -> tuple[dict[str, Any] | None, Path]:
     """Run a variant protocol (``robustness``, ``partiality``) with the command's
     arguments; the report (None after an error, printed) and its directory."""
     from .evaluation.datasets import EvaluationError
 
-    preset = get_preset(args.preset)
+    preset = with_units(get_preset(args.preset), units)
     dataset = Path(args.dataset_dir)
     labels = Path(args.labels) if args.labels else dataset / "labels.csv"
     out = Path(args.out) if args.out else Path("evaluation-out") / name / preset.name
@@ -178,7 +178,7 @@ def _robustness(args: argparse.Namespace) -> int:
 def _partiality(args: argparse.Namespace) -> int:
     from .evaluation.run import run_partiality
 
-    report, out = _run_protocol(args, run_partiality, "partiality")
+    report, out = _run_protocol(args, run_partiality, "partiality", args.units)
     if report is None:
         return 2
     titles = report["rows"]
@@ -306,14 +306,16 @@ def _add_collection_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_units_argument(parser: argparse.ArgumentParser) -> None:
-    """What ``evaluate`` and ``tune`` take: the collection's units."""
+    """What ``evaluate``, ``tune`` and ``partiality`` take: the collection's units (with
+    ``--poses``, the poses' files in the collection's unit)."""
     parser.add_argument(
         "--units",
         choices=UNITS,
         default="any",
         help="the files' units: any (arbitrary; every score scale-free, the default) or "
         "metric (calibrated: the size of each surface is compared and fused too, at the "
-        "preset's size weight)",
+        "preset's size weight, and a part compared with each whole at the scale their "
+        "sizes imply)",
     )
 
 
@@ -406,6 +408,7 @@ def add_subcommands(sub: Any) -> None:
     partial.add_argument(
         "--out", help="report directory (default: evaluation-out/partiality/PRESET)"
     )
+    _add_units_argument(partial)
     partial.set_defaults(run=_partiality)
 
     tune = sub.add_parser(

@@ -83,12 +83,15 @@ from worker.engine.compare import (
 from worker.engine.parts import (
     PartsMatch,
     best_scale,
+    can_hold,
     coarse,
     samples_at_scale,
     scale_count,
     scale_scores,
+    sized_dissimilarity,
+    sized_scales,
 )
-from worker.engine.presets import PARTS, Preset
+from worker.engine.presets import PARTS, SIZE, Preset
 
 from .candidates import FIT_SAMPLE, MAX_DIMS, CandidateTransform
 from .vectors import GalleryVectors, ids_fingerprint
@@ -471,6 +474,7 @@ class GalleryIndex:
         k: int,
         *,
         exclude: Iterable[int] = (),
+        sized: bool = False,
         stats: SearchStats | None = None,
     ) -> tuple[list[Match], float]:
         """The ``k`` gallery shapes with the lowest product ``prod_m D_m^w_m`` over the
@@ -485,17 +489,24 @@ class GalleryIndex:
         ``WORD_MAX_CANDIDATES``), scored at that scale only (:meth:`_word_candidates`).
         The best ``max(PARTS_SHORTLIST, 2 k)`` by that product are scored with every
         sample, their scale chosen among the chosen one and the ``SHORTLIST_SCALES`` on
-        either side of it.
+        either side of it, or with ``sized``, each shape's near the scale its size and the
+        query's imply (:func:`~worker.engine.parts.sized_dissimilarity`), the shortlist
+        then drawn from the shapes large enough to hold the query.
 
         Parameters
         ----------
         query : modality -> (M_m,) float, the query's flat vectors.
         profiles, reach : the query's parts profiles (m, C) and its samples' reach.
         weights : the product's exponent per modality (``PARTS`` among them).
+        sized : the shortlist compared at the scales the sizes imply
+            (:func:`~worker.engine.parts.compared_by_size`; the query's and every
+            shape's ``SIZE`` vector, a collection of metric units).
 
         Returns
         -------
-        The matches (``scores`` per weighed modality) and the query's parts scale.
+        The matches (``scores`` per weighed modality) and the query's parts scale; a shape
+        the parts cannot compare (``inf``: no sample of the query clear of its boundary, or
+        with ``sized`` a shape too small to hold it) is no match.
         """
         start = time.perf_counter()
         excluded = np.array(sorted(int(e) for e in exclude), dtype=np.int64)
@@ -522,18 +533,27 @@ class GalleryIndex:
             rough_parts = self._parts_scores(*few[:2], few[2][positions], scales, rough=True)
             per[PARTS] = rough_parts.dissimilarity
             rough = np.asarray(fuse(per, "product", dict(weights)), dtype=np.float64)
+            if sized:  # the shortlist from the shapes large enough to hold the query
+                sizes = self.store.vectors[SIZE][positions, 0]
+                centres = sized_scales(float(query[SIZE][0]), sizes, self.preset)
+                rough[~can_hold(centres, self.preset)] = np.inf
             short = np.argsort(rough, kind="stable")[: max(PARTS_SHORTLIST, 2 * k)]
             positions = positions[short]
             per = {m: v[short] for m, v in per.items() if m != PARTS}
-            tried = range(
-                max(0, rough_parts.j - SHORTLIST_SCALES),
-                min(scale_count(self.preset), rough_parts.j + SHORTLIST_SCALES + 1),
-            )
-            found = self._parts_scores(profiles, reach, self.store.parts_at(positions), tried)
+            shortlisted = self.store.parts_at(positions)
+            if sized:
+                centres = centres[short]
+                found = sized_dissimilarity(profiles, reach, shortlisted, self.preset, centres)
+            else:
+                tried = range(
+                    max(0, rough_parts.j - SHORTLIST_SCALES),
+                    min(scale_count(self.preset), rough_parts.j + SHORTLIST_SCALES + 1),
+                )
+                found = self._parts_scores(profiles, reach, shortlisted, tried)
             per[PARTS] = found.dissimilarity
             fused = np.asarray(fuse(per, "product", dict(weights)), dtype=np.float64)
             ids = self.store.ids[positions]
-            order = np.lexsort((ids, fused))[:k]
+            order = [j for j in np.lexsort((ids, fused)) if np.isfinite(fused[j])][:k]
             matches = [
                 Match(
                     id=int(ids[j]),

@@ -25,7 +25,7 @@ import numpy as np
 
 from worker.engine.compare import partiality, query_weights
 from worker.engine.descriptor import ShapeDescriptor
-from worker.engine.parts import GRID_STEPS_PER_OCTAVE, compared_profiles
+from worker.engine.parts import GRID_STEPS_PER_OCTAVE, compared_by_size, compared_profiles
 from worker.engine.presets import PARTS, Preset
 
 from ..errors import ConflictError, UnavailableError
@@ -242,6 +242,7 @@ class Gallery:
                 weights,
                 k,
                 exclude=exclude,
+                sized=compared_by_size(preset, descriptor.single_view),
                 stats=stats,
             )
             # The parts' scale is one of a grid: the share lies between its neighbours'.

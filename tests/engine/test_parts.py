@@ -20,14 +20,19 @@ from worker.engine.parts import (
     ball_area_profiles_reference,
     best_scale,
     boundary_reach,
+    can_hold,
+    compared_by_size,
     compared_profiles,
     grid_radii,
     part_dissimilarity,
     part_dissimilarity_reference,
+    scale_count,
     scale_scores,
+    sized_dissimilarity,
+    sized_scales,
 )
 from worker.engine.pipeline import describe_mesh
-from worker.engine.presets import DEFAULT_PRESET, get_preset
+from worker.engine.presets import DEFAULT_PRESET, get_preset, with_units
 from worker.evaluation.partial import noisy_surface, planar_cut
 from worker.evaluation.variants import decimated, subdivided
 
@@ -235,6 +240,73 @@ def test_a_part_between_two_steps_of_the_grid_is_found_between_them():
         replace(DEFAULT, parts_scale_steps=1),
     )
     assert whole_steps.dissimilarity[2] > match.dissimilarity[2] + 0.01
+
+
+def test_sized_dissimilarity_is_each_candidates_best_in_its_window():
+    """Each candidate scored at the scales within ``SIZED_SCALES`` of its centre, the
+    window cut to the scales tried (a centre far past the last: the last alone; below the
+    first: the first alone), as the plain reference scores it over that window alone;
+    one too small to hold the query (under half its area) at ``inf``."""
+    rng = np.random.default_rng(8)
+    gallery = compared_profiles(_profiles(rng, 6, 40), DEFAULT).astype(np.float16)
+    query = _profiles(rng, 1, 30)[0]
+    reach = np.where(rng.random(30) < 0.3, np.inf, rng.uniform(0.05, 1.5, size=30))
+    last = scale_count(DEFAULT) - 1
+    centres = np.array([-17, -3, 12, 12, last - 1, last + 30])
+    windows = [(0, 0), (10, 14), (10, 14), (last - 3, last), (last, last)]
+    found = sized_dissimilarity(query, reach, gallery, DEFAULT, centres)
+    plain = [
+        part_dissimilarity_reference(query, reach, gallery[c : c + 1], DEFAULT, range(a, b + 1))
+        for c, (a, b) in enumerate(windows, start=1)
+    ]
+    assert found.dissimilarity[0] == np.inf
+    want = [p.dissimilarity[0] for p in plain]
+    np.testing.assert_allclose(found.dissimilarity[1:], want, rtol=1e-9)
+    assert found.scale == plain[int(np.argmin(found.dissimilarity)) - 1].scale
+
+
+def test_sized_scales_are_the_share_the_areas_give():
+    """A query of 2^(-3/8) of a candidate's size is 59% of its area: scale 2^(3/8),
+    12 quarter steps; of equal size, 0; twice the size, a negative index."""
+    sizes = np.array([2.0 ** (3 / 8), 1.0, 0.5])
+    np.testing.assert_array_equal(sized_scales(1.0, sizes, DEFAULT), [12, 0, -32])
+
+
+def test_a_whole_under_half_the_querys_area_cannot_hold_it():
+    """Sizes 2^(-1/2) of the query's are half its area: 16 quarter steps below."""
+    centres = sized_scales(1.0, np.array([0.7, 2.0**-0.5, 0.72, 1.0]), DEFAULT)
+    np.testing.assert_array_equal(centres, [-16, -16, -15, 0])
+    np.testing.assert_array_equal(
+        can_hold(np.array([-17, -16, -15, 0]), DEFAULT), [False, True, True, True]
+    )
+
+
+def test_a_part_of_a_metric_collection_tells_its_whole_from_a_scaled_copy():
+    """Profiles are in units of a surface's own area, so a whole and a copy of it 19%
+    larger have the same ones, and a part matches both alike; its size and theirs say
+    which one it is 59% of."""
+    rng = np.random.default_rng(3)
+    profiles = _profiles(rng, 1, 60)[0]
+    gallery = compared_profiles(np.stack([profiles, profiles]), DEFAULT)
+    part = np.roll(profiles[:25], 3, axis=1)  # 59% of its whole's area (as above)
+    reach = np.full(25, np.inf)
+    alike = part_dissimilarity(part, reach, gallery, DEFAULT).dissimilarity
+    assert alike[0] == alike[1]
+    sizes = np.array([1.0, 2.0 ** (2 / 8)])  # the copy: 2 grid steps larger
+    centres = sized_scales(2.0 ** (-3 / 8), sizes, DEFAULT)
+    found = sized_dissimilarity(part, reach, gallery, DEFAULT, centres)
+    assert found.dissimilarity[0] == pytest.approx(alike[0], abs=1e-12)
+    assert found.dissimilarity[1] > alike[0] + 0.05
+    assert found.scale == 2.0 ** (3 / GRID_STEPS_PER_OCTAVE)
+
+
+def test_only_a_metric_collection_compares_by_size_and_not_a_two_sided_view():
+    metric = with_units(DEFAULT, "metric")
+    assert DEFAULT.two_sided_views
+    assert compared_by_size(metric, single_view=False)
+    assert not compared_by_size(metric, single_view=True)
+    assert compared_by_size(replace(metric, two_sided_views=False), single_view=True)
+    assert not compared_by_size(DEFAULT, single_view=False)
 
 
 def test_samples_that_see_the_cut_are_left_out():

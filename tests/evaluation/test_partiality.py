@@ -11,8 +11,14 @@ import pytest
 from conftest import EXAMPLES
 
 from app.cli import build_parser
-from worker.engine.parts import compared_profiles, grid_radii, part_dissimilarity
-from worker.engine.presets import DEFAULT_PRESET, PARTS, get_preset
+from worker.engine.parts import (
+    compared_profiles,
+    grid_radii,
+    part_dissimilarity,
+    sized_dissimilarity,
+    sized_scales,
+)
+from worker.engine.presets import DEFAULT_PRESET, PARTS, SIZE, get_preset, with_units
 from worker.evaluation.partial import PARTIAL_VARIANTS
 from worker.evaluation.partiality import parts_matrix, ranking_scores
 from worker.evaluation.robustness import PRESET_ROW
@@ -70,6 +76,48 @@ def test_all_to_all_a_query_chooses_its_scale_among_the_others():
     assert among[3, 0] == pytest.approx(prior, abs=1e-9)
     with_itself = parts_matrix(shapes, shapes, preset)
     assert with_itself[3, 3] == 0.0 and with_itself[3, 0] > among[3, 0] + 0.05
+
+
+def _shape(profiles: np.ndarray, size: float, single_view: bool = False) -> Any:
+    """What the protocol reads of a descriptor: its parts, its size, whether it is a view."""
+    return SimpleNamespace(
+        parts=profiles,
+        parts_reach=np.full(len(profiles), np.inf),
+        single_view=single_view,
+        vector=lambda m: np.array([size]) if m == SIZE else None,
+    )
+
+
+def test_in_metric_units_each_whole_is_compared_at_the_scale_the_sizes_give():
+    """As the service compares a part of a metric collection: a whole and its copy 19%
+    larger have the same profiles, and only the sizes tell which one a part of 59% of
+    the area is from; a single view, described two-sided, is compared at one scale."""
+    preset = with_units(get_preset(DEFAULT_PRESET), "metric")
+    rng = np.random.default_rng(0)
+    columns = len(grid_radii(preset))
+    wholes = -np.cumsum(rng.uniform(0.0, 0.3, size=(2, 40, columns)), axis=2)
+    sizes = [1.0, 2.0 ** (2 / 8), 1.1]
+    profiles = [wholes[0], wholes[0], wholes[1]]
+    gallery = [_shape(p, size) for p, size in zip(profiles, sizes, strict=True)]
+    part = np.roll(wholes[0], 3, axis=1)
+    queries = [_shape(part, 2.0 ** (-3 / 8)), _shape(part, 2.0 ** (-3 / 8), single_view=True)]
+    d = parts_matrix(queries, gallery, preset)
+    whole = compared_profiles(np.stack([g.parts for g in gallery]), preset)
+    centres = sized_scales(2.0 ** (-3 / 8), np.array(sizes), preset)
+    sized = sized_dissimilarity(part, queries[0].parts_reach, whole, preset, centres)
+    np.testing.assert_allclose(d[0], sized.dissimilarity, rtol=1e-12)
+    assert d[0, 0] < d[0, 1] - 0.05
+    one_scale = part_dissimilarity(part, queries[1].parts_reach, whole, preset).dissimilarity
+    np.testing.assert_allclose(d[1], one_scale, rtol=1e-12)
+    assert d[1, 0] == d[1, 1]
+    among = parts_matrix(gallery, gallery, preset, themselves=True)
+    # The larger copy looks larger than the whole but within twice its area: compared
+    # with it as a whole, the same profiles; the whole as a part of the copy.
+    assert (np.diag(among) == 0.0).all() and among[1, 0] == pytest.approx(0.0, abs=1e-12)
+    assert among[0, 1] > 0.05
+    # Half the size is a quarter of the area: too small to hold the copy.
+    small = [_shape(wholes[0], 0.5), _shape(wholes[0], 1.0)]
+    assert parts_matrix(small, small, preset, themselves=True)[1, 0] == np.inf
 
 
 @pytest.mark.slow  # describes 6 meshes and a cut copy of each

@@ -22,6 +22,8 @@ from worker.engine.parts import (
     grid_radii,
     part_dissimilarity,
     scale_count,
+    sized_dissimilarity,
+    sized_scales,
 )
 from worker.engine.presets import (
     DEFAULT_PRESET,
@@ -231,6 +233,70 @@ def test_a_partial_search_ranks_as_the_exhaustive_product(n):
         expected = [i for i in np.argsort(fused, kind="stable") if i != 5][:3]
         assert [m.id for m in found] == expected
         np.testing.assert_allclose([m.score for m in found], fused[expected], rtol=1e-9)
+
+
+def test_a_partial_search_of_a_metric_collection_scores_each_shape_at_its_size():
+    """``sized``: the shortlist's parts at the scales each shape's size and the query's
+    imply, as :func:`~worker.engine.parts.sized_dissimilarity` scores every shape, and
+    the size among the flat modalities (the exhaustive product, every shape
+    shortlisted); the source, the size a part of 59% of its area implies, comes first
+    before an equal copy of it 19% larger; a shape with under half the query's area
+    (size 0.5 against 0.77) is none, one a little smaller (0.7) is compared as a whole."""
+    preset = with_units(DEFAULT, "metric")
+    n = 6
+    vectors, profiles = _parts_gallery(n, seed=4)
+    profiles[4] = profiles[3]  # shape 4: shape 3 at another size
+    vectors[SIZE] = np.array([[1.3], [0.5], [1.1], [1.0], [2.0 ** (2 / 8)], [0.7]])
+    index = GalleryIndex(preset, preset.modality_sizes(), parts_shape=preset.parts_shape())
+    index.add_many(
+        (i, {**{m: vectors[m][i] for m in vectors}, PARTS: compared_profiles(profiles[i], preset)})
+        for i in range(n)
+    )
+    source = 3
+    part = np.roll(profiles[source, :200], 3, axis=1).astype(np.float16).astype(np.float64)
+    reach = np.full(200, np.inf)
+    weights = query_weights(preset, 1.0)
+    query = {m: vectors[m][source] for m in MODALITIES}
+    query[SIZE] = np.array([2.0 ** (-3 / 8)])
+    found, scale = index.partial_search(query, part, reach, weights, 6, sized=True)
+    whole = compared_profiles(profiles.astype(np.float16).astype(np.float64), preset)
+    per = {m: dissimilarity(query[m][None], vectors[m], "D1")[0] for m in weights if m != PARTS}
+    centres = sized_scales(2.0 ** (-3 / 8), vectors[SIZE][:, 0], preset)
+    per[PARTS] = sized_dissimilarity(part, reach, whole, preset, centres).dissimilarity
+    fused = fuse(per, "product", weights)
+    assert fused[1] == np.inf and np.isfinite(np.delete(fused, 1)).all()
+    expected = [int(i) for i in np.argsort(fused, kind="stable")[:5]]
+    assert [m.id for m in found] == expected and expected[0] == source
+    np.testing.assert_allclose([m.score for m in found], fused[expected], rtol=1e-9)
+    assert scale == 2.0 ** (3 / 8)
+    unsized, _ = index.partial_search(query, part, reach, weights, 3)
+    assert {m.id for m in unsized[:2]} == {3, 4}
+
+
+def test_a_metric_partial_search_shortlists_only_shapes_that_can_hold_the_query():
+    """More shapes than the shortlist holds hold the query's profiles exactly, the source
+    (the last) only nearly; but they are too small to hold it, and the shortlist leaves
+    them out, so the source is found."""
+    preset = with_units(DEFAULT, "metric")
+    n = PARTS_SHORTLIST + 8
+    vectors, profiles = _parts_gallery(n, seed=5)
+    exact = profiles[0].copy()
+    profiles[:] = exact
+    profiles[n - 1] += np.random.default_rng(0).normal(scale=0.02, size=exact.shape)
+    for m in MODALITIES:
+        vectors[m][:] = vectors[m][0]
+    vectors[SIZE] = np.where(np.arange(n) < n - 1, 0.5, 1.0)[:, None]
+    index = GalleryIndex(preset, preset.modality_sizes(), parts_shape=preset.parts_shape())
+    index.add_many(
+        (i, {**{m: vectors[m][i] for m in vectors}, PARTS: compared_profiles(profiles[i], preset)})
+        for i in range(n)
+    )
+    part = np.roll(exact[:200], 3, axis=1)
+    query = {m: vectors[m][n - 1] for m in MODALITIES}
+    query[SIZE] = np.array([2.0 ** (-3 / 8)])
+    weights = query_weights(preset, 1.0)
+    found, _ = index.partial_search(query, part, np.full(200, np.inf), weights, 5, sized=True)
+    assert [m.id for m in found] == [n - 1]
 
 
 @pytest.mark.parametrize("in_file", [False, True], ids=["in memory", "in a file"])

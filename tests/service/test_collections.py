@@ -8,6 +8,7 @@ import io
 import sqlite3
 from collections.abc import Iterator
 
+import numpy as np
 import pytest
 import trimesh
 from alembic import command
@@ -15,6 +16,8 @@ from conftest import example
 
 from app.migrations import alembic_config
 from benchmarks.common import Service
+from worker.engine.mesh_io import Mesh
+from worker.evaluation.partial import planar_cut
 
 from .conftest import migrated_service, running
 
@@ -199,11 +202,15 @@ def test_a_collections_fusion_weights_can_be_pinned_and_unpinned(two):
     assert after["source"] in ("preset", "learned")
 
 
-def _scaled(name: str, factor: float) -> bytes:
-    """The example ``name`` as an OFF file, scaled by ``factor``."""
+def _scaled(name: str, factor: float, cut: float = 0.0) -> bytes:
+    """The example ``name`` as an OFF file, scaled by ``factor``, the share ``cut`` of
+    its area cut off along x."""
     data = io.BytesIO(gzip.decompress(example(name).read_bytes()))
     mesh = trimesh.load(data, file_type="off", process=False)
     mesh.apply_scale(factor)
+    if cut:
+        part = planar_cut(Mesh(mesh.vertices, mesh.faces), cut, np.array([1.0, 0.0, 0.0]))
+        mesh = trimesh.Trimesh(part.vertices, part.faces, process=False)
     return mesh.export(file_type="off").encode()
 
 
@@ -228,25 +235,37 @@ def test_a_metric_collection_tells_sizes_apart(two):
             ids[label] = answer.json()["id"]
         for mesh_id in ids.values():
             assert svc.wait_mesh(mesh_id, collection=name)["status"] == "ready"
-        query = svc.client.post(
-            f"/collections/{name}/query",
-            files={"file": ("probe.off", _scaled("hand-1", 2.0))},
-            data={"k": "2"},
-        ).json()
-        found[units] = query
-    metric = found["metric"]
+        for probe, data in (
+            ("whole", _scaled("hand-1", 2.0)),
+            ("cut", _scaled("hand-1", 2.0, 0.3)),
+        ):
+            answer = svc.client.post(
+                f"/collections/{name}/query",
+                files={"file": (f"{probe}.off", data)},
+                data={"k": "2"},
+            )
+            assert answer.status_code == 200, answer.text
+            found[units, probe] = answer.json()
+    metric = found["metric", "whole"]
     # Ranked by the modalities of a weight above 0 (the default's GDM is weighed 0).
     assert metric["modalities"] == ["ddt", "spectrum", "size"]
     assert list(metric["weights"]) == ["gdm", "ddt", "spectrum", "size"]
     assert [m["name"] for m in metric["matches"]] == ["hand-0-large", "hand-0"]
     large, small = (m["scores"]["size"] for m in metric["matches"])
     assert large < 0.1 < 0.5 < small  # 2x apart: eq. (8) of the sizes is 2/3
-    scale_free = found["any"]
+    scale_free = found["any", "whole"]
     assert scale_free["modalities"] == ["ddt", "spectrum"]
     assert all("size" not in m["scores"] for m in scale_free["matches"])
     # Scale-free, the two enrolled files are the same shape: their scores barely differ.
     first, second = (m["score"] for m in scale_free["matches"])
     assert second < 1.5 * first
+    # A part: its size and each shape's give the share it keeps of each. The small copy
+    # is too small to hold it: no match; scale-free, the two hold it alike.
+    cut = found["metric", "cut"]
+    assert cut["modalities"] == ["parts"]
+    assert [m["name"] for m in cut["matches"]] == ["hand-0-large"]
+    free = [m["scores"]["parts"] for m in found["any", "cut"]["matches"]]
+    assert abs(free[0] - free[1]) < 0.01
 
 
 def test_the_migration_moves_every_mesh_into_the_default_collection(tmp_path):

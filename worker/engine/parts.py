@@ -40,7 +40,9 @@ the query's samples, each weighted by ``|V_c|`` (samples far from the cut carry 
 its shape). It asks how much of the query the candidate contains, not the other way
 round: a whole is close to each of its parts. The scale is chosen once per query, by its
 best match (:func:`part_dissimilarity`); ``1 / s^2`` then estimates the share of the
-surface the query has.
+surface the query has. In a collection of metric units the sizes give that share for
+each candidate, ``a / A``, and each is compared near its own scale instead
+(:func:`sized_dissimilarity`); a candidate too small to hold the query is not.
 
 Measured on TOSCA's partial copies (docs/evaluation.md, sec. "Partial queries"), with
 the paper's and the spectrum's modalities as the complete queries' score
@@ -263,6 +265,76 @@ def scale_scores(
         rms = np.sqrt(np.maximum(nearest, 0.0) / used[:, None])
         out[row] = used @ rms / used.sum() + prior * np.log(_scale(j, preset))
     return out
+
+
+#: Scales either side of the one a candidate's size implies that a query of a collection
+#: of metric units is tried at (:func:`sized_dissimilarity`).
+SIZED_SCALES = 2
+
+
+def compared_by_size(preset: Preset, single_view: bool) -> bool:
+    """Whether a query is compared with each candidate near the scale their sizes imply
+    (:func:`sized_dissimilarity`) rather than at one scale for all: in a collection of
+    metric units, unless it is a single view described two-sided, whose unseen side is
+    its seen side's mirror image, so that its area does not measure its share."""
+    return preset.units == "metric" and not (single_view and preset.two_sided_views)
+
+
+def sized_scales(query_size: float, sizes: np.ndarray, preset: Preset) -> np.ndarray:
+    """(n,) int, the scale index ``j`` at which a query of size ``sqrt(a)`` is the part of
+    each candidate of size ``sqrt(A)`` (``sizes``, the same unit) that its area says it
+    is: ``s_j = sqrt(A / a)``, ``j = 8 p log2 s`` rounded (it may lie outside the scales
+    tried: a query larger than the candidate, or a smaller share than they reach)."""
+    ratio = np.asarray(sizes, dtype=np.float64) / query_size
+    steps = GRID_STEPS_PER_OCTAVE * preset.parts_scale_steps
+    centres: np.ndarray = np.rint(steps * np.log2(ratio)).astype(np.int64)
+    return centres
+
+
+#: A whole whose area is below this share of a query's cannot hold it. Not 1: noise adds
+#: area to the resampled surface (at 1% of the diagonal a median third on TOSCA, up to
+#: 2.9 times), and a whole that looks smaller than a query is compared with it as a whole.
+HOLDING_AREA = 0.5
+
+
+def can_hold(centres: np.ndarray, preset: Preset) -> np.ndarray:
+    """(n,) bool, which candidates of :func:`sized_scales`' ``centres`` are large enough
+    to hold the query: an area at least ``HOLDING_AREA`` times the query's."""
+    steps = GRID_STEPS_PER_OCTAVE * preset.parts_scale_steps
+    held: np.ndarray = centres >= np.rint(steps * np.log2(HOLDING_AREA) / 2)
+    return held
+
+
+def sized_dissimilarity(
+    profiles: np.ndarray,
+    reach: np.ndarray,
+    gallery: np.ndarray,
+    preset: Preset,
+    centres: np.ndarray,
+) -> PartsMatch:
+    """:func:`part_dissimilarity` with each candidate's own scales: the best of the
+    ``SIZED_SCALES`` either side of its ``centres`` (:func:`sized_scales`), the window cut
+    to the scales tried (a candidate that looks smaller than the query, but not too small
+    to hold it, is compared with it as a whole), ``inf`` for one too small to hold it
+    (:func:`can_hold`). A part in the units of its whole need not guess its share
+    (docs/decisions.md, "Parts of metric collections compared at their size"). The
+    match's ``scale`` is its best candidate's."""
+    last = scale_count(preset) - 1
+    holds = can_hold(centres, preset)
+    first_scale = np.clip(centres - SIZED_SCALES, 0, last)
+    last_scale = np.clip(centres + SIZED_SCALES, 0, last)
+    out = np.full(len(gallery), np.inf)
+    chosen = np.zeros(len(gallery), dtype=np.int64)
+    windows = np.stack([first_scale, last_scale], axis=1)[holds]
+    for a, b in np.unique(windows, axis=0):
+        members = np.flatnonzero(holds & (first_scale == a) & (last_scale == b))
+        scores = scale_scores(profiles, reach, gallery[members], preset, range(a, b + 1))
+        out[members] = scores.min(axis=0)
+        chosen[members] = a + scores.argmin(axis=0)
+    if not np.isfinite(out).any():
+        return PartsMatch(out, 1.0)
+    best = int(chosen[np.argmin(out)])
+    return PartsMatch(out, _scale(best, preset), best)
 
 
 def scale_columns(j: int, preset: Preset) -> np.ndarray:

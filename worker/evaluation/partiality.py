@@ -31,11 +31,20 @@ import numpy as np
 from worker.engine.compare import (
     fuse,
     partiality,
+    preset_dissimilarity,
     query_weights,
 )
 from worker.engine.descriptor import ShapeDescriptor
-from worker.engine.parts import best_scale, compared_profiles, part_dissimilarity, scale_scores
-from worker.engine.presets import MODALITIES, PARTS, Preset
+from worker.engine.parts import (
+    best_scale,
+    compared_by_size,
+    compared_profiles,
+    part_dissimilarity,
+    scale_scores,
+    sized_dissimilarity,
+    sized_scales,
+)
+from worker.engine.presets import MODALITIES, PARTS, SIZE, Preset
 from worker.recognition import metrics
 
 from .compute import single_threaded_blas
@@ -72,19 +81,28 @@ def parts_matrix(
     candidates (as a service's query is never in its gallery): its scale is chosen by
     its best match among the others (it would match itself best, at scale 1). Its own
     entry is then 0, as every modality's distance of a shape to itself.
+
+    In a collection of metric units a query is compared with each shape near the scale
+    their sizes imply, as the service compares it (:func:`compared_by_size`).
     """
     whole = compared_profiles(np.stack([g.parts.astype(np.float64) for g in gallery]), preset)
     profiles = [q.parts.astype(np.float64) for q in queries]
     reach = [q.parts_reach for q in queries]
     own: list[int | None] = list(range(len(queries))) if themselves else [None] * len(queries)
+    sizes = np.array([g.vector(SIZE)[0] for g in gallery]) if preset.units == "metric" else None
+    centres = [
+        sized_scales(float(q.vector(SIZE)[0]), sizes, preset)
+        if sizes is not None and compared_by_size(preset, q.single_view)
+        else None
+        for q in queries
+    ]
+    rows = (profiles, reach, own, centres)
     if jobs <= 1 or len(queries) < 2:
-        return np.stack(
-            [_parts_row(whole, preset, *row) for row in zip(profiles, reach, own, strict=True)]
-        )
+        return np.stack([_parts_row(whole, preset, *row) for row in zip(*rows, strict=True)])
     with ProcessPoolExecutor(
         max_workers=jobs, initializer=_hold_gallery, initargs=(whole, preset)
     ) as pool:
-        return np.stack(list(pool.map(_held_row, profiles, reach, own, chunksize=4)))
+        return np.stack(list(pool.map(_held_row, *rows, chunksize=4)))
 
 
 _HELD: dict[str, tuple[np.ndarray, Preset]] = {}
@@ -96,13 +114,25 @@ def _hold_gallery(whole: np.ndarray, preset: Preset) -> None:
     _HELD["gallery"] = (whole, preset)
 
 
-def _held_row(profiles: np.ndarray, reach: np.ndarray, own: int | None) -> np.ndarray:
-    return _parts_row(*_HELD["gallery"], profiles, reach, own)
+def _held_row(
+    profiles: np.ndarray, reach: np.ndarray, own: int | None, centres: np.ndarray | None
+) -> np.ndarray:
+    return _parts_row(*_HELD["gallery"], profiles, reach, own, centres)
 
 
 def _parts_row(
-    whole: np.ndarray, preset: Preset, profiles: np.ndarray, reach: np.ndarray, own: int | None
+    whole: np.ndarray,
+    preset: Preset,
+    profiles: np.ndarray,
+    reach: np.ndarray,
+    own: int | None,
+    centres: np.ndarray | None,
 ) -> np.ndarray:
+    if centres is not None:  # each shape at its own scales: its own entry has no say
+        row = sized_dissimilarity(profiles, reach, whole, preset, centres).dissimilarity
+        if own is not None:
+            row[own] = 0.0
+        return row
     if own is None:
         return part_dissimilarity(profiles, reach, whole, preset).dissimilarity
     scores = scale_scores(profiles, reach, whole, preset)
@@ -138,7 +168,11 @@ def query_matrices(
         flat[0][BASELINE], flat[1][BASELINE] = baselines
     out = cross_dissimilarities(flat[0], flat[1], preset)
     out[PARTS] = parts_matrix(queries, gallery, preset, jobs, themselves=themselves)
-    out[PRESET_ROW] = weighed_by_partiality(out, query_partiality(queries, preset), preset)
+    per = dict(out)
+    if preset.units == "metric":
+        asked, held = (np.stack([d.vector(SIZE) for d in side]) for side in (queries, gallery))
+        per[SIZE] = preset_dissimilarity(SIZE, asked, held, preset)
+    out[PRESET_ROW] = weighed_by_partiality(per, query_partiality(queries, preset), preset)
     return out
 
 
@@ -159,12 +193,22 @@ def collection_matrices(
     Returns
     -------
     {"parts": (n, n), PRESET_ROW: (n, n)}; row ``i`` weighed by query ``i``'s
-    partiality, so neither is symmetric.
+    partiality, so neither is symmetric; a pair the parts cannot compare (:func:`ranked_last`)
+    at the largest float.
     """
     parts = parts_matrix(descriptors, descriptors, preset, jobs, themselves=True)
     per = {**per_modality, PARTS: parts}
     shares = query_partiality(descriptors, preset)
-    return {PARTS: parts, PRESET_ROW: weighed_by_partiality(per, shares, preset)}
+    fused = weighed_by_partiality(per, shares, preset)
+    return {PARTS: ranked_last(parts), PRESET_ROW: ranked_last(fused)}
+
+
+def ranked_last(d: np.ndarray) -> np.ndarray:
+    """``d`` with its infinite entries at the largest float, so that the metrics rank them
+    after every other: a query with no sample clear of its boundary, or in metric units a
+    shape too small to hold it, is infinitely far by the parts."""
+    finite: np.ndarray = np.where(np.isfinite(d), d, np.finfo(np.float64).max)
+    return finite
 
 
 def weighed_by_partiality(
@@ -242,10 +286,11 @@ def partiality_scores(
             pair = None if baselines is None else (baselines[1][name], baselines[1][name])
             each = query_matrices(copies, copies, preset, pair, jobs, themselves=True)
             for row, d in each.items():
-                # A copy with no sample clear of its boundary is infinitely far from all
-                # (the parts): it ranks the others by index, as against the wholes.
-                finite = np.where(np.isfinite(d), d, np.finfo(np.float64).max)
-                among.setdefault(row, {})[name] = metrics.retrieval_scores(finite, copy_labels)
+                # A copy the parts cannot compare ranks the others by index, as against
+                # the wholes.
+                among.setdefault(row, {})[name] = metrics.retrieval_scores(
+                    ranked_last(d), copy_labels
+                )
         shares = query_partiality(copies, preset)
         about[name] = {
             "count": len(copies),
