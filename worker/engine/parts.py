@@ -300,8 +300,8 @@ HOLDING_AREA = 0.5
 def can_hold(centres: np.ndarray, preset: Preset) -> np.ndarray:
     """(n,) bool, which candidates of :func:`sized_scales`' ``centres`` are large enough
     to hold the query: an area at least ``HOLDING_AREA`` times the query's."""
-    steps = GRID_STEPS_PER_OCTAVE * preset.parts_scale_steps
-    held: np.ndarray = centres >= np.rint(steps * np.log2(HOLDING_AREA) / 2)
+    least = sized_scales(1.0, np.array([np.sqrt(HOLDING_AREA)]), preset)[0]
+    held: np.ndarray = centres >= least
     return held
 
 
