@@ -347,6 +347,11 @@ def format_matches(body: dict[str, Any]) -> str:
             f"\nThe query is a scanner's point cloud: {facts['input_points']:,} points on "
             f"a {width} x {height} grid, triangulated by it."
         )
+    elif facts.get("input_points"):
+        title += (
+            f"\nThe query is a scanner's point cloud: {facts['input_points']:,} points, "
+            "triangulated as seen from its sensor."
+        )
     kept = facts.get("kept_area_fraction")
     if _partial(kept):
         title += (

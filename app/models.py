@@ -150,8 +150,8 @@ class Descriptor(Base):
     timings: Mapped[dict[str, float]] = mapped_column(JSON, default=dict)
     # The described part's share of the file's surface (None: made before it was kept).
     kept_area_fraction: Mapped[float | None]
-    # The organized point cloud the file was: its points and grid [width, height] (None:
-    # a mesh, or made before they were kept).
+    # The point cloud the file was: its points and, organized, its grid [width, height]
+    # (None: a mesh, a cloud without a grid, or made before they were kept).
     input_points: Mapped[int | None]
     input_grid: Mapped[list[int] | None] = mapped_column(JSON)
     # The largest share of the surface facing one way (None: made before it was kept).

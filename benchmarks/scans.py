@@ -4,9 +4,10 @@
 
 For each size, the walk-through's quadruped-3 seen from its left side by an orthographic
 depth grid of about ``--pixels`` pixels on it (as ``examples/partial/quadruped-3-depth``
-was made), written as an organized PCD (ascii, binary) and as a structured E57 scan, and
-its surface (what :func:`~worker.engine.scans.read_pcd` makes of the binary file) as an
-OFF mesh: a mesh of the same size. Each file is described by
+was made), written as an organized PCD (ascii, binary), as a structured E57 scan, as its
+points without the grid (in another order, in the camera's frame: an XYZ text file and a
+binary PLY of vertices), and its surface (what :func:`~worker.engine.scans.read_pcd`
+makes of the binary file) as an OFF mesh: a mesh of the same size. Each file is described by
 :func:`~worker.engine.pipeline.describe_file` ``--repeats`` times, the files' order
 alternated, in one process; the table gives the median load (read, triangulate, clean)
 and total seconds, and each total over the mesh's.
@@ -35,20 +36,34 @@ from worker.evaluation.samples import (
 )
 
 
+def points_ply(points: np.ndarray) -> bytes:
+    """``points`` (n, 3) as a binary PLY of vertices alone, as scanners' tools write it."""
+    header = (
+        "ply\nformat binary_little_endian 1.0\n"
+        f"element vertex {len(points)}\nproperty float x\nproperty float y\nproperty float z\n"
+        "end_header\n"
+    )
+    return header.encode() + points.astype("<f4").tobytes()
+
+
 def scan_files(pixels: int) -> tuple[dict[str, bytes], int, tuple[int, int]]:
     """The scan's files by name (the mesh first), its points and its grid (width,
     height)."""
     points, viewpoint = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), pixels)
     binary = pcd_bytes(points, viewpoint, "binary")
-    vertices, faces, grid = read_pcd(binary)
+    vertices, faces, cloud = read_pcd(binary)
+    assert cloud.grid is not None
     mesh = cast(str, trimesh.Trimesh(vertices, faces, process=False).export(file_type="off"))
+    seen = (vertices - viewpoint)[np.random.default_rng(0).permutation(len(vertices))]
     files = {
         "mesh.off": mesh.encode(),
         "scan.pcd (ascii)": pcd_bytes(points, viewpoint),
         "scan.pcd (binary)": binary,
         "scan.e57": e57_bytes(points, viewpoint),
+        "scan.xyz (no grid)": "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in seen.tolist()).encode(),
+        "scan.ply (no grid)": points_ply(seen),
     }
-    return files, grid.points, (grid.width, grid.height)
+    return files, cloud.points, cloud.grid
 
 
 def main() -> None:

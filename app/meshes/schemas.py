@@ -34,12 +34,14 @@ class DescriptorInfo(BaseModel):
     )
     input_points: int | None = Field(
         None,
-        description="when the file was a scanner's organized point cloud (a PCD or a "
-        "structured E57 scan, triangulated by its grid): its points that saw the surface; "
-        "null for a mesh",
+        description="when the file was a point cloud (one view: an organized PCD or "
+        "structured E57 scan triangulated by its grid, or points without one triangulated "
+        "as seen from their sensor): its points that saw the surface; null for a mesh",
     )
     input_grid: list[int] | None = Field(
-        None, description="that cloud's sensor grid, [width, height] pixels; null for a mesh"
+        None,
+        description="that cloud's sensor grid, [width, height] pixels; null for a mesh or "
+        "a cloud without one",
     )
     facing_share: float | None = Field(
         None,

@@ -50,7 +50,7 @@ class PartialOut(BaseModel):
     )
     single_view: bool = Field(
         False,
-        description="the query is one view of its object (a scanner's organized point "
+        description="the query is one view of its object (a scanner's point "
         "cloud, or a surface facing one way: query.facing_share at least 0.95), described with "
         "its unseen side taken as the mirror image of the side it sees: missing_share is "
         "then that two-sided surface's, which matches as nearly whole, not what the scan "
@@ -127,8 +127,9 @@ class QueryOut(BaseModel):
         "surface area (below 1 when the file has other, separate parts, which are left out), "
         "facing_share, the largest share of its surface facing one way (about 0.5 for a "
         "whole, a cut or a holed copy, near 1 for one view); "
-        "for a scanner's organized point cloud (a PCD or a structured E57 scan) also "
-        "input_points (its points that saw the surface) and input_grid ([width, height])",
+        "for a point cloud also input_points (its points that saw the surface), and for "
+        "an organized one (a PCD with a grid or a structured E57 scan) input_grid "
+        "([width, height])",
     )
     partial: PartialOut | None = Field(
         None,

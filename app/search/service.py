@@ -67,8 +67,8 @@ class RankedMatch:
 class PartialQuery:
     """A query ranked as a part: how partial it looks and how much of its whole it seems
     to miss (an estimate and its bounds: the parts' scale is measured on a grid), and
-    whether it is one view (:attr:`ShapeDescriptor.single_view`: a scanner's organized
-    cloud, or a surface facing one way)."""
+    whether it is one view (:attr:`ShapeDescriptor.single_view`: a point cloud, or a
+    surface facing one way)."""
 
     partiality: float
     missing_share: float
@@ -220,8 +220,8 @@ def parse_options(
 def query_facts(descriptor: ShapeDescriptor) -> dict[str, int | float | list[int]]:
     """What the answer says of the query's mesh: its size as cleaned and as described,
     (when known) the described part's share of the file's surface area and the share of
-    its surface facing one way, and the points and grid of the organized point cloud it
-    was."""
+    its surface facing one way, and the points (and grid, when organized) of the point
+    cloud it was."""
     facts: dict[str, int | float | list[int]] = {
         "input_vertices": descriptor.input_vertices,
         "input_faces": descriptor.input_faces,
@@ -231,8 +231,9 @@ def query_facts(descriptor: ShapeDescriptor) -> dict[str, int | float | list[int
         facts["kept_area_fraction"] = descriptor.kept_area_fraction
     if descriptor.facing_share is not None:
         facts["facing_share"] = round(descriptor.facing_share, 3)
-    if descriptor.input_points is not None and descriptor.input_grid is not None:
+    if descriptor.input_points is not None:
         facts["input_points"] = descriptor.input_points
+    if descriptor.input_grid is not None:
         facts["input_grid"] = list(descriptor.input_grid)
     return facts
 
@@ -267,7 +268,7 @@ def rank(
             round(max(0.0, 1.0 - kept), 2),
             (low, high),
             single_view=descriptor.single_view,
-            cloud=descriptor.input_grid is not None,
+            cloud=descriptor.input_points is not None,
         )
     reference = gallery.reference
     # The calibration is of whole queries' scores; a part's are on another scale.

@@ -208,12 +208,13 @@ function partial(kept) {
   return kept != null && kept < PARTIAL_SURFACE;
 }
 
-// The organized point cloud a file was, as a phrase; null for a mesh.
+// The point cloud a file was, as a phrase; null for a mesh.
 function pointCloud(facts) {
-  if (!facts || facts.input_points == null || !facts.input_grid) return null;
+  if (!facts || facts.input_points == null) return null;
+  const points = `a scanner's point cloud: ${facts.input_points.toLocaleString("en")} points`;
+  if (!facts.input_grid) return `${points}, triangulated as seen from its sensor`;
   const [width, height] = facts.input_grid;
-  return `a scanner's point cloud: ${facts.input_points.toLocaleString("en")} points `
-    + `on a ${width} x ${height} grid, triangulated by it`;
+  return `${points} on a ${width} x ${height} grid, triangulated by it`;
 }
 
 function percent(value) {

@@ -1,5 +1,6 @@
-"""Organized point clouds (a depth camera's PCD): read, triangulated by their grid, the
-gaps between occluding and occluded surfaces left open."""
+"""Point clouds of one view: organized ones (a depth camera's PCD) triangulated by their
+grid, others as seen from their sensor, the gaps between occluding and occluded surfaces
+left open; points that are not one view refused."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from worker.engine.errors import PointCloudError, UnreadableMeshError
 from worker.engine.mesh_io import read_mesh
 from worker.engine.scans import (
     SHADOW_DEGREES,
-    Grid,
+    Cloud,
     grid_faces,
     grid_sight,
     lzf_decompress,
@@ -23,6 +24,7 @@ from worker.engine.scans import (
     read_e57,
     read_pcd,
     unshadowed,
+    viewed_surface,
 )
 from worker.evaluation.samples import pcd_gz_bytes
 
@@ -232,7 +234,7 @@ def test_pcl_binary_compressed_file_is_read():
     raw = len(soa_fields(points))
     data = header + struct.pack("<II", len(LIBLZF_SMALL_GRID), raw) + LIBLZF_SMALL_GRID
     vertices, faces, grid = read_pcd(data)
-    assert grid == Grid(8, 6, 48 - 8 - 3)
+    assert grid == Cloud(48 - 8 - 3, (8, 6))
     want_vertices, want_faces = organized_surface(points.astype(np.float32), np.zeros(3))
     np.testing.assert_allclose(vertices, want_vertices, rtol=1e-6)
     np.testing.assert_array_equal(faces, want_faces)
@@ -245,7 +247,7 @@ def test_pcl_binary_compressed_file_is_read():
 def assert_read_as(points: np.ndarray, vertices, faces, grid) -> np.ndarray:
     """That a file's surface is ``points``' (stored in single precision, the first pixel
     blank) triangulated from the origin; returns the triangles."""
-    assert grid == Grid(WIDTH, HEIGHT, WIDTH * HEIGHT - 1)
+    assert grid == Cloud(WIDTH * HEIGHT - 1, (WIDTH, HEIGHT))
     want_vertices, want_faces = organized_surface(points.astype(np.float32), np.zeros(3))
     np.testing.assert_allclose(vertices, want_vertices, rtol=1e-6)
     np.testing.assert_array_equal(faces, want_faces)
@@ -259,20 +261,82 @@ def test_a_gzipped_pcd_is_read_as_a_mesh():
     assert cleaned.mesh.n_vertices == HEIGHT * (WIDTH - 15)
     assert np.allclose(cleaned.mesh.vertices[:, 2], 3.0, atol=1e-6)
     assert 0.5 < cleaned.kept_area_fraction < 1.0
-    assert cleaned.grid == Grid(WIDTH, HEIGHT, WIDTH * HEIGHT)  # the file's, not the piece's
+    assert cleaned.cloud == Cloud(WIDTH * HEIGHT, (WIDTH, HEIGHT))  # the file's, not the piece's
 
 
-def test_a_cloud_without_its_grid_is_refused_with_a_sentence():
+def triangles(vertices: np.ndarray, faces: np.ndarray) -> set[tuple[tuple[float, ...], ...]]:
+    """A surface's triangles as sets of their corners' coordinates, whatever their order."""
+    return {tuple(sorted(map(tuple, vertices[face].round(9).tolist()))) for face in faces}
+
+
+def test_a_cloud_without_its_grid_is_triangulated_as_its_grid_is():
+    """The two planes' points in random order, from the same viewpoint, make the grid's
+    surface: every point, no triangle across the gap between the planes, none over the
+    pixels that saw nothing; a grid's square split along either diagonal (four points on
+    a circle), so the same area in as many triangles. Each faces the sensor."""
     points, _ = two_planes()
-    unorganized = points.reshape(1, -1, 3)
-    with pytest.raises(PointCloudError, match="no sensor grid"):
-        read_pcd(pcd(unorganized))
-    with pytest.raises(PointCloudError, match="organized"):
-        read_mesh(
-            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n"
-            b"property float y\nproperty float z\nend_header\n0 0 0\n",
-            "points.ply",
-        )
+    points[5:9, 20:30] = np.nan  # a hole the far plane's grid leaves open
+    points[2, 3] = np.nan  # a missing pixel
+    grid_vertices, grid_triangles = organized_surface(points, np.zeros(3))
+    shuffled = points.reshape(-1, 3)[np.random.default_rng(0).permutation(HEIGHT * WIDTH)]
+    vertices, faces = viewed_surface(shuffled, np.zeros(3))
+    assert {tuple(v) for v in vertices.tolist()} == {tuple(v) for v in grid_vertices.tolist()}
+    assert len(vertices) == len(grid_vertices) and len(faces) == len(grid_triangles)
+    corners = vertices[faces]
+    assert np.allclose(corners[:, :, 2].min(axis=1), corners[:, :, 2].max(axis=1))  # one plane
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    grid_corners = grid_vertices[grid_triangles]
+    grid_normals = np.cross(
+        grid_corners[:, 1] - grid_corners[:, 0], grid_corners[:, 2] - grid_corners[:, 0]
+    )
+    area = np.linalg.norm(normals, axis=1).sum()
+    assert area == pytest.approx(np.linalg.norm(grid_normals, axis=1).sum(), rel=1e-9)
+    assert (np.einsum("ij,ij->i", normals, -corners.mean(axis=1)) > 0).all()
+    # A PCD without a grid (HEIGHT 1) is read so from its VIEWPOINT.
+    moved = np.array([0.5, -2.0, 7.0])
+    read, read_faces, cloud = read_pcd(pcd((shuffled + moved).reshape(1, -1, 3), viewpoint=moved))
+    assert cloud == Cloud(len(grid_vertices)) and len(read_faces) == len(grid_triangles)
+    assert triangles(read - moved, read_faces) == triangles(vertices, faces)
+
+
+def test_points_in_a_text_file_or_a_mesh_file_without_faces_are_read_as_one_view():
+    """XYZ, PTS and CSV (a header or a count line, more columns, commas) and a PLY of
+    vertices alone: the points as seen from the origin of their frame."""
+    points, _ = two_planes()
+    flat = points.reshape(-1, 3)
+    want = triangles(*viewed_surface(flat, np.zeros(3)))
+    rows = [f"{x!r} {y!r} {z!r}" for x, y, z in flat.tolist()]
+    files = {
+        "scan.xyz": "\n".join(f"{row} 0.1 0.2 0.9" for row in rows),
+        "scan.pts": f"{len(rows)}\n" + "\n".join(f"{row} 17 255 255 255" for row in rows),
+        "scan.csv": "x,y,z\n" + "\n".join(row.replace(" ", ",") for row in rows),
+        "scan.ply": trimesh.PointCloud(flat).export(file_type="ply", encoding="ascii"),
+    }
+    single = triangles(*viewed_surface(flat.astype(np.float32).astype(float), np.zeros(3)))
+    for name, text in files.items():
+        cleaned = read_mesh(text.encode() if isinstance(text, str) else text, name)
+        assert cleaned.cloud == Cloud(HEIGHT * WIDTH), name
+        # The larger piece, the far plane, as the grid's.
+        assert cleaned.mesh.n_vertices == HEIGHT * (WIDTH - 15), name
+        surface = triangles(cleaned.mesh.vertices, cleaned.mesh.faces)
+        assert surface <= (single if name == "scan.ply" else want), name  # PLY: float32
+    with pytest.raises(UnreadableMeshError, match="three numbers"):
+        read_mesh(b"1 2 3\n4 5 six\n", "scan.xyz")
+
+
+def test_points_that_are_not_one_view_are_refused_with_a_sentence():
+    """A whole object's points hide one another from any viewpoint; around the origin,
+    some lie behind it; too few make no surface."""
+    sphere = trimesh.creation.icosphere(subdivisions=4).vertices
+    with pytest.raises(PointCloudError, match="hide behind others, as a whole object"):
+        viewed_surface(sphere, np.array([0.0, 0.0, 50.0]))
+    text = "\n".join(f"{x!r} {y!r} {z!r}" for x, y, z in sphere.tolist()).encode()
+    with pytest.raises(PointCloudError, match=r"sensor at \(0, 0, 0\): some lie beside or behind"):
+        read_mesh(text, "object.xyz")
+    with pytest.raises(PointCloudError, match="too few points"):
+        read_mesh(b"0 0 1\n1 0 1\n", "two.xyz")
+    with pytest.raises(PointCloudError, match="on one line"):
+        viewed_surface(np.array([[0.0, 0, 1], [1, 0, 1], [2, 0, 1], [3, 0, 1]]), np.zeros(3))
 
 
 @pytest.mark.parametrize(
@@ -313,7 +377,7 @@ def test_a_structured_e57_scan_is_read_as_its_grid_from_the_scanner_s_position()
         vertices - moved, organized_surface(points, np.zeros(3))[0], atol=1e-6
     )
     np.testing.assert_array_equal(faces, want_faces)
-    assert read_mesh(e57_scan(points), "scan.e57").grid == grid
+    assert read_mesh(e57_scan(points), "scan.e57").cloud == grid
 
 
 def test_an_e57_file_that_is_not_one_structured_scan_is_refused_with_a_sentence():

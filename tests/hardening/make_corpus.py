@@ -258,6 +258,13 @@ def build_corpus(max_faces: int, seed: int = 5) -> list[Case]:
     add("point-cloud-obj", "cloud.obj",
         "".join(f"v {x} {y} {z}\n" for x, y, z in points).encode(), 422,
         ("no_faces", "empty_mesh"))  # fmt: skip
+    # Points as text: around the sensor (not one view), not numbers, not text at all.
+    add("point-cloud-xyz", "cloud.xyz", "".join(f"{x} {y} {z}\n" for x, y, z in points).encode(),
+        422, "no_faces")  # fmt: skip
+    add("points-not-numbers-csv", "cloud.csv", b"x,y,z\n1,2,3\n4,five,6\n", 422, UNREADABLE)
+    add("points-binary-xyz", "cloud.xyz", bytes(range(256)) * 8, 422, UNREADABLE)
+    add("points-far-view-pts", "far.pts", b"3\n0 0 1e300\n1 0 1e300\n0 1 1e300\n", 422,
+        UNREADABLE + ("non_finite_coordinates",))  # fmt: skip
     same = np.ones_like(sphere_v) * 3.0
     add("identical-vertices", "collapsed.off", off(same, sphere_f), 422, "too_few_vertices")
     flat = sphere_v.copy()

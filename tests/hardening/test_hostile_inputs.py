@@ -26,11 +26,11 @@ from .make_corpus import build_corpus
 CASES = build_corpus(MAX_FACES)
 
 
-def _error(response: httpx.Response, status: int, codes) -> dict:
-    assert response.status_code == status, (status, response.text)
+def _error(response: httpx.Response, status: int, codes, name: str = "") -> dict:
+    assert response.status_code == status, (name, status, response.text)
     body = response.json()
-    assert body["error"] in codes, body
-    assert body["detail"].endswith("."), body
+    assert body["error"] in codes, (name, body)
+    assert body["detail"].endswith("."), (name, body)
     return body
 
 
@@ -58,7 +58,9 @@ def test_every_hostile_file_is_refused_with_its_code_and_nothing_else_changes(
     accepted: dict[str, tuple[int, dict]] = {}
     for case in CASES:
         files = {"file": (case.filename, case.data)}
-        queried = _error(hardened.client.post("/query", files=files), case.status, case.codes)
+        queried = _error(
+            hardened.client.post("/query", files=files), case.status, case.codes, case.name
+        )
         _still_up(hardened)
         response = hardened.client.post("/meshes", files=files, data={"label": "hostile"})
         if case.early:

@@ -135,13 +135,14 @@ def test_a_view_sent_as_a_mesh_is_called_one_view(service: Service, gallery):
     assert enrolled["descriptor"]["facing_share"] < 0.6
 
 
-def test_a_depth_camera_s_cloud_is_queried_by_its_grid_and_one_without_it_refused(
+def test_a_depth_camera_s_cloud_is_queried_by_its_grid_or_as_seen_from_its_camera(
     service: Service, gallery
 ):
     """The example depth scan (an organized PCD of the quadruped's left side) is
     triangulated by its grid and finds the quadruped by its parts; the answer, and an
-    enrolled scan's descriptor, say it was a cloud and of how many points; points with no
-    grid are a 422 that says what to send instead."""
+    enrolled scan's descriptor, say it was a cloud and of how many points. Its points
+    without the grid, in the camera's frame, are read as seen from the camera and find the
+    same; a whole object's points are a 422 that says what to send instead."""
     data = (EXAMPLES / DEPTH_SAMPLE).read_bytes()
     response = service.client.post(
         "/query", files={"file": (DEPTH_SAMPLE.name, data)}, data={"k": "3"}
@@ -150,8 +151,8 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_and_one_without_it_refuse
     body = response.json()
     assert body["partial"] is not None
     assert [m["label"] for m in body["matches"][:2]] == ["quadruped", "quadruped"]
-    grid = read_pcd(gzip.decompress(data))[2]  # 56 x 77 pixels, 1,583 on the quadruped
-    width, height, points = grid.width, grid.height, grid.points
+    cloud = read_pcd(gzip.decompress(data))[2]  # 56 x 77 pixels, 1,583 on the quadruped
+    points, (width, height) = cloud.points, cloud.grid
     assert body["query"]["input_grid"] == [width, height]
     assert body["query"]["input_points"] == points
     # One view: described with its unseen side as the mirror image of the seen one.
@@ -172,9 +173,25 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_and_one_without_it_refuse
     assert mesh["descriptor"]["input_grid"] == [width, height]
     assert mesh["descriptor"]["input_points"] == points
 
-    cloud = trimesh.PointCloud(load_mesh(example("quadruped-2")).vertices).export(file_type="ply")
-    refused = _error(service.client.post("/query", files={"file": ("scan.ply", cloud)}), 422)
-    assert "organized cloud a depth camera wrote (.pcd" in refused["detail"]
+    # The same points without their grid, in the camera's frame: read as seen from it.
+    raw = gzip.decompress(data)
+    vertices = read_pcd(raw)[0]
+    header = next(line for line in raw.split(b"\n") if line.startswith(b"VIEWPOINT"))
+    viewpoint = np.array([float(v) for v in header.split()[1:4]])
+    shuffled = (vertices - viewpoint)[np.random.default_rng(0).permutation(len(vertices))]
+    xyz = "\n".join(f"{x!r} {y!r} {z!r}" for x, y, z in shuffled.tolist()).encode()
+    response = service.client.post("/query", files={"file": ("scan.xyz", xyz)}, data={"k": "3"})
+    assert response.status_code == 200, response.text
+    as_points = response.json()
+    assert [m["name"] for m in as_points["matches"]] == [m["name"] for m in body["matches"]]
+    assert as_points["query"]["input_points"] == points and "input_grid" not in as_points["query"]
+    assert as_points["partial"]["single_view"]
+    assert f"{points:,} points, triangulated as seen from its sensor" in format_matches(as_points)
+
+    whole = trimesh.PointCloud(load_mesh(example("quadruped-2")).vertices).export(file_type="ply")
+    refused = _error(service.client.post("/query", files={"file": ("scan.ply", whole)}), 422)
+    assert refused["error"] == "no_faces" and "not one view" in refused["detail"]
+    assert "organized cloud (.pcd, one point per pixel)" in refused["detail"]
 
 
 def test_a_laser_scanner_s_structured_e57_scan_is_queried_by_its_grid(service: Service, gallery):

@@ -489,10 +489,12 @@ def test_the_collection_picker_switches_gallery_and_search(page, site):
 
 def depth_cloud_phrase() -> str:
     """How the page names the example depth scan (its grid as the file has it)."""
-    grid = read_pcd(gzip.decompress((EXAMPLES / DEPTH_SAMPLE).read_bytes()))[2]
+    cloud = read_pcd(gzip.decompress((EXAMPLES / DEPTH_SAMPLE).read_bytes()))[2]
+    assert cloud.grid is not None
+    width, height = cloud.grid
     return (
-        f"a scanner's point cloud: {grid.points:,} points on a {grid.width} x "
-        f"{grid.height} grid, triangulated by it"
+        f"a scanner's point cloud: {cloud.points:,} points on a {width} x {height} grid, "
+        "triangulated by it"
     )
 
 

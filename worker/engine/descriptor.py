@@ -54,10 +54,10 @@ class ShapeDescriptor:
         :func:`~worker.engine.pipeline.described_area`): the size modality
         (:data:`~worker.engine.presets.SIZE`). None for a descriptor stored before this
         was recorded.
-    input_points, input_grid : when the file was an organized point cloud (a depth
-        camera's PCD or a laser scanner's structured E57 scan, triangulated by its grid:
-        :mod:`~worker.engine.scans`), its points that saw the surface and its grid
-        (width, height); None for a mesh.
+    input_points, input_grid : when the file was a point cloud (triangulated as
+        :mod:`~worker.engine.scans` reads one view), its points that saw the surface, and
+        its grid (width, height) when it was organized (a depth camera's PCD or a laser
+        scanner's structured E57 scan, triangulated by it); None for a mesh.
     facing_share : the largest share of the described surface's area whose faces face
         one direction (:func:`~worker.engine.holes.facing_share`): about a half for a
         whole, a cut or a holed copy, near 1 for one view of a scanner. None for a
@@ -84,9 +84,9 @@ class ShapeDescriptor:
 
     @property
     def single_view(self) -> bool:
-        """Whether it is one view of its object: a scanner's organized cloud, or a surface
-        facing one way (:data:`~worker.engine.holes.ONE_VIEW_FACING`)."""
-        if self.input_grid is not None:
+        """Whether it is one view of its object: a point cloud (read as one view), or a
+        surface facing one way (:data:`~worker.engine.holes.ONE_VIEW_FACING`)."""
+        if self.input_points is not None:
             return True
         return self.facing_share is not None and self.facing_share >= ONE_VIEW_FACING
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from .errors import UnsupportedFormatError
 
-MESH_FORMATS = ("obj", "ply", "off", "stl", "glb", "gltf", "pcd", "e57")
+MESH_FORMATS = ("obj", "ply", "off", "stl", "glb", "gltf", "pcd", "e57", "xyz", "pts", "csv")
 DEFAULT_MAX_FACES = 2_000_000
 DEFAULT_MAX_DECOMPRESSED_BYTES = 512 * 1024 * 1024
 

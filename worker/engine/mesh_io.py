@@ -1,8 +1,9 @@
 """Reading and cleaning triangle meshes from user files.
 
-``load_mesh`` accepts OBJ, PLY, OFF, STL, GLB and GLTF, optionally gzip-compressed,
-from a path or from bytes plus the original file name, and returns one clean,
-connected triangle surface or raises a :class:`~worker.engine.errors.MeshError` whose
+``load_mesh`` accepts OBJ, PLY, OFF, STL, GLB and GLTF, a scanner's PCD and E57, and
+points as text (XYZ, PTS, CSV), optionally gzip-compressed, from a path or from bytes
+plus the original file name, and returns one clean, connected triangle surface (a cloud
+triangulated as :mod:`.scans` reads it) or raises a :class:`~worker.engine.errors.MeshError` whose
 message can be shown to the person who uploaded the file.
 """
 
@@ -24,13 +25,12 @@ from .errors import (
     MeshError,
     NonFiniteCoordinatesError,
     NonManifoldError,
-    PointCloudError,
     TooFewVerticesError,
     TooManyFacesError,
     UnreadableMeshError,
 )
 from .formats import DEFAULT_MAX_DECOMPRESSED_BYTES, DEFAULT_MAX_FACES, mesh_format
-from .scans import POINTS_WITHOUT_GRID, Grid, read_e57, read_pcd
+from .scans import Cloud, read_e57, read_pcd, viewed_surface
 from .tol import TOL
 from .topology import edge_keys, unique_rows, used_vertices
 
@@ -143,13 +143,52 @@ def _parse_triangle_off(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
     return np.ascontiguousarray(vertices), faces[:, 1:].astype(np.int64)
 
 
+#: Formats of points as text, a point a line (its first three numbers; lines without
+#: three, a header or a count, skipped).
+TEXT_POINTS = ("xyz", "pts", "csv")
+
+
+def _parse_text_points(data: bytes) -> np.ndarray:
+    """(n, 3) the points of an XYZ, PTS or CSV file: on each line, its first three
+    numbers (separated by spaces, tabs, commas or semicolons; more columns, as colours
+    or normals, ignored); lines before the first with three numbers (a header, a PTS
+    count) skipped."""
+    try:
+        lines = data.decode("utf-8-sig").splitlines()
+    except UnicodeDecodeError as exc:
+        raise UnreadableMeshError("The file of points is not text.") from exc
+    rows = [line.replace(",", " ").replace(";", " ").split() for line in lines]
+    start = next((i for i, row in enumerate(rows) if len(row) >= 3 and _numbers(row[:3])), None)
+    if start is None:
+        return np.empty((0, 3))
+    body = [row[:3] for row in rows[start:] if row]
+    try:
+        points = np.array(body, dtype=np.float64)
+    except ValueError as exc:
+        raise UnreadableMeshError(
+            "A line of the file of points does not start with three numbers."
+        ) from exc
+    return points
+
+
+def _numbers(tokens: list[str]) -> bool:
+    try:
+        [float(t) for t in tokens]
+    except ValueError:
+        return False
+    return True
+
+
 def _parse(
     data: bytes, fmt: str, max_bytes: int = DEFAULT_MAX_DECOMPRESSED_BYTES
-) -> tuple[np.ndarray, np.ndarray, Grid | None]:
-    """A file's vertices and triangles, and its sensor grid when it is an organized cloud
-    (a compressed one expanding to at most ``max_bytes``)."""
+) -> tuple[np.ndarray, np.ndarray, Cloud | None]:
+    """A file's vertices and triangles (none for points alone), and its cloud when it is
+    a scanner's triangulated by :mod:`.scans` (a compressed one expanding to at most
+    ``max_bytes``)."""
     if fmt == "off" and (parsed := _parse_triangle_off(data)) is not None:
         return (*parsed, None)
+    if fmt in TEXT_POINTS:
+        return _parse_text_points(data), np.empty((0, 3), dtype=np.int64), None
     if fmt == "pcd":
         return read_pcd(data, max_bytes)
     if fmt == "e57":
@@ -165,11 +204,15 @@ def _parse(
             f"The file could not be read as {fmt.upper()}: it is damaged or not a mesh."
         ) from exc
     meshes = [p for p in parts if isinstance(p, trimesh.Trimesh) and len(p.faces)]
-    if not meshes:
-        n_points = sum(len(getattr(p, "vertices", ())) for p in parts)
-        if n_points:
-            raise PointCloudError(POINTS_WITHOUT_GRID)
-        return np.empty((0, 3)), np.empty((0, 3), dtype=np.int64), None
+    if not meshes:  # points alone, read as one view (_read_arrays)
+        clouds = [np.asarray(getattr(p, "vertices", ()), dtype=np.float64) for p in parts]
+        clouds = [c for c in clouds if c.size]
+        if any(c.ndim != 2 or c.shape[1] != 3 for c in clouds):
+            raise UnreadableMeshError(
+                f"The file could not be read as {fmt.upper()}: it is damaged or not a mesh."
+            )
+        points = np.concatenate([np.empty((0, 3)), *clouds])
+        return points, np.empty((0, 3), dtype=np.int64), None
     vertices, faces, offset = [], [], 0
     for mesh in meshes:
         vertices.append(np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3))
@@ -188,13 +231,13 @@ class CleanedMesh:
     kept_area_fraction : its share of the source's surface area (after duplicate and
         degenerate triangles are removed); below 1 when the source had other, separate
         parts, which are not described.
-    grid : the sensor grid when the source was an organized point cloud, triangulated
-        by it (:mod:`.scans`); None for a mesh.
+    cloud : the point cloud the source was, triangulated as :mod:`.scans` reads it (by
+        its sensor grid, or as one view); None for a mesh.
     """
 
     mesh: Mesh
     kept_area_fraction: float
-    grid: Grid | None = None
+    cloud: Cloud | None = None
 
 
 def clean_mesh(vertices: np.ndarray, faces: np.ndarray) -> Mesh:
@@ -366,8 +409,8 @@ def read_mesh(
     MeshError
         A subclass naming what is wrong, with a sentence for the user.
     """
-    vertices, faces, grid = _read_arrays(source, filename, max_faces, max_decompressed_bytes)
-    cleaned = replace(clean_surface(vertices, faces), grid=grid)
+    vertices, faces, cloud = _read_arrays(source, filename, max_faces, max_decompressed_bytes)
+    cleaned = replace(clean_surface(vertices, faces), cloud=cloud)
     mesh = cleaned.mesh
     if mesh.n_vertices < min_vertices:
         raise TooFewVerticesError(
@@ -410,10 +453,11 @@ def _read_arrays(
     filename: str | None,
     max_faces: int,
     max_decompressed_bytes: int,
-) -> tuple[np.ndarray, np.ndarray, Grid | None]:
+) -> tuple[np.ndarray, np.ndarray, Cloud | None]:
     """A file's vertices (n, 3) float and triangles (m, 3) int as it numbers them, after
     the checks of the file itself (format, size, triangles, indices, coordinates), and
-    its sensor grid when it is an organized cloud."""
+    its cloud when it was points (points without triangles read as one view seen from
+    the origin of their frame, :func:`~.scans.viewed_surface`)."""
     if isinstance(source, bytes | bytearray | memoryview):
         if filename is None:
             raise ValueError("filename is required when the mesh is given as bytes")
@@ -428,11 +472,17 @@ def _read_arrays(
     if not data.strip():
         raise EmptyMeshError("The file is empty.")
 
-    vertices, faces, grid = _parse(data, fmt, max_decompressed_bytes)
+    vertices, faces, cloud = _parse(data, fmt, max_decompressed_bytes)
     if not len(vertices):
         raise EmptyMeshError("The file contains no vertices.")
     if not len(faces):
-        raise PointCloudError(POINTS_WITHOUT_GRID)
+        if len(vertices) > max_faces // 2:  # a view's triangles are about twice its points
+            raise TooManyFacesError(
+                f"The cloud has {len(vertices):,} points; the limit is {max_faces // 2:,}. "
+                "Subsample it before uploading."
+            )
+        vertices, faces = viewed_surface(vertices, np.zeros(3))
+        cloud = Cloud(len(vertices))
     if len(faces) > max_faces:
         raise TooManyFacesError(
             f"The mesh has {len(faces):,} triangles; the limit is {max_faces:,}. "
@@ -445,7 +495,7 @@ def _read_arrays(
         raise NonFiniteCoordinatesError(
             "Some vertex coordinates are not finite numbers (NaN, infinity or too large)."
         )
-    return np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64), grid
+    return np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64), cloud
 
 
 __all__ = [

@@ -296,9 +296,9 @@ def load_and_describe(
     descriptor.kept_area_fraction = cleaned.kept_area_fraction * (
         descriptor.kept_area_fraction or 1.0
     )
-    if cleaned.grid is not None:
-        descriptor.input_points = cleaned.grid.points
-        descriptor.input_grid = (cleaned.grid.width, cleaned.grid.height)
+    if cleaned.cloud is not None:
+        descriptor.input_points = cleaned.cloud.points
+        descriptor.input_grid = cleaned.cloud.grid
     descriptor.timings = {"load": load_seconds, **descriptor.timings}
     descriptor.timings["total"] = sum(descriptor.timings.values())
     return cleaned.mesh, descriptor

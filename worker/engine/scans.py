@@ -6,10 +6,17 @@ a square of it. PCD files (the Point Cloud Library's format) keep that grid when
 are *organized* (``HEIGHT`` > 1, one point per pixel in row order, ``NaN`` where the
 pixel saw nothing) and the sensor's position (``VIEWPOINT``); E57 files (laser
 scanners') keep it in a *structured* scan, each point's row and column index on the
-scanner's angular grid, and the scanner's position in the scan's pose. A cloud without
-its grid (``HEIGHT`` 1, an E57 scan without indices, or a file of points in other
-formats) is refused: its surface's neighbours are not known, and guessing them fuses
-touching sheets (docs/decisions.md, "Point clouds stay refused").
+scanner's angular grid, and the scanner's position in the scan's pose.
+
+A cloud without its grid (a PCD of ``HEIGHT`` 1, a PLY or OBJ without faces, a text file
+of points) is read as one view: its points seen from its sensor (the PCD's
+``VIEWPOINT``; the origin of the points' frame otherwise, where a depth camera writes
+them) each lie on their own ray, so the rays' directions are the pixels a grid would
+have given, and their Delaunay triangulation is the grid's (:func:`viewed_surface`),
+gaps left open as the grid leaves them. Points that do not lie one behind none other
+as seen from there (a whole object's, a scan merged from several views) are refused:
+their neighbours are not known, and guessing them fuses touching sheets
+(docs/decisions.md, "Point clouds stay refused"). So is an E57 scan without indices.
 
 The grid is triangulated as a scanner's software does: two triangles per square of four
 valid pixels, one per square of three (:func:`grid_faces`). Where the surface seen by two
@@ -40,24 +47,33 @@ from .formats import DEFAULT_MAX_DECOMPRESSED_BYTES
 #: An edge closer than this to its sensor's viewing ray crosses a gap, not the surface.
 SHADOW_DEGREES = 12.5
 
-#: What a file of points without their grid is told (any format but an organized PCD).
-POINTS_WITHOUT_GRID = (
-    "The file contains points but no triangles; upload a triangle mesh, the organized "
-    "cloud a depth camera wrote (.pcd, one point per pixel), or a structured .e57 scan."
+#: What a file of points that are not one view is told, after why.
+UPLOAD_A_VIEW = (
+    "Upload a triangle mesh, or one view's points as its sensor saw them (in the sensor's "
+    "frame, or a .pcd with its VIEWPOINT), or its organized cloud (.pcd, one point per "
+    "pixel) or structured .e57 scan."
 )
+
+#: :func:`viewed_surface`: the share of a cloud's points that must lie on the surface
+#: seen from its sensor for it to be one view (a view's keep 97-99%, a whole object's
+#: vertices seen from afar 10-16%: docs/decisions.md), and an edge's length in the
+#: image, in spacings of its points, past which it crosses a gap (a grid's diagonal is
+#: 1.41 spacings, the edge across a missing pixel 2).
+VIEW_SHARE = 0.8
+GAP_SPACINGS = 1.5
 
 #: PCD field types (``TYPE`` and ``SIZE``) as numpy's little-endian type letters.
 _PCD_TYPES = {"F": "f", "I": "i", "U": "u"}
 
 
 @dataclass(frozen=True)
-class Grid:
-    """An organized cloud's sensor grid: ``width`` x ``height`` pixels, ``points`` of
-    which saw the surface."""
+class Cloud:
+    """The point cloud a surface was triangulated from: its ``points`` that saw the
+    surface, and its sensor ``grid``, (width, height) pixels (None: a cloud without one,
+    triangulated as seen from its sensor, :func:`viewed_surface`)."""
 
-    width: int
-    height: int
     points: int
+    grid: tuple[int, int] | None = None
 
 
 def grid_faces(valid: np.ndarray) -> np.ndarray:
@@ -171,11 +187,86 @@ def organized_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.nda
     return flat[valid.ravel()], number[faces]
 
 
+def viewed_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A cloud without a grid read as one view: (n, 3) its finite points and (m, 3) the
+    triangles of the surface its sensor saw, facing the sensor.
+
+    Seen from ``viewpoint`` (3,), each point of one view lies on its own ray, and the
+    rays' directions are the pixels of the sensor's image: the points' central (pinhole)
+    projection on the plane across their mean ray is the image, up to a homography
+    (exact for a depth camera at the origin of its points' frame). Its Delaunay
+    triangulation is the grid's own: each pixel joined to its neighbours, a square split
+    along a diagonal. As on a grid, a triangle is left out when an edge crosses a gap:
+    longer in the image than ``GAP_SPACINGS`` times the spacing of its ends (each point's
+    distance to its nearest in the image; a missing pixel leaves a hole as the grid
+    does), or shadowed (:func:`unshadowed`, an occluding edge along the ray).
+
+    Raises
+    ------
+    PointCloudError
+        Fewer than three points not on one line as seen from ``viewpoint``; a point
+        beside or behind it (no image plane holds every ray); or fewer than
+        ``VIEW_SHARE`` of the points on the surface (points hidden behind others, as a
+        whole object's or several views' are, are joined to them only along the rays).
+    """
+    from scipy.spatial import Delaunay, QhullError
+
+    finite = points[np.isfinite(points).all(axis=1)]
+    if len(finite) < 3:
+        raise PointCloudError(f"The file holds too few points to make a surface. {UPLOAD_A_VIEW}")
+    where = ", ".join(f"{c:g}" for c in viewpoint)
+    rays = finite - viewpoint
+    length = np.linalg.norm(rays, axis=1)
+    axis = (rays / np.maximum(length, np.finfo(float).tiny)[:, None]).mean(axis=0)
+    axis /= max(float(np.linalg.norm(axis)), np.finfo(float).tiny)
+    depth = rays @ axis
+    if depth.min() <= 1e-3 * length.max():
+        raise PointCloudError(
+            f"The file holds points but no triangles, and they are not one view from the "
+            f"sensor at ({where}): some lie beside or behind it. {UPLOAD_A_VIEW}"
+        )
+    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    across = np.cross(axis, helper)
+    across /= np.linalg.norm(across)
+    image = rays @ np.stack([across, np.cross(axis, across)]).T / depth[:, None]
+    try:
+        faces = Delaunay(image).simplices.astype(np.int64)
+    except QhullError as exc:
+        raise PointCloudError(
+            f"The file's points lie on one line as seen from ({where}): no surface joins "
+            f"them. {UPLOAD_A_VIEW}"
+        ) from exc
+    corners = image[faces]
+    sides = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)  # (m, 3)
+    spacing = np.full(len(finite), np.inf)
+    for side in range(3):  # side k joins corners k - 1 and k
+        np.minimum.at(spacing, faces[:, side], sides[:, side])
+        np.minimum.at(spacing, faces[:, side - 1], sides[:, side])
+    kept = sides.max(axis=1) <= GAP_SPACINGS * spacing[faces].max(axis=1)
+    kept &= unshadowed(finite, faces, viewpoint)
+    faces = faces[kept]
+    seen = np.unique(faces).size / len(finite)
+    if seen < VIEW_SHARE:
+        raise PointCloudError(
+            f"The file holds points but no triangles, and they are not one view from the "
+            f"sensor at ({where}): {100 * (1 - seen):.0f}% of them hide behind others, as "
+            f"a whole object's points do. {UPLOAD_A_VIEW}"
+        )
+    # Wound clockwise in the image (whose third axis points away from the sensor), a
+    # triangle's normal faces the sensor.
+    first, second, third = (image[faces[:, k]] for k in range(3))
+    (ax, ay), (bx, by) = (second - first).T, (third - first).T
+    turn = ax * by - ay * bx
+    faces[turn > 0] = faces[turn > 0][:, ::-1]
+    return finite, faces
+
+
 def read_pcd(
     data: bytes, max_bytes: int = DEFAULT_MAX_DECOMPRESSED_BYTES
-) -> tuple[np.ndarray, np.ndarray, Grid]:
-    """A PCD file's (n, 3) vertices and (m, 3) triangles: an organized cloud's surface
-    (:func:`organized_surface`, from its ``VIEWPOINT``), and its grid.
+) -> tuple[np.ndarray, np.ndarray, Cloud]:
+    """A PCD file's (n, 3) vertices and (m, 3) triangles, and its cloud: an organized
+    cloud's surface (:func:`organized_surface`, from its ``VIEWPOINT``), or one without
+    a grid (``HEIGHT`` 1) as one view seen from there (:func:`viewed_surface`).
 
     Its data ``ascii``, ``binary`` (a record per point) or ``binary_compressed`` (PCL's
     default for files it saves: each field's values in turn, compressed by LZF,
@@ -184,7 +275,7 @@ def read_pcd(
     Raises
     ------
     PointCloudError
-        The cloud is not organized (``HEIGHT`` 1): no grid tells its neighbours.
+        A cloud without a grid that is not one view from its ``VIEWPOINT``.
     UnreadableMeshError
         Not a PCD file, no x, y, z fields, other data, or points that do not match the
         header.
@@ -194,12 +285,6 @@ def read_pcd(
         width, height = int(header["WIDTH"][0]), int(header["HEIGHT"][0])
     except ValueError as exc:
         raise UnreadableMeshError("The PCD header's WIDTH or HEIGHT is not a number.") from exc
-    if height <= 1 or width <= 1:
-        raise PointCloudError(
-            "The point cloud has no sensor grid (PCD HEIGHT 1): its points' neighbours are "
-            "unknown. Upload a triangle mesh, or the organized cloud the depth camera "
-            "wrote (one point per pixel)."
-        )
     fields = header["FIELDS"]
     if not {"x", "y", "z"} <= set(fields):
         raise UnreadableMeshError("The PCD file has no x, y and z fields.")
@@ -241,13 +326,16 @@ def read_pcd(
             "The PCD file's points do not match its header: it is damaged or truncated."
         ) from exc
     viewpoint = np.array([float(v) for v in header.get("VIEWPOINT", ["0"] * 7)[:3]])
+    if height <= 1 or width <= 1:  # no grid: one view seen from its viewpoint
+        points, faces = viewed_surface(xyz.astype(np.float64), viewpoint)
+        return points, faces, Cloud(len(points))
     points, faces = organized_surface(xyz.astype(np.float64).reshape(height, width, 3), viewpoint)
-    return points, faces, Grid(width, height, len(points))
+    return points, faces, Cloud(len(points), (width, height))
 
 
 def read_e57(
     data: bytes, max_bytes: int = DEFAULT_MAX_DECOMPRESSED_BYTES
-) -> tuple[np.ndarray, np.ndarray, Grid]:
+) -> tuple[np.ndarray, np.ndarray, Cloud]:
     """An E57 file's scan (ASTM E2807, laser scanners' exchange format) as an organized
     cloud: a *structured* scan's points put on their grid by their ``rowIndex`` and
     ``columnIndex`` (the scanner's angular grid), in the file's global frame, and
@@ -291,7 +379,7 @@ def read_e57(
             e57.close()
 
 
-def _structured_scan(e57: Any, max_bytes: int) -> tuple[np.ndarray, np.ndarray, Grid]:
+def _structured_scan(e57: Any, max_bytes: int) -> tuple[np.ndarray, np.ndarray, Cloud]:
     """:func:`read_e57`'s scan from an open ``pye57.E57``."""
     if e57.scan_count != 1:
         raise UnreadableMeshError(
@@ -333,7 +421,7 @@ def _structured_scan(e57: Any, max_bytes: int) -> tuple[np.ndarray, np.ndarray, 
     grid[rows, columns] = np.stack([scan[f"cartesian{a}"] for a in "XYZ"], axis=1)
     viewpoint = np.asarray(e57.scan_position(0), dtype=np.float64).reshape(3)
     points, faces = organized_surface(grid, viewpoint)
-    return points, faces, Grid(width, height, len(points))
+    return points, faces, Cloud(len(points), (width, height))
 
 
 def _bounds(header: Any, axis: str, indices: np.ndarray) -> tuple[int, int]:
