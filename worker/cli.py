@@ -402,8 +402,8 @@ def add_subcommands(sub: Any) -> None:
     partial.add_argument(
         "--variants",
         help="comma-separated subset of the partial copies: cut-5, cut-15, cut-30, holes-10, "
-        "holes-25, view, range, range-cloud, shrec-holes, noise-0.25, noise-0.5, noise-1 "
-        "(default: all)",
+        "holes-25, view, range, range-cloud, view-points, shrec-holes, noise-0.25, noise-0.5, "
+        "noise-1 (default: all)",
     )
     partial.add_argument(
         "--out", help="report directory (default: evaluation-out/partiality/PRESET)"

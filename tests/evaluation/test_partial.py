@@ -7,7 +7,8 @@ import pytest
 import trimesh
 
 from worker.engine.holes import boundary_loops
-from worker.engine.mesh_io import Mesh, clean_mesh
+from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
+from worker.evaluation import partial
 from worker.evaluation.partial import (
     PARTIAL_VARIANTS,
     SHREC_MIN_VERTICES,
@@ -74,3 +75,20 @@ def test_noise_is_a_share_of_the_bounding_box_diagonal(sphere):
     assert moved.std() == pytest.approx(0.005 * diagonal, rel=0.05)
     np.testing.assert_array_equal(noisy.faces, sphere.faces)
     assert {"noise-0.25", "noise-0.5", "noise-1", "range", "shrec-holes"} <= set(PARTIAL_VARIANTS)
+
+
+def test_view_points_are_the_range_cloud_s_scans_read_without_their_grid(sphere, monkeypatch):
+    """``view-points`` draws ``range-cloud``'s scans (its seed) and reads their points as
+    a cloud without a grid: the same points (the random similarity left out to compare
+    them), and their surface as the grid's but for the diagonals of some squares (at the
+    rim, one diagonal along the rays, the other not), so within a percent of its points
+    and area."""
+    monkeypatch.setattr(partial, "similarity", lambda mesh, rng: mesh)
+    for name in ("sphere.off", "other.off"):
+        grid = make_variant(sphere, "range-cloud", name)
+        points = make_variant(sphere, "view-points", name)
+        on_grid = {tuple(v) for v in grid.vertices.tolist()}
+        shared = sum(tuple(v) in on_grid for v in points.vertices.tolist())
+        assert shared >= 0.99 * max(grid.n_vertices, points.n_vertices)
+        area = face_areas(points.vertices, points.faces).sum()
+        assert area == pytest.approx(face_areas(grid.vertices, grid.faces).sum(), rel=0.01)

@@ -18,6 +18,9 @@ here keeps a part of the surface, its largest connected piece:
 * ``range-cloud``: scans drawn as ``range``'s, read as the service reads a depth camera's
   organized cloud (:mod:`worker.engine.scans`): the grid's triangles along a viewing ray
   left out, so occlusion edges stay open;
+* ``view-points``: ``range-cloud``'s very scans (drawn from its seed, :data:`DRAWN_AS`)
+  without their grid, their points in another order, read as the service reads one
+  view's points (:func:`worker.engine.scans.viewed_surface`, from the camera);
 * ``shrec-holes``: SHREC'17's holes: geodesic discs of random radius (up to 20% of the
   diameter) eroded around some of 70 farthest samples, the rest decimated to a random
   resolution (300 vertices .. as many as the mesh has), in a random similarity transform;
@@ -39,7 +42,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from worker.engine.errors import MeshError
 from worker.engine.geodesic import farthest_point_samples
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
-from worker.engine.scans import grid_faces, organized_surface
+from worker.engine.scans import grid_faces, organized_surface, viewed_surface
 from worker.engine.topology import edge_keys
 
 #: Number of discs the ``holes-*`` variants remove.
@@ -292,6 +295,18 @@ def range_cloud(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     return similarity(clean_mesh(vertices, faces), rng)
 
 
+def view_points(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """:func:`range_cloud`'s scan (its generator drawn from that variant's seed) read
+    without its grid: the points that saw the surface in a fixed random order, triangulated
+    as seen from the camera (:func:`worker.engine.scans.viewed_surface`), the largest
+    piece in the same random similarity."""
+    points, direction = range_image(mesh, rng)
+    seen = points.reshape(-1, 3)[np.isfinite(points).all(axis=2).ravel()]
+    shuffled = seen[np.random.default_rng(0).permutation(len(seen))]
+    vertices, faces = viewed_surface(shuffled, far_viewpoint(mesh, direction))
+    return similarity(clean_mesh(vertices, faces), rng)
+
+
 def single_view(mesh: Mesh, direction: np.ndarray) -> Mesh:
     """The faces a scanner looking along ``-direction`` (3,) sees: facing it, and with no
     other face in front of their centroid on the ray through it (orthographic rays;
@@ -337,6 +352,10 @@ def single_view(mesh: Mesh, direction: np.ndarray) -> Mesh:
     return largest_piece(mesh, facing & ~hidden)
 
 
+#: A variant drawn from another's seed (:func:`.variants.make_variant`): the same scans,
+#: read another way.
+DRAWN_AS = {"view-points": "range-cloud"}
+
 #: name -> how to make it from a mesh and a random generator, in report order.
 PARTIAL_VARIANTS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
     "cut-5": lambda mesh, rng: planar_cut(mesh, 0.05, random_direction(rng)),
@@ -347,6 +366,7 @@ PARTIAL_VARIANTS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
     "view": lambda mesh, rng: single_view(mesh, random_direction(rng)),
     "range": range_scan,
     "range-cloud": range_cloud,
+    "view-points": view_points,
     "shrec-holes": shrec_holes,
     "noise-0.25": lambda mesh, rng: noisy_surface(mesh, 0.25, rng),
     "noise-0.5": lambda mesh, rng: noisy_surface(mesh, 0.5, rng),

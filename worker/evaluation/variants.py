@@ -20,7 +20,7 @@ import numpy as np
 
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas, tiling_edge
 
-from .partial import LOG10_SCALE_RANGE, PARTIAL_VARIANTS, decimated, random_rotation
+from .partial import DRAWN_AS, LOG10_SCALE_RANGE, PARTIAL_VARIANTS, decimated, random_rotation
 
 #: Gaussian vertex noise, as a fraction of the mesh's mean edge length.
 NOISE_FRACTION = 0.1
@@ -116,6 +116,8 @@ def variant_seed(name: str, variant: str) -> int:
 
 def make_variant(mesh: Mesh, variant: str, name: str) -> Mesh:
     """The variant ``variant`` of ``mesh`` (the file called ``name``): one of
-    :data:`VARIANTS`, or a partial copy (:data:`.partial.PARTIAL_VARIANTS`)."""
+    :data:`VARIANTS`, or a partial copy (:data:`.partial.PARTIAL_VARIANTS`), from its
+    seed or the one it is drawn as (:data:`.partial.DRAWN_AS`)."""
     make = VARIANTS.get(variant) or PARTIAL_VARIANTS[variant]
-    return make(mesh, np.random.default_rng(variant_seed(name, variant)))
+    seed = variant_seed(name, DRAWN_AS.get(variant, variant))
+    return make(mesh, np.random.default_rng(seed))
