@@ -157,18 +157,37 @@ def _parse_text_points(data: bytes) -> np.ndarray:
         lines = data.decode("utf-8-sig").splitlines()
     except UnicodeDecodeError as exc:
         raise UnreadableMeshError("The file of points is not text.") from exc
-    rows = [line.replace(",", " ").replace(";", " ").split() for line in lines]
-    start = next((i for i, row in enumerate(rows) if len(row) >= 3 and _numbers(row[:3])), None)
+    start = next(
+        (i for i, line in enumerate(lines) if len(row := _tokens(line)) >= 3 and _numbers(row[:3])),
+        None,
+    )
     if start is None:
         return np.empty((0, 3))
-    body = [row[:3] for row in rows[start:] if row]
+    body = [line for line in lines[start:] if line.strip()]
+    columns = len(_tokens(body[0]))
+    # Every line as many numbers as the first: all at once; otherwise line by line.
+    with warnings.catch_warnings():  # a token that is not a number warns, or raises
+        warnings.simplefilter("error")
+        try:
+            values = np.fromstring(_tokens_text(" ".join(body)), sep=" ")
+            if values.size == columns * len(body):
+                return np.ascontiguousarray(values.reshape(len(body), columns)[:, :3])
+        except (ValueError, DeprecationWarning):
+            pass
     try:
-        points = np.array(body, dtype=np.float64)
+        return np.array([_tokens(line)[:3] for line in body], dtype=np.float64)
     except ValueError as exc:
         raise UnreadableMeshError(
             "A line of the file of points does not start with three numbers."
         ) from exc
-    return points
+
+
+def _tokens_text(text: str) -> str:
+    return text.replace(",", " ").replace(";", " ")
+
+
+def _tokens(line: str) -> list[str]:
+    return _tokens_text(line).split()
 
 
 def _numbers(tokens: list[str]) -> bool:

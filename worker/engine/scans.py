@@ -55,10 +55,10 @@ UPLOAD_A_VIEW = (
 )
 
 #: :func:`viewed_surface`: the share of a cloud's points that must lie on the surface
-#: seen from its sensor for it to be one view (a view's keep 97-99%, a whole object's
-#: vertices seen from afar 10-16%: docs/decisions.md), and an edge's length in the
-#: image, in spacings of its points, past which it crosses a gap (a grid's diagonal is
-#: 1.41 spacings, the edge across a missing pixel 2).
+#: seen from its sensor for it to be one view (92-100% of a range scan's, 9-20% of a
+#: whole object's vertices seen from afar: docs/decisions.md), and an edge's length in
+#: the image, in spacings of its points, past which it crosses a gap (a grid's diagonal
+#: is 1.41 spacings, the edge across a missing pixel 2).
 VIEW_SHARE = 0.8
 GAP_SPACINGS = 1.5
 
