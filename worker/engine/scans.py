@@ -13,8 +13,8 @@ of points) is read as one view: its points seen from its sensor (the PCD's
 ``VIEWPOINT``; the origin of the points' frame otherwise, where a depth camera writes
 them) each lie on their own ray, so the rays' directions are the pixels a grid would
 have given, and their Delaunay triangulation is the grid's (:func:`viewed_surface`),
-gaps left open as the grid leaves them. Points that do not lie one behind none other
-as seen from there (a whole object's, a scan merged from several views) are refused:
+gaps left open as the grid leaves them. Points of which some hide behind others as
+seen from there (a whole object's, a scan merged from several views) are refused:
 their neighbours are not known, and guessing them fuses touching sheets
 (docs/decisions.md, "Point clouds stay refused"). So is an E57 scan without indices.
 
