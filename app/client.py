@@ -50,7 +50,19 @@ def default_url(environ: Mapping[str, str]) -> str:
 DEFAULT_URL = default_url(os.environ)
 #: The engine's formats (``worker.engine.formats.MESH_FORMATS``, which a test keeps equal):
 #: the client loads nothing of the server.
-MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl", ".glb", ".gltf", ".pcd", ".e57")
+MESH_SUFFIXES = (
+    ".obj",
+    ".ply",
+    ".off",
+    ".stl",
+    ".glb",
+    ".gltf",
+    ".pcd",
+    ".e57",
+    ".xyz",
+    ".pts",
+    ".csv",
+)
 TIMEOUT = httpx.Timeout(300.0, connect=10.0)
 #: Below this share of the file's surface described, the answer says the rest was left out
 #: (specks and debris are far smaller; the web page uses the same figure).
