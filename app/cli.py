@@ -143,7 +143,7 @@ def _add_client_subcommands(sub: Any) -> None:
 
 def _import_command(args: argparse.Namespace) -> int:
     try:
-        files = mesh_files(args.paths)
+        files = mesh_files(args.paths, Path(args.labels) if args.labels else None)
         labels = read_labels(Path(args.labels)) if args.labels else {}
         if not files:
             suffixes = " ".join(MESH_SUFFIXES)

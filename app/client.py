@@ -77,13 +77,19 @@ class Interrupted(ClientError):
     """Ctrl-C during an import: the uploads under way finished, no new one started."""
 
 
-def mesh_files(paths: Iterable[str]) -> list[Path]:
-    """The mesh files named or found (recursively) in the directories named, sorted."""
+def mesh_files(paths: Iterable[str], labels: Path | None = None) -> list[Path]:
+    """The mesh files named or found (recursively) in the directories named, sorted; a
+    directory's ``labels`` file (a CSV, as points can be) is not one of them."""
     found: list[Path] = []
+    skipped = None if labels is None else labels.resolve()
     for raw in paths:
         path = Path(raw)
         if path.is_dir():
-            found.extend(p for p in sorted(path.rglob("*")) if p.is_file() and is_mesh(p))
+            found.extend(
+                p
+                for p in sorted(path.rglob("*"))
+                if p.is_file() and is_mesh(p) and p.resolve() != skipped
+            )
         elif path.is_file():
             found.append(path)
         else:
