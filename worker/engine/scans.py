@@ -169,6 +169,16 @@ def _sight_of(points: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
     return sight
 
 
+def view_frame(direction: np.ndarray) -> np.ndarray:
+    """(3, 3) rows: two unit vectors across a view, and its ``direction`` (3,, any length
+    but zero) made a unit vector."""
+    view = direction / np.linalg.norm(direction)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(view[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    across = np.cross(view, helper)
+    across /= np.linalg.norm(across)
+    return np.stack([across, np.cross(view, across), view])
+
+
 def organized_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """An organized cloud's surface: (n, 3) its valid points and (m, 3) the grid's
     unshadowed triangles on them.
@@ -217,18 +227,16 @@ def viewed_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarra
     where = ", ".join(f"{c:g}" for c in viewpoint)
     rays = finite - viewpoint
     length = np.linalg.norm(rays, axis=1)
-    axis = (rays / np.maximum(length, np.finfo(float).tiny)[:, None]).mean(axis=0)
-    axis /= max(float(np.linalg.norm(axis)), np.finfo(float).tiny)
-    depth = rays @ axis
+    mean_ray = (rays / np.maximum(length, np.finfo(float).tiny)[:, None]).mean(axis=0)
+    # Rays that cancel out (|mean| <= 1e-3) have one within 1e-3 of square to it anyway.
+    frame = view_frame(mean_ray) if np.linalg.norm(mean_ray) > 1e-3 else np.zeros((3, 3))
+    depth = rays @ frame[2]
     if depth.min() <= 1e-3 * length.max():
         raise PointCloudError(
             f"The file holds points but no triangles, and they are not one view from the "
             f"sensor at ({where}): some lie beside or behind it. {UPLOAD_A_VIEW}"
         )
-    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    across = np.cross(axis, helper)
-    across /= np.linalg.norm(across)
-    image = rays @ np.stack([across, np.cross(axis, across)]).T / depth[:, None]
+    image = rays @ frame[:2].T / depth[:, None]
     try:
         faces = Delaunay(image).simplices.astype(np.int64)
     except QhullError as exc:

@@ -42,7 +42,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from worker.engine.errors import MeshError
 from worker.engine.geodesic import farthest_point_samples
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
-from worker.engine.scans import grid_faces, organized_surface, viewed_surface
+from worker.engine.scans import grid_faces, organized_surface, view_frame, viewed_surface
 from worker.engine.topology import edge_keys
 
 #: Number of discs the ``holes-*`` variants remove.
@@ -175,15 +175,6 @@ def shrec_holes(mesh: Mesh, rng: np.random.Generator) -> Mesh:
     return similarity(piece, rng)
 
 
-def _view_frame(direction: np.ndarray) -> np.ndarray:
-    """(3, 3) rows: two unit vectors across the view, and the view ``direction`` (3,)."""
-    view = direction / np.linalg.norm(direction)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(view[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    across = np.cross(view, helper)
-    across /= np.linalg.norm(across)
-    return np.stack([across, np.cross(view, across), view])
-
-
 def _box_cells(first: np.ndarray, span: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every integer cell of boxes ``first`` (b, 2) .. ``first + span - 1``: (box, x, y)."""
     count = span[:, 0] * span[:, 1]
@@ -218,7 +209,7 @@ def depth_grid(mesh: Mesh, direction: np.ndarray, pitch: float) -> tuple[np.ndar
         centre, ``nan`` where the ray misses; pixels ``pitch`` apart.
     origin : (2,) the image's corner in the plane across the view.
     """
-    local = mesh.vertices @ _view_frame(direction).T
+    local = mesh.vertices @ view_frame(direction).T
     origin = local[:, :2].min(axis=0)
     corners = (local[:, :2] - origin)[mesh.faces] / pitch  # in pixels
     depth = local[mesh.faces, 2]
@@ -243,7 +234,7 @@ def grid_points(
     ys, xs = np.mgrid[0:height, 0:width]
     plane = origin + (np.stack([xs, ys], axis=-1) + 0.5) * pitch
     local = np.concatenate([plane, image[..., None]], axis=-1)
-    points: np.ndarray = local @ _view_frame(direction)
+    points: np.ndarray = local @ view_frame(direction)
     return points
 
 
@@ -269,7 +260,7 @@ def range_image(mesh: Mesh, rng: np.random.Generator) -> tuple[np.ndarray, np.nd
     :func:`random_resolution` pixels hit, and the direction (3,)."""
     direction = random_direction(rng)
     target = random_resolution(mesh, rng)
-    extent = np.ptp(mesh.vertices @ _view_frame(direction).T, axis=0)
+    extent = np.ptp(mesh.vertices @ view_frame(direction).T, axis=0)
     pitch = float(np.sqrt(extent[0] * extent[1] / target))
     image, origin = depth_grid(mesh, direction, pitch)
     for _ in range(2):  # the silhouette's share of the box decides the pixels hit
@@ -312,7 +303,7 @@ def single_view(mesh: Mesh, direction: np.ndarray) -> Mesh:
     other face in front of their centroid on the ray through it (orthographic rays;
     triangles found through a uniform grid of their projected bounding boxes)."""
     vertices, faces = mesh.vertices, mesh.faces
-    frame = _view_frame(direction)
+    frame = view_frame(direction)
     local = vertices @ frame.T
     plane, depth = local[:, :2], local[:, 2]  # larger depth is nearer the scanner
     corners, corner_depth = plane[faces], depth[faces]
