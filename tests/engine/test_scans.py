@@ -24,6 +24,7 @@ from worker.engine.scans import (
     read_e57,
     read_pcd,
     unshadowed,
+    view_frame,
     viewed_surface,
 )
 from worker.evaluation.samples import pcd_gz_bytes
@@ -297,6 +298,17 @@ def test_a_cloud_without_its_grid_is_triangulated_as_its_grid_is():
     read, read_faces, cloud = read_pcd(pcd((shuffled + moved).reshape(1, -1, 3), viewpoint=moved))
     assert cloud == Cloud(len(grid_vertices)) and len(read_faces) == len(grid_triangles)
     assert triangles(read - moved, read_faces) == triangles(vertices, faces)
+
+
+@pytest.mark.parametrize("direction", [(0, 0, 2), (1, 0, 0), (0.95, 0.3, 0), (-1, 2, -3)])
+def test_a_view_s_frame_is_right_handed_and_looks_along_its_direction(direction):
+    """The image plane's two axes and the view direction: orthonormal rows, the third
+    the direction made a unit vector, the frame right-handed (the viewed surface's
+    winding relies on it), whichever axis the direction lies near."""
+    frame = view_frame(np.array(direction, dtype=float))
+    np.testing.assert_allclose(frame @ frame.T, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(frame[2], np.array(direction) / np.linalg.norm(direction))
+    assert np.linalg.det(frame) == pytest.approx(1.0)
 
 
 def test_points_in_a_text_file_or_a_mesh_file_without_faces_are_read_as_one_view():
