@@ -34,9 +34,10 @@ SERVICE_FIXTURES = {
 #: Fixtures that give a shared data set's directory: a test using one is marked
 #: ``dataset`` with that set's name.
 DATASET_FIXTURES = {"tosca_dir": "tosca"}
-#: The skip reasons given to ``dataset`` tests whose set is absent.
-DATASET_SKIP_REASONS: set[str] = set()
-#: How many tests skipped for each of them, counted as they run (a deselected test is
+#: The shared data sets a ``dataset`` marker names.
+SHARED_SETS = ("tosca", "scape")
+#: How many tests skipped for each absent set's reason, counted as their reports arrive
+#: (in the process that reports, with pytest-xdist its controller; a deselected test is
 #: not counted), for the terminal summary.
 SKIPPED_DATASETS: Counter[str] = Counter()
 
@@ -71,14 +72,13 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         for marker in item.iter_markers("dataset"):
             reason = missing_dataset(marker.args[0])
             if reason is not None:
-                DATASET_SKIP_REASONS.add(reason)
                 item.add_marker(pytest.mark.skip(reason=reason))
 
 
 def pytest_runtest_logreport(report: pytest.TestReport) -> None:
     if report.skipped and report.when == "setup" and isinstance(report.longrepr, tuple):
         reason = report.longrepr[2].removeprefix("Skipped: ")
-        if reason in DATASET_SKIP_REASONS:
+        if reason in {missing_dataset(name) for name in SHARED_SETS}:
             SKIPPED_DATASETS[reason] += 1
 
 
