@@ -32,7 +32,8 @@ if [ ${#missing[@]} -gt 0 ]; then apt_install "${missing[@]}"; fi
 .venv/bin/python -m ruff format --check .
 .venv/bin/python -m mypy
 # The test files are spread over the machine's cores (pytest-xdist; a file stays on one
-# worker, so its fixtures start once), each worker's BLAS on one thread so that the
-# workers do not crowd each other. `-n 0` after it runs them in this one process.
+# worker, so its module fixtures start once and a session's service once per worker),
+# each worker's BLAS on one thread so that the workers do not crowd each other. `-n 0`
+# after it runs them in this one process.
 export OMP_NUM_THREADS="${OMP_NUM_THREADS:-1}" OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
 exec .venv/bin/python -m pytest -n auto --dist loadfile "$@"
