@@ -18,11 +18,9 @@ from worker.engine.compare import (
     paired_preset_dissimilarity,
     paired_size_dissimilarity,
     preset_dissimilarity,
-    product_fusion,
     query_weights,
     reweighted_euclidean,
     size_dissimilarity,
-    sum_fusion,
 )
 from worker.engine.presets import (
     DEFAULT_PRESET,
@@ -80,12 +78,16 @@ def test_constant_element_gets_unit_sigma():
 
 def test_fusion_rules():
     d = {"gdm": np.array([[1.0, 2.0]]), "ddt": np.array([[3.0, 0.5]])}
-    np.testing.assert_allclose(sum_fusion(d), [[4.0, 2.5]])
-    np.testing.assert_allclose(product_fusion(d), [[3.0, 1.0]])
+    np.testing.assert_allclose(fuse(d, "sum"), [[4.0, 2.5]])
+    np.testing.assert_allclose(fuse(d, "product"), [[3.0, 1.0]])
     np.testing.assert_allclose(fuse(d, "sum", {"ddt": 2.0}), [[7.0, 3.0]])
     np.testing.assert_allclose(fuse(d, "product", {"gdm": 2.0}), [[3.0, 2.0]])
     with pytest.raises(ValueError, match="fusion rule"):
         fuse(d, "max")
+    with pytest.raises(ValueError, match="fusion rule"):
+        fuse({}, "max")
+    with pytest.raises(ValueError, match="at least one"):
+        fuse({}, "sum")
 
 
 @pytest.mark.parametrize("kind", ["D1", "D2", REWEIGHTED])

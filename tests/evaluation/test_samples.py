@@ -33,7 +33,12 @@ from worker.evaluation.samples import (
     posed_bones,
     sample_name,
 )
-from worker.recognition.metrics import nearest_neighbor_rate
+from worker.recognition.metrics import (
+    LabelledSet,
+    equal_error_rate,
+    nearest_neighbor_rate,
+    retrieval_scores,
+)
 
 SAMPLES = [f"{name}-{pose}" for name in SAMPLE_CLASSES for pose in range(N_POSES)]
 #: How far a regenerated sample may lie from the committed one, as a fraction of its
@@ -169,7 +174,7 @@ def test_shapes_samples_regenerates_the_committed_geometry(regenerated, name):
 @pytest.fixture(scope="module")
 def default_scores(tmp_path_factory):
     """The default preset's score (its fused dissimilarity, as the service ranks with
-    it) between all examples, and their labels and names."""
+    it) between all examples, their labels and names, and each modality's dissimilarity."""
     preset = get_preset(DEFAULT_PRESET)
     meshes = read_labels(EXAMPLES / "labels.csv", EXAMPLES)
     computed = compute_descriptors(
@@ -183,14 +188,14 @@ def default_scores(tmp_path_factory):
     }
     scores = fuse(per, preset.fusion, {m: preset.weight(m) for m in per})
     names = [m.name.removesuffix(".off.gz") for m in meshes]
-    return scores, np.array([m.label for m in meshes]), names
+    return scores, np.array([m.label for m in meshes]), names, per
 
 
 @pytest.mark.slow  # describes the 20 examples
 def test_the_default_preset_tells_the_classes_apart(default_scores):
     """Every pair of one figure is nearer than any pair of two (measured at v9: at most
     0.0073 against at least 0.026, a quadruped and a hand): NN 100%, EER 0."""
-    scores, labels, _ = default_scores
+    scores, labels, _, _ = default_scores
     assert nearest_neighbor_rate(scores, labels) == 1.0
     same = labels[:, None] == labels[None, :]
     genuine = scores[same & ~np.eye(len(labels), dtype=bool)]
@@ -198,8 +203,25 @@ def test_the_default_preset_tells_the_classes_apart(default_scores):
 
 
 @pytest.mark.slow
+def test_a_labelled_sets_figures_are_the_metrics_own_on_every_modality(default_scores):
+    """:class:`LabelledSet` (what a fusion's weights are chosen with) against the plain
+    metrics on real descriptors: each modality's dissimilarity and a product of them,
+    labelled by figure (which each tells apart) and by pose (which none does)."""
+    scores, labels, names, per = default_scores
+    by_pose = np.array([name.rsplit("-", 1)[1] for name in names])
+    matrices = [scores, *per.values(), fuse(per, "product", dict.fromkeys(per, 0.5))]
+    for classes in (labels, by_pose):
+        labelled = LabelledSet(classes)
+        for d in matrices:
+            retrieval = retrieval_scores(d, classes)
+            expected = (equal_error_rate(d, classes), retrieval["nn"], retrieval["map"])
+            assert labelled.figures(d) == expected
+    assert LabelledSet(by_pose).figures(scores)[0] > 0.1
+
+
+@pytest.mark.slow
 def test_pose_3_of_every_figure_finds_its_own_class_among_poses_0_to_2(default_scores):
-    scores, labels, names = default_scores
+    scores, labels, names, _ = default_scores
     gallery = np.array([not name.endswith("-3") for name in names])
     for name in SAMPLE_CLASSES:
         query = names.index(sample_name(name, 3).removesuffix(".off.gz"))

@@ -424,3 +424,32 @@ def test_query_mean_average_precision_against_a_separate_gallery():
     assert m.query_mean_average_precision(d, ["a", "b"], gallery) == pytest.approx(2 / 3)
     with pytest.raises(ValueError, match="no object of its class"):
         m.query_mean_average_precision(d, ["a", "c"], gallery)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_a_labelled_set_scores_each_matrix_as_the_functions_do(seed):
+    """:class:`LabelledSet`'s figures equal the functions' bit for bit, on random
+    asymmetric matrices whose values tie often (a few levels) or never, and whose
+    diagonal holds anything."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(6, 40))
+    labels = rng.permutation(np.arange(n) % int(rng.integers(2, n // 2 + 1)))
+    labelled = m.LabelledSet(labels)
+    for levels in (3, 10, None):
+        d = rng.random((n, n)) if levels is None else rng.integers(0, levels, (n, n)) / levels
+        np.fill_diagonal(d, rng.choice([np.nan, -1.0, 0.0]))
+        retrieval = m.retrieval_scores(d, labels)
+        expected = (m.equal_error_rate(d, labels), retrieval["nn"], retrieval["map"])
+        assert labelled.figures(d) == expected
+
+
+def test_a_labelled_set_refuses_what_the_functions_refuse():
+    with pytest.raises(ValueError, match="singleton classes"):
+        m.LabelledSet(["a", "a", "b"])
+    with pytest.raises(ValueError, match="at least two classes"):
+        m.LabelledSet(["a", "a"])
+    labelled = m.LabelledSet(["a", "a", "b", "b"])
+    with pytest.raises(ValueError, match="infinite"):
+        labelled.figures(symmetric(4, {(i, j): np.inf for i in range(4) for j in range(i + 1, 4)}))
+    with pytest.raises(ValueError, match=r"\(4, 4\)"):
+        labelled.figures(np.zeros((3, 3)))

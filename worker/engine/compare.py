@@ -9,8 +9,7 @@ the size (:data:`~worker.engine.presets.SIZE`, compared by eq. 8).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import cast
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 
@@ -270,26 +269,31 @@ def paired_preset_dissimilarity(
     return paired_dissimilarity(first, second, preset.comparison(modality), sigma)
 
 
-def sum_fusion(
-    dissimilarities: Mapping[str, np.ndarray], weights: Mapping[str, float] | None = None
-) -> np.ndarray:
-    """Sum rule: ``sum_m w_m D_m`` (weights default to 1)."""
-    weights = weights or {}
-    # sum() starts from 0, which the first array absorbs: the result is an array.
-    return cast(np.ndarray, sum(weights.get(name, 1.0) * d for name, d in dissimilarities.items()))
+#: The fusion rules, ``sum_m w_m D_m`` and ``prod_m D_m ** w_m``.
+RULES = ("sum", "product")
 
 
-def product_fusion(
-    dissimilarities: Mapping[str, np.ndarray], weights: Mapping[str, float] | None = None
-) -> np.ndarray:
-    """Product rule: ``prod_m D_m ** w_m`` (weights default to 1)."""
-    weights = weights or {}
+def _checked_rule(rule: str) -> str:
+    if rule not in RULES:
+        raise ValueError(f"unknown fusion rule {rule!r}; use 'sum' or 'product'")
+    return rule
+
+
+def fusion_term(d: np.ndarray, rule: str, weight: float = 1.0) -> np.ndarray:
+    """One modality's term of the ``"sum"`` rule, ``w D``, or of the ``"product"`` rule,
+    ``D ** w``."""
+    return weight * d if _checked_rule(rule) == "sum" else np.power(d, weight)
+
+
+def combine_terms(terms: Iterable[np.ndarray], rule: str) -> np.ndarray:
+    """The rule's sum or product of :func:`fusion_term`'s terms, in their order (a caller
+    that fuses many weightings of the same matrices computes each term once)."""
+    adding = _checked_rule(rule) == "sum"
     out: np.ndarray | None = None
-    for name, d in dissimilarities.items():
-        term = np.power(d, weights.get(name, 1.0))
-        out = term if out is None else out * term
+    for term in terms:
+        out = term if out is None else out + term if adding else out * term
     if out is None:
-        raise ValueError("the product rule needs at least one dissimilarity")
+        raise ValueError(f"the {rule} rule needs at least one dissimilarity")
     return out
 
 
@@ -298,12 +302,12 @@ def fuse(
     rule: str,
     weights: Mapping[str, float] | None = None,
 ) -> np.ndarray:
-    """Apply the ``"sum"`` or ``"product"`` rule."""
-    if rule == "sum":
-        return sum_fusion(dissimilarities, weights)
-    if rule == "product":
-        return product_fusion(dissimilarities, weights)
-    raise ValueError(f"unknown fusion rule {rule!r}; use 'sum' or 'product'")
+    """Apply the ``"sum"`` or ``"product"`` rule (weights default to 1)."""
+    weights = weights or {}
+    return combine_terms(
+        (fusion_term(d, rule, weights.get(name, 1.0)) for name, d in dissimilarities.items()),
+        rule,
+    )
 
 
 def fused_dissimilarity(

@@ -39,7 +39,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from worker.engine.compare import dissimilarity, fuse, gallery_sigma, preset_dissimilarity
+from worker.engine.compare import (
+    combine_terms,
+    dissimilarity,
+    fuse,
+    fusion_term,
+    gallery_sigma,
+    preset_dissimilarity,
+)
 from worker.engine.presets import COMPARISONS, SIZE, Preset
 
 from . import metrics
@@ -296,19 +303,23 @@ def fusion_scores(
     -------
     FusionScores
     """
+    if held_out is None:
+        return _scores(metrics.LabelledSet(labels), dissimilarity)
     d = np.asarray(dissimilarity, dtype=np.float64)
     labels = np.asarray(labels)
-    if held_out is None:
-        retrieval = metrics.retrieval_scores(d, labels)
-        eer = metrics.equal_error_rate(d, labels)
-    else:
-        queries = np.asarray(held_out, dtype=np.int64)
-        i, j = np.triu_indices(len(d), 1)
-        tested = np.isin(i, queries) | np.isin(j, queries)
-        same = labels[i] == labels[j]
-        eer = metrics.pair_equal_error_rate(d[i, j][tested & same], d[i, j][tested & ~same])
-        retrieval = metrics.retrieval_scores(d, labels, queries=queries)
+    queries = np.asarray(held_out, dtype=np.int64)
+    i, j = np.triu_indices(len(d), 1)
+    tested = np.isin(i, queries) | np.isin(j, queries)
+    same = labels[i] == labels[j]
+    eer = metrics.pair_equal_error_rate(d[i, j][tested & same], d[i, j][tested & ~same])
+    retrieval = metrics.retrieval_scores(d, labels, queries=queries)
     return FusionScores(eer=eer, nn=retrieval["nn"], map=retrieval["map"])
+
+
+def _scores(labelled: metrics.LabelledSet, dissimilarity: ArrayLike) -> FusionScores:
+    """:func:`fusion_scores` over every pair and object of ``labelled``'s set."""
+    eer, nn, average_precision = labelled.figures(dissimilarity)
+    return FusionScores(eer=eer, nn=nn, map=average_precision)
 
 
 Candidates = Mapping[str, Mapping[str, NDArray[np.float64]]]
@@ -337,14 +348,21 @@ def choose_fusion(
     names = list(candidates)
     if not names:
         raise ValueError("no dissimilarity to weigh")
+    # The labels' work and each modality's weighted terms, once for every weighting.
+    labelled = metrics.LabelledSet(labels)
+    terms = {
+        m: {c: {w: fusion_term(d, rule, w) for w in {*grid, 1.0}} for c, d in by.items()}
+        for m, by in candidates.items()
+    }
     best: tuple[float, dict[str, float], dict[str, str]] | None = None
     for chosen in itertools.product(*(list(candidates[m]) for m in names)):
-        mats = {m: candidates[m][c] for m, c in zip(names, chosen, strict=True)}
+        comparisons = dict(zip(names, chosen, strict=True))
         for w in itertools.product(grid, repeat=len(names) - 1):
             weights = dict(zip(names, (*w, 1.0), strict=True))
-            loss = fusion_scores(fuse(mats, rule, weights), labels).loss
+            fused = combine_terms((terms[m][comparisons[m]][weights[m]] for m in names), rule)
+            loss = _scores(labelled, fused).loss
             if best is None or loss < best[0]:
-                best = (loss, weights, dict(zip(names, chosen, strict=True)))
+                best = (loss, weights, comparisons)
     assert best is not None
     return best[1], best[2], best[0]
 
@@ -498,8 +516,9 @@ def tune_fusion(
             )
     weights, comparisons, loss = choose_fusion(candidates, labels, rule, grid)
     chosen = {m: candidates[m][comparisons[m]] for m in mats}
+    labelled = metrics.LabelledSet(labels)
     sensitivity = {
-        m: tuple(fusion_scores(fuse(chosen, rule, {**weights, m: w}), labels).loss for w in grid)
+        m: tuple(_scores(labelled, fuse(chosen, rule, {**weights, m: w})).loss for w in grid)
         for m in list(mats)[:-1]
     }
     return FusionTuning(

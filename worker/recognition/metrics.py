@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "LabelledSet",
     "cmc_curve",
     "discounted_cumulative_gain",
     "e_measure",
@@ -694,3 +695,61 @@ def retrieval_scores(
         "dcg": _dcg(relevant),
         "map": _mean_average_precision(relevant),
     }
+
+
+class LabelledSet:
+    """The EER, NN and mAP of many all-to-all dissimilarities of one labelled set, as
+    :func:`equal_error_rate` and :func:`retrieval_scores` give them, bit for bit (tested),
+    with what only the labels decide worked out once: a fusion's weights are chosen by
+    scoring hundreds of matrices of the same objects (:mod:`worker.recognition.fusion`).
+
+    Each matrix's pairs are ranked by one sort, the ROC read at the end of each run of
+    equal values (what :func:`pair_roc`'s thresholds count); each query's row by one
+    stable sort with its own entry first (``-inf``), the others in the order of
+    :func:`_ranked_relevance`: by dissimilarity, ties by index.
+
+    Parameters
+    ----------
+    labels : (n,) array_like, every class with at least two objects, at least two classes.
+    """
+
+    def __init__(self, labels: ArrayLike) -> None:
+        labels = np.asarray(labels)
+        # A matrix of zeros validates the labels as every function does.
+        _, self._codes = _validate(np.zeros((len(labels), len(labels))), labels)
+        sizes = np.bincount(self._codes)
+        if np.any(sizes < 2):
+            singletons = np.unique(labels[sizes[self._codes] < 2])
+            raise ValueError(
+                "retrieval metrics need every class to have at least two objects; "
+                f"singleton classes: {singletons.tolist()}"
+            )
+        self._pairs = np.triu_indices(len(labels), k=1)
+        self._genuine = self._codes[self._pairs[0]] == self._codes[self._pairs[1]]
+        self._genuines = int(self._genuine.sum())
+        self._impostors = len(self._genuine) - self._genuines
+        self._off_diagonal = ~np.eye(len(labels), dtype=bool)
+
+    def figures(self, dissimilarity: ArrayLike) -> tuple[float, float, float]:
+        """``dissimilarity`` (n, n)'s :func:`equal_error_rate` and :func:`retrieval_scores`'
+        ``nn`` and ``map`` with these labels."""
+        d = np.asarray(dissimilarity, dtype=np.float64)
+        n = len(self._codes)
+        if d.shape != (n, n):
+            raise ValueError(f"{n} labels need an ({n}, {n}) dissimilarity, got {d.shape}")
+        if not np.all(np.isfinite(d[self._off_diagonal])):
+            raise ValueError("dissimilarity has NaN or infinite off-diagonal entries")
+        values = d[self._pairs]
+        order = np.argsort(values)
+        ranked = values[order]
+        accepted_genuines = np.cumsum(self._genuine[order])
+        accepted_impostors = np.arange(1, len(values) + 1) - accepted_genuines
+        # The last pair of each run of equal values: every pair <= it is accepted.
+        ends = np.append(np.flatnonzero(ranked[1:] != ranked[:-1]), len(values) - 1)
+        far = np.concatenate(([0.0], accepted_impostors[ends] / self._impostors))
+        frr = np.concatenate(([1.0], 1.0 - accepted_genuines[ends] / self._genuines))
+        rows = d.copy()
+        np.fill_diagonal(rows, -np.inf)  # each query's own entry first, then the others
+        retrieved = np.argsort(rows, axis=1, kind="stable")[:, 1:]
+        relevant: NDArray[np.bool_] = self._codes[retrieved] == self._codes[:, None]
+        return _crossing(far, frr), _nearest_neighbor(relevant), _mean_average_precision(relevant)
