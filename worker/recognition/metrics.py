@@ -89,9 +89,7 @@ def _validate(
         If the matrix is not square, has non-finite off-diagonal entries, the label
         count does not match, or fewer than two classes are present.
     """
-    d = np.asarray(dissimilarity, dtype=np.float64)
-    if d.ndim != 2 or d.shape[0] != d.shape[1]:
-        raise ValueError(f"dissimilarity must be a square (n, n) matrix, got shape {d.shape}")
+    d = _square(dissimilarity)
     n = d.shape[0]
     lab = np.asarray(labels)
     if lab.ndim != 1:
@@ -100,13 +98,34 @@ def _validate(
         raise ValueError(
             f"labels has {lab.shape[0]} entries but dissimilarity is {n} x {n}; they must match"
         )
-    off_diagonal = ~np.eye(n, dtype=bool)
-    if not np.all(np.isfinite(d[off_diagonal])):
-        raise ValueError("dissimilarity has NaN or infinite off-diagonal entries")
+    _check_finite(d, ~np.eye(n, dtype=bool))
     classes, codes = np.unique(lab, return_inverse=True)
     if classes.size < 2:
         raise ValueError(f"at least two classes are required, got {classes.size}")
     return d, codes.reshape(-1)
+
+
+def _square(dissimilarity: ArrayLike) -> NDArray[np.float64]:
+    d = np.asarray(dissimilarity, dtype=np.float64)
+    if d.ndim != 2 or d.shape[0] != d.shape[1]:
+        raise ValueError(f"dissimilarity must be a square (n, n) matrix, got shape {d.shape}")
+    return d
+
+
+def _check_finite(d: NDArray[np.float64], off_diagonal: NDArray[np.bool_]) -> None:
+    if not np.all(np.isfinite(d[off_diagonal])):
+        raise ValueError("dissimilarity has NaN or infinite off-diagonal entries")
+
+
+def _check_no_singleton(codes: NDArray[np.int64], labels: ArrayLike) -> None:
+    """Retrieval needs every class to hold two objects (one to query, one to find)."""
+    class_sizes = np.bincount(codes)
+    if np.any(class_sizes < 2):
+        singletons = np.unique(np.asarray(labels)[class_sizes[codes] < 2])
+        raise ValueError(
+            "retrieval metrics need every class to have at least two objects; "
+            f"singleton classes: {singletons.tolist()}"
+        )
 
 
 # --------------------------------------------------------------------------- verification
@@ -421,13 +440,7 @@ def _ranked_relevance(dissimilarity: ArrayLike, labels: ArrayLike) -> NDArray[np
     """
     d, codes = _validate(dissimilarity, labels)
     n = d.shape[0]
-    class_sizes = np.bincount(codes)
-    if np.any(class_sizes < 2):
-        singletons = np.unique(np.asarray(labels)[class_sizes[codes] < 2])
-        raise ValueError(
-            "retrieval metrics need every class to have at least two objects; "
-            f"singleton classes: {singletons.tolist()}"
-        )
+    _check_no_singleton(codes, labels)
     rows = np.arange(n)[:, None]
     cols = np.arange(n - 1)[None, :]
     others = cols + (cols >= rows)  # (n, n-1): row i lists j != i in increasing order
@@ -717,13 +730,7 @@ class LabelledSet:
         labels = np.asarray(labels)
         # A matrix of zeros validates the labels as every function does.
         _, self._codes = _validate(np.zeros((len(labels), len(labels))), labels)
-        sizes = np.bincount(self._codes)
-        if np.any(sizes < 2):
-            singletons = np.unique(labels[sizes[self._codes] < 2])
-            raise ValueError(
-                "retrieval metrics need every class to have at least two objects; "
-                f"singleton classes: {singletons.tolist()}"
-            )
+        _check_no_singleton(self._codes, labels)
         self._pairs = np.triu_indices(len(labels), k=1)
         self._genuine = self._codes[self._pairs[0]] == self._codes[self._pairs[1]]
         self._genuines = int(self._genuine.sum())
@@ -733,12 +740,11 @@ class LabelledSet:
     def figures(self, dissimilarity: ArrayLike) -> tuple[float, float, float]:
         """``dissimilarity`` (n, n)'s :func:`equal_error_rate` and :func:`retrieval_scores`'
         ``nn`` and ``map`` with these labels."""
-        d = np.asarray(dissimilarity, dtype=np.float64)
+        d = _square(dissimilarity)
         n = len(self._codes)
-        if d.shape != (n, n):
+        if d.shape[0] != n:
             raise ValueError(f"{n} labels need an ({n}, {n}) dissimilarity, got {d.shape}")
-        if not np.all(np.isfinite(d[self._off_diagonal])):
-            raise ValueError("dissimilarity has NaN or infinite off-diagonal entries")
+        _check_finite(d, self._off_diagonal)
         values = d[self._pairs]
         order = np.argsort(values)
         ranked = values[order]
