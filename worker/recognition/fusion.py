@@ -516,9 +516,8 @@ def tune_fusion(
             )
     weights, comparisons, loss = choose_fusion(candidates, labels, rule, grid)
     chosen = {m: candidates[m][comparisons[m]] for m in mats}
-    labelled = metrics.LabelledSet(labels)
     sensitivity = {
-        m: tuple(_scores(labelled, fuse(chosen, rule, {**weights, m: w})).loss for w in grid)
+        m: tuple(fusion_scores(fuse(chosen, rule, {**weights, m: w}), labels).loss for w in grid)
         for m in list(mats)[:-1]
     }
     return FusionTuning(
