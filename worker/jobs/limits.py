@@ -24,11 +24,8 @@ from multiprocessing.context import ForkServerContext
 from pathlib import Path
 
 from worker.engine.errors import MeshError
-from worker.engine.pipeline import load_and_describe
-from worker.engine.presets import get_preset
 
 from .previews import IMPORTS as PREVIEW_IMPORTS
-from .previews import preview_glb, preview_mesh, thumbnail_png
 
 log = logging.getLogger("shapes.worker")
 
@@ -75,6 +72,14 @@ def _child(
     memory: int,
     with_thumbnail: bool,
 ) -> None:
+    # The engine is imported here, in the job, where the fork server has preloaded it
+    # (:func:`_context`): the consumer and the service import this module and never
+    # describe (0.7 to 1 s of imports at each start).
+    from worker.engine.pipeline import load_and_describe
+    from worker.engine.presets import get_preset
+
+    from .previews import preview_glb, preview_mesh, thumbnail_png
+
     if memory > 0:
         resource.setrlimit(resource.RLIMIT_AS, (memory, memory))
     try:

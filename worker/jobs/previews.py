@@ -21,10 +21,12 @@ Both are drawn from the mesh :func:`preview_mesh` makes (decimated and turned on
 from __future__ import annotations
 
 import io
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from worker.engine.mesh_io import Mesh, canonical_frame
+if TYPE_CHECKING:  # imported where it is used: the service loads this module too
+    from worker.engine.mesh_io import Mesh
 
 #: What the functions below import on first use (kept out of this module's own import,
 #: which the service loads too): a process that makes previews for many jobs, such as
@@ -51,6 +53,8 @@ LIGHT = np.array([-0.4, 0.5, 0.77])
 def preview_mesh(mesh: Mesh, max_faces: int = PREVIEW_FACES) -> Mesh:
     """The mesh with at most ``max_faces`` triangles, in its canonical frame (turned,
     not mirrored), centred, within the unit sphere."""
+    from worker.engine.mesh_io import Mesh
+
     vertices, faces = mesh.vertices, mesh.faces
     if len(faces) > max_faces:
         import fast_simplification
@@ -68,6 +72,8 @@ def _turned(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """``vertices`` in the canonical frame of :func:`canonical_frame`, whose axes' signs
     may make a mirror image (the descriptors do not mind; a person would): then the
     least axis is flipped, making it a rotation."""
+    from worker.engine.mesh_io import Mesh, canonical_frame
+
     turned = canonical_frame(Mesh(vertices=vertices, faces=faces)).vertices
     # The frame is affine: the linear part, fitted from the vertices, says if it mirrors.
     before, after = vertices - vertices.mean(axis=0), turned - turned.mean(axis=0)
