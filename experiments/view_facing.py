@@ -4,7 +4,7 @@
 
 A query is one view of its object when the largest share of its area facing one
 direction (:func:`worker.engine.holes.facing_share`) is at least
-:data:`~worker.engine.holes.ONE_VIEW_FACING`. For every TOSCA and SCAPE file (every
+:data:`~worker.engine.descriptor.ONE_VIEW_FACING`. For every TOSCA and SCAPE file (every
 ``--every``-th), the file itself and each partial copy the partiality protocol makes of it
 (:func:`worker.evaluation.variants.make_variant`, seeded as there): per variant, the
 copies made, the smallest, median and largest share, and how many are called one view.
@@ -19,8 +19,9 @@ import argparse
 import numpy as np
 
 from benchmarks.common import TOSCA
+from worker.engine.descriptor import ONE_VIEW_FACING
 from worker.engine.errors import MeshError
-from worker.engine.holes import ONE_VIEW_FACING, facing_share
+from worker.engine.holes import facing_share
 from worker.engine.mesh_io import load_mesh
 from worker.engine.pipeline import without_grid_shortcuts
 from worker.evaluation.datasets import shared_dataset

@@ -8,9 +8,9 @@ import pytest
 import trimesh
 
 from tests.conftest import example
+from worker.engine.descriptor import ONE_VIEW_FACING
 from worker.engine.geodesic import farthest_point_samples
 from worker.engine.holes import (
-    ONE_VIEW_FACING,
     close_small_holes,
     facing_share,
     fibonacci_directions,

@@ -116,10 +116,6 @@ FACING_DIRECTIONS = 600
 FACING_STARTS = 8
 FACING_MOVES = 2
 FACING_FINEST = 0.002
-#: A surface facing one way this much is one view of its object (a height field over the
-#: view: the faces a camera sees), not a cut or a holed copy of a whole (at most 0.89 of
-#: the partiality protocol's cut-30 copies of TOSCA and SCAPE, its single views at least 0.998).
-ONE_VIEW_FACING = 0.95
 
 
 def facing_share(mesh: Mesh) -> float:
@@ -245,12 +241,13 @@ def two_sided(mesh: Mesh) -> Mesh:
     """``mesh`` glued along its open boundary to a copy of itself wound the other way: a
     closed surface, its unseen side taken as the image of the side it has.
 
-    What a single view (:data:`ONE_VIEW_FACING`) misses is mostly the side facing away
-    from the camera, and a body's far side is close to the near one's mirror image (a limb
-    seen from one side is half of its round section, a head's far half its near half's):
-    intrinsically, a hemisphere glued to its copy along the equator is the round sphere,
-    the near half of a cylinder so glued the whole cylinder. Every operator here is
-    intrinsic, so the two coincident sheets are told apart by their connectivity alone.
+    What a single view (:data:`~worker.engine.descriptor.ONE_VIEW_FACING`) misses is
+    mostly the side facing away from the camera, and a body's far side is close to the
+    near one's mirror image (a limb seen from one side is half of its round section, a
+    head's far half its near half's): intrinsically, a hemisphere glued to its copy along
+    the equator is the round sphere, the near half of a cylinder so glued the whole
+    cylinder. Every operator here is intrinsic, so the two coincident sheets are told
+    apart by their connectivity alone.
 
     Returns
     -------

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .descriptor import ShapeDescriptor
+from .descriptor import ONE_VIEW_FACING, ShapeDescriptor
 from .diffusion import (
     LaplaceBeltrami,
     averaged_mass_eigenpairs,
@@ -19,7 +19,6 @@ from .diffusion import (
 from .formats import DEFAULT_MAX_FACES
 from .geodesic import farthest_point_samples, geodesic_distance_matrix, sample_distances
 from .holes import (
-    ONE_VIEW_FACING,
     boundary_loops,
     close_small_holes,
     facing_share,

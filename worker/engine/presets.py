@@ -84,7 +84,7 @@ class Preset:
         :func:`worker.engine.holes.close_small_holes`). None: describe the surface
         with its holes, as the paper does.
     two_sided_views : a surface facing one way (a single view of its object,
-        :data:`worker.engine.holes.ONE_VIEW_FACING`) is resampled to half of
+        :data:`worker.engine.descriptor.ONE_VIEW_FACING`) is resampled to half of
         ``n_vertices`` and glued to its own image along its boundary
         (:func:`worker.engine.holes.two_sided`) before it is described, its unseen side
         taken as the mirror of the side it shows; False: described as it is.
