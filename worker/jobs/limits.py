@@ -24,6 +24,7 @@ from multiprocessing.context import ForkServerContext
 from pathlib import Path
 
 from worker.engine.errors import MeshError
+from worker.engine.presets import get_preset
 
 from .previews import IMPORTS as PREVIEW_IMPORTS
 
@@ -76,7 +77,6 @@ def _child(
     # (:func:`_context`): the consumer and the service import this module and never
     # describe (0.7 to 1 s of imports at each start).
     from worker.engine.pipeline import load_and_describe
-    from worker.engine.presets import get_preset
 
     from .previews import preview_glb, preview_mesh, thumbnail_png
 
