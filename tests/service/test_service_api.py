@@ -220,6 +220,10 @@ def test_bytes_already_described_answer_without_a_worker(service: Service, galle
     first = service.query("hand-2", k=1).json()
     again = service.query("hand-2", k=1).json()
     assert (first["descriptor_source"], again["descriptor_source"]) == ("computed", "recent")
+    # The same ranking and scores. Not the closeness: its yardstick is refitted in the
+    # background, and a fit may land between the two queries.
+    for match in first["matches"] + again["matches"]:
+        match.pop("closeness")
     assert again["matches"] == first["matches"]
     assert again["timings"]["describe_wall"] < 0.1 < first["timings"]["describe_wall"]
 
