@@ -457,8 +457,10 @@ async function follow(meshId, cell) {
 
 // --------------------------------------------------------------------------- gallery
 let galleryOffset = 0;
+let galleryRequest = 0; // only the newest request's answer is shown
 
 async function loadGallery() {
+  const request = ++galleryRequest;
   const params = new URLSearchParams({
     offset: galleryOffset, limit: PAGE, sort: $("gallery-sort").value,
   });
@@ -466,6 +468,7 @@ async function loadGallery() {
   if ($("gallery-status").value) params.set("status", $("gallery-status").value);
   try {
     const page = await api(`${base()}/meshes?${params}`);
+    if (request !== galleryRequest) return; // a later sort, filter or page asked since
     const grid = $("gallery-grid");
     grid.replaceChildren(...page.items.map(galleryCard));
     if (!page.items.length) grid.replaceChildren(placeholder("Nothing enrolled matches."));
@@ -474,7 +477,7 @@ async function loadGallery() {
     $("gallery-prev").disabled = page.offset === 0;
     $("gallery-next").disabled = last >= page.total;
   } catch (err) {
-    showError(err);
+    if (request === galleryRequest) showError(err);
   }
 }
 

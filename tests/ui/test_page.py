@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import gzip
 import os
+import re
 import shutil
 import time
 from collections.abc import Iterator
@@ -389,9 +390,15 @@ def test_the_gallery_sorts_and_says_which_meshes_failed(page, site):
     broken = b"OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 1 9\n"
     failed = site.client.post("/meshes", files={"file": ("broken-one.off", broken)}).json()
     assert site.wait_mesh(failed["id"])["status"] == "failed"
+    # The tab's own listing (newest first) is held back until the listing by name has
+    # been drawn: a late, older answer must not replace the newer one.
+    held: list = []
+    page.route(
+        re.compile(r"/meshes\?"), lambda route: route.continue_() if held else held.append(route)
+    )
     page.click("#tab-gallery")
-    page.fill("#gallery-label", "")
-    page.select_option("#gallery-status", "")
+    while not held:
+        page.wait_for_timeout(20)
     page.select_option("#gallery-sort", "name")
     sorted_by_name = """() => {
       const titles = [...document.querySelectorAll('#gallery-grid .card .title')]
@@ -399,6 +406,12 @@ def test_the_gallery_sorts_and_says_which_meshes_failed(page, site):
       return titles.length > 1 && titles.every((t, i) => i === 0 || titles[i - 1] <= t);
     }"""
     page.wait_for_function(sorted_by_name)  # the service sorts; this checks it did
+    assert "sort=newest" in held[0].request.url
+    with page.expect_response(lambda r: r.request == held[0].request):
+        held[0].continue_()
+    page.evaluate("() => new Promise((done) => setTimeout(done, 200))")  # its answer is read
+    assert page.evaluate(sorted_by_name)
+    page.unroute(re.compile(r"/meshes\?"))
     card = page.locator(f'#gallery-grid .card[data-mesh-id="{failed["id"]}"]')
     assert "failed: " in card.inner_text() and "not described yet" not in card.inner_text()
     page.select_option("#gallery-sort", "newest")
