@@ -118,6 +118,11 @@ WORD_MAX_CANDIDATES = 8192
 #: gallery holds, the more of them crowd the top votes at a wrong scale).
 WORD_MIN_PROBE = 64
 WORD_MAX_PROBE = 256
+#: Each scale's best shapes of its probe that are then compared at every scale: a step's
+#: best shape scores near the best at the steps beside it, where a million shapes' votes
+#: can rank it too low to be probed (docs/decisions.md, "A step's leaders compared at
+#: every step").
+PROBE_LEADERS = 4
 #: Query scales on either side of the coarse pass's that the shortlist tries (with the
 #: preset's four scales to a step of the grid, three quarters of a step: at 100,000 shapes
 #: the whole step agrees with the exhaustive ranking no more often, half of it less
@@ -573,31 +578,42 @@ class GalleryIndex:
 
         The samples vote at each step of the grid apart (``profiles``, ``reach``: the
         coarse pass's samples); each scale's best ``count / 8`` (``WORD_MIN_PROBE`` to
-        ``WORD_MAX_PROBE``) are compared coarsely at it, and the scale of the best match
-        is the query's, as the exhaustive pass chooses it over every shape (it can only
-        be missed when no shape near that best is among the probe). Its candidates are
-        that scale's ``count`` best by votes.
+        ``WORD_MAX_PROBE``) are compared coarsely at it, the ``PROBE_LEADERS`` best of
+        each at every step as well, and the scale of the best match is the query's, as
+        the exhaustive pass chooses it over every shape (it can only be missed when no
+        shape near that best is among the probes). Its candidates are that scale's
+        ``count`` best by votes.
         """
         assert self.words is not None
         words, present = self.words, self.store.contains
         depth = min(max(WORD_MIN_PROBE, count // 8), WORD_MAX_PROBE)
-        best, chosen = np.inf, 0
-        chosen_votes: tuple[np.ndarray, np.ndarray] | None = None  # the chosen scale's only
-        for j in range(0, scale_count(self.preset), self.preset.parts_scale_steps):
+        steps = range(0, scale_count(self.preset), self.preset.parts_scale_steps)
+        lowest, leaders = np.full(len(steps), np.inf), []
+        kept: tuple[int, tuple[np.ndarray, np.ndarray]] = (-1, (np.zeros(0), np.zeros(0)))
+        for row, j in enumerate(steps):
             voted = words.voted(*samples_at_scale(profiles, reach, j, self.preset))
-            probe = words.best(*voted, present, depth + len(excluded))
-            probe = self._without(probe, excluded)
+            probe = self._without(words.best(*voted, present, depth + len(excluded)), excluded)
             if len(probe):
                 gallery = self.store.coarse[self.store.positions(probe)]
-                low = self._parts_scores(
+                scores = self._parts_scores(
                     profiles, reach, gallery, range(j, j + 1), rough=True
-                ).dissimilarity.min()
-                if low < best:
-                    best, chosen, chosen_votes = low, j, voted
-        if chosen_votes is None:  # no sample has enough radii clear of the boundary
+                ).dissimilarity
+                if scores.min() < lowest.min():  # the probes' best so far: its votes kept
+                    kept = (j, voted)
+                lowest[row] = scores.min()
+                leaders.append(probe[np.argsort(scores, kind="stable")[:PROBE_LEADERS]])
+        probed = np.flatnonzero(np.isfinite(lowest))
+        if not len(probed):  # no sample has enough radii clear of the boundary
             return range(1), np.zeros(0, dtype=np.int64)
-        found = words.best(*chosen_votes, present, count + len(excluded))
-        return range(chosen, chosen + 1), self._without(found, excluded)
+        gallery = self.store.coarse[self.store.positions(np.unique(np.concatenate(leaders)))]
+        across = scale_scores(profiles, reach, gallery, self.preset, steps, rough=True)
+        j = steps[probed[np.argmin(np.minimum(lowest, across.min(axis=1))[probed])]]
+        if kept[0] != j:  # voted again: every scale's votes kept, a million weights
+            # each, would take fresh memory for every scale (a tenth of the search)
+            kept = (j, words.voted(*samples_at_scale(profiles, reach, j, self.preset)))
+        voted = kept[1]
+        found = words.best(*voted, present, count + len(excluded))
+        return range(j, j + 1), self._without(found, excluded)
 
     @staticmethod
     def _without(ids: np.ndarray, excluded: np.ndarray) -> np.ndarray:

@@ -18,10 +18,13 @@ from worker.engine.compare import (
 )
 from worker.engine.parts import (
     COARSE_SAMPLES,
+    coarse,
     compared_profiles,
     grid_radii,
     part_dissimilarity,
+    samples_at_scale,
     scale_count,
+    scale_scores,
     sized_dissimilarity,
     sized_scales,
 )
@@ -496,6 +499,45 @@ def test_the_inverted_file_chooses_the_scale_every_shape_compared_chooses(monkey
     query = ({}, part, np.full(150, np.inf), {PARTS: 1.0}, 10)
     found, scale = index.partial_search(*query)
     assert scale == 2.0 ** (j / 8) and found[0].id % 40 == 7
+    assert ([m.id for m in found], scale) == _every_shape_compared(index, *query)
+
+
+def test_a_scale_whose_votes_miss_its_best_shapes_is_found_by_another_scale_s_leaders(
+    monkeypatch,
+):
+    """At the part's own scale the votes rank its object's poses below that scale's probe
+    (within its candidates); at the next step of the grid they rank first. The probes
+    alone would choose the next step; its best shapes compared at every step find the
+    part's own scale, and the ranking every shape compared gives."""
+    rng = np.random.default_rng(9)
+    index, pose, _ = _posed_index(monkeypatch, rng)
+    whole, shift = pose(7)[:150], 2  # columns: the part's own scale is step 2 of the grid
+    part = np.concatenate([np.repeat(whole[:, :1], shift, 1), whole[:, :-shift]], axis=1)
+    own = np.arange(7, 400, 40)
+    others = np.setdiff1d(np.arange(400), own)
+    few = coarse(part, np.full(150, np.inf), index.store.coarse[index.store.positions(others)])
+    j = DEFAULT.parts_scale_steps * shift
+    at_own_scale = scale_scores(*few[:3], DEFAULT, range(j, j + 1), rough=True)
+    others = others[np.argsort(-at_own_scale[0])]  # the probe there: the farthest others
+    asked: list[int] = []
+
+    def at_scale(profiles, reach, j, preset):
+        asked.append(j)
+        return samples_at_scale(profiles, reach, j, preset)
+
+    def voted(queries, valid):  # a scale's votes stand for its step of the grid
+        return np.array([asked[-1] // DEFAULT.parts_scale_steps]), np.zeros(0)
+
+    def best(step, _, present, count):
+        ranked = {shift: [others[:100], own, others[100:]], shift + 1: [own, others]}
+        return np.concatenate(ranked.get(int(step[0]), [others, own]))[:count]
+
+    monkeypatch.setattr(index_module, "samples_at_scale", at_scale)
+    monkeypatch.setattr(index.words, "voted", voted)
+    monkeypatch.setattr(index.words, "best", best)
+    query = ({}, part, np.full(150, np.inf), {PARTS: 1.0}, 10)
+    found, scale = index.partial_search(*query)
+    assert scale == 2.0 ** (shift / 8) and found[0].id % 40 == 7
     assert ([m.id for m in found], scale) == _every_shape_compared(index, *query)
 
 
