@@ -18,6 +18,15 @@ function onActivate(element, action) {
   });
 }
 const PAGE = 24;
+
+// Only the newest request of a kind is shown: one answering late, after a newer sort,
+// file or collection, is dropped. request(kind) returns whether it is still the newest.
+const newest = {};
+function request(kind) {
+  const mine = (newest[kind] || 0) + 1;
+  newest[kind] = mine;
+  return () => newest[kind] === mine;
+}
 const KEY = "modalshape-api-key";
 const COLLECTION = "modalshape-collection";
 
@@ -317,6 +326,7 @@ function showResults(result, target) {
 }
 
 function forgetResults() {
+  request("search"); // a search still running is not shown
   $("search-results").replaceChildren();
   $("search-progress").textContent = "";
   $("compare").hidden = true;
@@ -381,13 +391,16 @@ async function search(file) {
   if ($("search-far").value) form.append("far", $("search-far").value);
   const progress = $("search-progress");
   const started = performance.now();
+  forgetResults();
+  const current = request("search");
   const tick = setInterval(() => {
+    if (!current()) return;
     const seconds = ((performance.now() - started) / 1000).toFixed(0);
     progress.textContent = `Describing ${file.name}: ${seconds} s (a few seconds for a new mesh)`;
   }, 250);
-  forgetResults();
   try {
     const result = await api(`${base()}/query`, { method: "POST", body: form });
+    if (!current()) return;
     result.queryName = file.name;
     const how = { computed: "described now", enrolled: "enrolled already", recent: "searched recently" };
     const cloud = pointCloud(result.query);
@@ -402,6 +415,7 @@ async function search(file) {
       + (result.partial ? ` ${result.partial.note}` : "");
     showResults(result, $("search-results"));
   } catch (err) {
+    if (!current()) return;
     progress.textContent = "";
     showError(err);
   } finally {
@@ -457,10 +471,9 @@ async function follow(meshId, cell) {
 
 // --------------------------------------------------------------------------- gallery
 let galleryOffset = 0;
-let galleryRequest = 0; // only the newest request's answer is shown
 
 async function loadGallery() {
-  const request = ++galleryRequest;
+  const current = request("gallery");
   const params = new URLSearchParams({
     offset: galleryOffset, limit: PAGE, sort: $("gallery-sort").value,
   });
@@ -468,7 +481,7 @@ async function loadGallery() {
   if ($("gallery-status").value) params.set("status", $("gallery-status").value);
   try {
     const page = await api(`${base()}/meshes?${params}`);
-    if (request !== galleryRequest) return; // a later sort, filter or page asked since
+    if (!current()) return;
     const grid = $("gallery-grid");
     grid.replaceChildren(...page.items.map(galleryCard));
     if (!page.items.length) grid.replaceChildren(placeholder("Nothing enrolled matches."));
@@ -477,7 +490,7 @@ async function loadGallery() {
     $("gallery-prev").disabled = page.offset === 0;
     $("gallery-next").disabled = last >= page.total;
   } catch (err) {
-    if (request === galleryRequest) showError(err);
+    if (current()) showError(err);
   }
 }
 
@@ -546,13 +559,16 @@ async function openDetail(mesh) {
 
 $("detail-similar").addEventListener("click", async () => {
   if (!detailMesh) return;
+  const current = request("search");
   try {
     const result = await api(`${base()}/meshes/${detailMesh.id}/similar?k=${$("search-k").value || 8}`, { method: "POST" });
+    if (!current()) return;
     result.queryName = detailMesh.name;
     selectTab("search");
     $("search-progress").textContent = `Most similar to ${detailMesh.name}:`;
     showResults(result, $("search-results"));
   } catch (err) {
+    if (!current()) return;
     forgetResults(); // not the results of another search beside this error
     showError(err);
   }
@@ -594,8 +610,10 @@ $("gallery-next").addEventListener("click", () => {
 // --------------------------------------------------------------------------- calibration
 async function loadCalibration() {
   const summary = $("calibration-summary");
+  const current = request("calibration");
   try {
     const c = await api(`${base()}/calibration`);
+    if (!current()) return;
     summary.textContent = `${c.labelled_shapes} labelled meshes (${c.labels} labels): `
       + `${c.genuine_pairs} pairs of the same label, ${c.impostor_pairs} of different labels. `
       + `Equal error rate ${percent(c.eer)}. `
@@ -624,6 +642,7 @@ async function loadCalibration() {
     $("calibration-table").hidden = false;
     showFusion(c.fusion);
   } catch (err) {
+    if (!current()) return;
     summary.textContent = err.message;
     for (const id of ["calibration-roc", "calibration-histogram"]) $(id).toggleAttribute("hidden", true);
     for (const id of ["calibration-table", "calibration-fusion", "calibration-fusion-numbers",

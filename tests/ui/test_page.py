@@ -154,6 +154,30 @@ def test_search_with_another_pose_shows_the_right_object_in_3d(page):
     )
 
 
+def test_a_search_answering_late_leaves_the_newer_search_shown(page):
+    """The first file's answer is held back until the second file's is shown; when it
+    comes, the page keeps showing the second's."""
+    held: list = []
+    query = re.compile(r"/query$")
+    page.route(query, lambda route: route.continue_() if held else held.append(route))
+    page.click("#tab-search")
+    page.set_input_files("#file-search", [])  # the page's input may hold this file already
+    page.set_input_files("#file-search", str(example("quadruped-1")))
+    while not held:
+        page.wait_for_timeout(20)
+    search_for(page, example("biped-2"))
+    cards = (
+        "() => [...document.querySelectorAll('#search-results .card')].map((c) => c.dataset.meshId)"
+    )
+    shown = page.evaluate(cards)
+    with page.expect_response(lambda r: r.request == held[0].request, timeout=180_000):
+        held[0].continue_()
+    page.evaluate("() => new Promise((done) => setTimeout(done, 200))")  # its answer is read
+    assert page.locator("#search-progress").inner_text().startswith("biped-2")
+    assert page.evaluate(cards) == shown and shown
+    page.unroute(query)
+
+
 def test_the_gallery_lists_and_opens_a_mesh_in_3d(page):
     page.click("#tab-gallery")
     cards = page.locator("#gallery-grid .card")
