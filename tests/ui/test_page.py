@@ -420,6 +420,10 @@ def test_the_gallery_sorts_and_says_which_meshes_failed(page, site):
     page.route(
         re.compile(r"/meshes\?"), lambda route: route.continue_() if held else held.append(route)
     )
+    page.evaluate(  # the page is shared: no filter left by another test, newest first
+        """() => { for (const [id, value] of [['gallery-label', ''], ['gallery-status', ''],
+            ['gallery-sort', 'newest']]) document.getElementById(id).value = value; }"""
+    )
     page.click("#tab-gallery")
     while not held:
         page.wait_for_timeout(20)
