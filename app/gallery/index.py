@@ -598,9 +598,10 @@ class GalleryIndex:
                 scores = self._parts_scores(
                     profiles, reach, gallery, range(j, j + 1), rough=True
                 ).dissimilarity
-                if scores.min() < lowest.min():  # the probes' best so far: its votes kept
+                low = scores.min()
+                if low < lowest.min():  # the probes' best so far: its votes kept
                     kept = (j, voted)
-                lowest[row] = scores.min()
+                lowest[row] = low
                 leaders.append(probe[np.argsort(scores, kind="stable")[:PROBE_LEADERS]])
         probed = np.flatnonzero(np.isfinite(lowest))
         if not len(probed):  # no sample has enough radii clear of the boundary

@@ -92,6 +92,34 @@ def shoot(page, name: str) -> None:
         page.screenshot(path=str(Path(SCREENSHOTS) / f"{name}.png"), full_page=True)
 
 
+class FirstRequestHeld:
+    """Within it, the first request whose URL matches ``url`` is held back (the others
+    pass) until :meth:`release`; the route is gone on leaving, whatever happened."""
+
+    def __init__(self, page, url: re.Pattern[str]) -> None:
+        self.page, self.url, self.held = page, url, []
+
+    def __enter__(self) -> FirstRequestHeld:
+        self.page.route(self.url, lambda r: r.continue_() if self.held else self.held.append(r))
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.page.unroute(self.url)
+
+    def made(self) -> str:
+        """Wait until the page has made the request held; its URL."""
+        while not self.held:
+            self.page.wait_for_timeout(20)
+        return str(self.held[0].request.url)
+
+    def release(self) -> None:
+        """Let it through and wait until the page has read its answer."""
+        request = self.held[0].request
+        with self.page.expect_response(lambda r: r.request == request, timeout=180_000):
+            self.held[0].continue_()
+        self.page.evaluate("() => new Promise((done) => setTimeout(done, 200))")
+
+
 def search_for(page, path: Path) -> None:
     """Search the page with the file at ``path`` and wait for its answer's progress line."""
     page.click("#tab-search")
@@ -157,25 +185,19 @@ def test_search_with_another_pose_shows_the_right_object_in_3d(page):
 def test_a_search_answering_late_leaves_the_newer_search_shown(page):
     """The first file's answer is held back until the second file's is shown; when it
     comes, the page keeps showing the second's."""
-    held: list = []
-    query = re.compile(r"/query$")
-    page.route(query, lambda route: route.continue_() if held else held.append(route))
-    page.click("#tab-search")
-    page.set_input_files("#file-search", [])  # the page's input may hold this file already
-    page.set_input_files("#file-search", str(example("quadruped-1")))
-    while not held:
-        page.wait_for_timeout(20)
-    search_for(page, example("biped-2"))
     cards = (
         "() => [...document.querySelectorAll('#search-results .card')].map((c) => c.dataset.meshId)"
     )
-    shown = page.evaluate(cards)
-    with page.expect_response(lambda r: r.request == held[0].request, timeout=180_000):
-        held[0].continue_()
-    page.evaluate("() => new Promise((done) => setTimeout(done, 200))")  # its answer is read
+    with FirstRequestHeld(page, re.compile(r"/query$")) as first:
+        page.click("#tab-search")
+        page.set_input_files("#file-search", [])  # the page's input may hold this file
+        page.set_input_files("#file-search", str(example("quadruped-1")))
+        first.made()
+        search_for(page, example("biped-2"))
+        shown = page.evaluate(cards)
+        first.release()
     assert page.locator("#search-progress").inner_text().startswith("biped-2")
     assert page.evaluate(cards) == shown and shown
-    page.unroute(query)
 
 
 def test_the_gallery_lists_and_opens_a_mesh_in_3d(page):
@@ -416,30 +438,23 @@ def test_the_gallery_sorts_and_says_which_meshes_failed(page, site):
     assert site.wait_mesh(failed["id"])["status"] == "failed"
     # The tab's own listing (newest first) is held back until the listing by name has
     # been drawn: a late, older answer must not replace the newer one.
-    held: list = []
-    page.route(
-        re.compile(r"/meshes\?"), lambda route: route.continue_() if held else held.append(route)
-    )
-    page.evaluate(  # the page is shared: no filter left by another test, newest first
-        """() => { for (const [id, value] of [['gallery-label', ''], ['gallery-status', ''],
-            ['gallery-sort', 'newest']]) document.getElementById(id).value = value; }"""
-    )
-    page.click("#tab-gallery")
-    while not held:
-        page.wait_for_timeout(20)
-    page.select_option("#gallery-sort", "name")
     sorted_by_name = """() => {
       const titles = [...document.querySelectorAll('#gallery-grid .card .title')]
         .map((t) => t.textContent);
       return titles.length > 1 && titles.every((t, i) => i === 0 || titles[i - 1] <= t);
     }"""
-    page.wait_for_function(sorted_by_name)  # the service sorts; this checks it did
-    assert "sort=newest" in held[0].request.url
-    with page.expect_response(lambda r: r.request == held[0].request):
-        held[0].continue_()
-    page.evaluate("() => new Promise((done) => setTimeout(done, 200))")  # its answer is read
+    with FirstRequestHeld(page, re.compile(r"/meshes\?")) as first:
+        page.evaluate(  # the page is shared: no filter left by another test, newest first
+            """() => { for (const [id, value] of [['gallery-label', ''], ['gallery-status', ''],
+                ['gallery-sort', 'newest']]) document.getElementById(id).value = value; }"""
+        )
+        page.click("#tab-gallery")
+        first.made()
+        page.select_option("#gallery-sort", "name")
+        page.wait_for_function(sorted_by_name)  # the service sorts; this checks it did
+        assert "sort=newest" in first.made()
+        first.release()
     assert page.evaluate(sorted_by_name)
-    page.unroute(re.compile(r"/meshes\?"))
     card = page.locator(f'#gallery-grid .card[data-mesh-id="{failed["id"]}"]')
     assert "failed: " in card.inner_text() and "not described yet" not in card.inner_text()
     page.select_option("#gallery-sort", "newest")
