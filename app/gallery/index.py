@@ -589,7 +589,7 @@ class GalleryIndex:
         depth = min(max(WORD_MIN_PROBE, count // 8), WORD_MAX_PROBE)
         steps = range(0, scale_count(self.preset), self.preset.parts_scale_steps)
         lowest, leaders = np.full(len(steps), np.inf), []
-        kept: tuple[int, tuple[np.ndarray, np.ndarray]] = (-1, (np.zeros(0), np.zeros(0)))
+        kept: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # the probes' best step's votes
         for row, j in enumerate(steps):
             voted = words.voted(*samples_at_scale(profiles, reach, j, self.preset))
             probe = self._without(words.best(*voted, present, depth + len(excluded)), excluded)
@@ -599,8 +599,8 @@ class GalleryIndex:
                     profiles, reach, gallery, range(j, j + 1), rough=True
                 ).dissimilarity
                 low = scores.min()
-                if low < lowest.min():  # the probes' best so far: its votes kept
-                    kept = (j, voted)
+                if low < lowest.min():
+                    kept = {j: voted}
                 lowest[row] = low
                 leaders.append(probe[np.argsort(scores, kind="stable")[:PROBE_LEADERS]])
         probed = np.flatnonzero(np.isfinite(lowest))
@@ -609,10 +609,13 @@ class GalleryIndex:
         gallery = self.store.coarse[self.store.positions(np.unique(np.concatenate(leaders)))]
         across = scale_scores(profiles, reach, gallery, self.preset, steps, rough=True)
         j = steps[probed[np.argmin(np.minimum(lowest, across.min(axis=1))[probed])]]
-        if kept[0] != j:  # voted again: every scale's votes kept, a million weights
-            # each, would take fresh memory for every scale (a tenth of the search)
-            kept = (j, words.voted(*samples_at_scale(profiles, reach, j, self.preset)))
-        voted = kept[1]
+        # Another step's votes are taken again: every step's kept, a million weights each,
+        # would take fresh memory for every step (a tenth of the search).
+        voted = (
+            kept[j]
+            if j in kept
+            else words.voted(*samples_at_scale(profiles, reach, j, self.preset))
+        )
         found = words.best(*voted, present, count + len(excluded))
         return range(j, j + 1), self._without(found, excluded)
 
