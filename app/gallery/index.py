@@ -81,9 +81,11 @@ from worker.engine.compare import (
     preset_dissimilarity,
 )
 from worker.engine.parts import (
+    COARSE_SAMPLES,
     PartsMatch,
     best_scale,
     can_hold,
+    clearest,
     coarse,
     samples_at_scale,
     scale_count,
@@ -123,6 +125,12 @@ WORD_MAX_PROBE = 256
 #: can rank it too low to be probed (docs/decisions.md, "A step's leaders compared at
 #: every step").
 PROBE_LEADERS = 4
+#: The query's samples that vote, those farthest from its boundary: while its candidates
+#: are fewer than WORD_MAX_CANDIDATES, twice the coarse pass's (docs/decisions.md, "A
+#: partial query votes with 128 samples while its candidates are few": they then miss the
+#: exhaustive ranking's first less often; at the cap the candidates hold it already, and
+#: the votes, which cost in proportion to the gallery, keep the coarse pass's samples).
+VOTE_SAMPLES = 128
 #: Query scales on either side of the coarse pass's that the shortlist tries (with the
 #: preset's four scales to a step of the grid, three quarters of a step: at 100,000 shapes
 #: the whole step agrees with the exhaustive ranking no more often, half of it less
@@ -528,7 +536,11 @@ class GalleryIndex:
             scales = range(0, scale_count(self.preset), self.preset.parts_scale_steps)
             if self.words is not None:
                 count = min(max(WORD_CANDIDATES, n // WORD_SHARE), WORD_MAX_CANDIDATES)
-                scales, found_ids = self._word_candidates(*few[:2], count, excluded)
+                voting = VOTE_SAMPLES if count < WORD_MAX_CANDIDATES else COARSE_SAMPLES
+                voters = clearest(reach, voting)
+                scales, found_ids = self._word_candidates(
+                    (profiles[voters], reach[voters]), few[:2], count, excluded
+                )
                 positions = np.sort(self.store.positions(found_ids))
             else:
                 positions = np.flatnonzero(~np.isin(self.store.ids[:n], excluded))
@@ -572,13 +584,18 @@ class GalleryIndex:
         return matches, found.scale
 
     def _word_candidates(
-        self, profiles: np.ndarray, reach: np.ndarray, count: int, excluded: np.ndarray
+        self,
+        voters: tuple[np.ndarray, np.ndarray],
+        few: tuple[np.ndarray, np.ndarray],
+        count: int,
+        excluded: np.ndarray,
     ) -> tuple[range, np.ndarray]:
         """A partial query's scale and its ``count`` candidates from the inverted file.
 
-        The samples vote at each step of the grid apart (``profiles``, ``reach``: the
-        coarse pass's samples); each scale's best ``count / 8`` (``WORD_MIN_PROBE`` to
-        ``WORD_MAX_PROBE``) are compared coarsely at it, the ``PROBE_LEADERS`` best of
+        The ``voters`` (profiles, reach: the query's samples that vote) vote at each step
+        of the grid apart; each scale's best ``count / 8`` (``WORD_MIN_PROBE`` to
+        ``WORD_MAX_PROBE``) are compared coarsely at it (``few``: the coarse pass's
+        samples of the query, profiles and reach), the ``PROBE_LEADERS`` best of
         each at every step as well, and the scale of the best match is the query's, as
         the exhaustive pass chooses it over every shape (it can only be missed when no
         shape near that best is among the probes). Its candidates are that scale's
@@ -590,8 +607,9 @@ class GalleryIndex:
         steps = range(0, scale_count(self.preset), self.preset.parts_scale_steps)
         lowest, leaders = np.full(len(steps), np.inf), []
         kept: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # the probes' best step's votes
+        profiles, reach = few
         for row, j in enumerate(steps):
-            voted = words.voted(*samples_at_scale(profiles, reach, j, self.preset))
+            voted = words.voted(*samples_at_scale(*voters, j, self.preset))
             probe = self._without(words.best(*voted, present, depth + len(excluded)), excluded)
             if len(probe):
                 gallery = self.store.coarse[self.store.positions(probe)]
@@ -611,11 +629,7 @@ class GalleryIndex:
         j = steps[probed[np.argmin(np.minimum(lowest, across.min(axis=1))[probed])]]
         # Another step's votes are taken again: every step's kept, a million weights each,
         # would take fresh memory for every step (a tenth of the search).
-        voted = (
-            kept[j]
-            if j in kept
-            else words.voted(*samples_at_scale(profiles, reach, j, self.preset))
-        )
+        voted = kept[j] if j in kept else words.voted(*samples_at_scale(*voters, j, self.preset))
         found = words.best(*voted, present, count + len(excluded))
         return range(j, j + 1), self._without(found, excluded)
 

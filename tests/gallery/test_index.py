@@ -568,6 +568,36 @@ def test_each_scale_s_probe_is_an_eighth_of_the_candidates_within_its_bounds(
     assert [m.id for m in found] == _every_shape_compared(index, *query)[0]
 
 
+@pytest.mark.parametrize(("cap", "voting"), [(8192, 128), (256, 64)])
+def test_twice_the_coarse_pass_s_samples_vote_while_the_candidates_are_under_their_cap(
+    monkeypatch, cap, voting
+):
+    """The query's ``VOTE_SAMPLES`` samples farthest from its boundary vote at each step
+    while its candidates are fewer than ``WORD_MAX_CANDIDATES``; at the cap, the coarse
+    pass's ``COARSE_SAMPLES``. Either way the answer is the one every shape compared
+    gives."""
+    rng = np.random.default_rng(12)
+    index, pose, _ = _posed_index(monkeypatch, rng)
+    monkeypatch.setattr(index_module, "WORD_MAX_CANDIDATES", cap)
+    assert index.words is not None
+    rows: list[np.ndarray] = []
+    voted = index.words.voted
+
+    def spy(queries, valid):
+        rows.append(np.asarray(queries))
+        return voted(queries, valid)
+
+    monkeypatch.setattr(index.words, "voted", spy)
+    part = pose(9)[:300]
+    reach = 10.0 + rng.permutation(300)  # every radius clear, each sample its own reach
+    query = ({}, part, reach, {PARTS: 1.0}, 10)
+    found, _ = index.partial_search(*query)
+    clear = np.sort(np.argsort(-reach)[:voting])
+    assert np.array_equal(rows[0], samples_at_scale(part[clear], reach[clear], 0, DEFAULT)[0])
+    assert found[0].id % 40 == 9
+    assert [m.id for m in found] == _every_shape_compared(index, *query)[0]
+
+
 @pytest.mark.parametrize("quarters", [3, 10, 18])
 def test_between_the_grid_s_steps_the_shortlist_finds_the_scale_every_shape_compared_finds(
     monkeypatch, quarters

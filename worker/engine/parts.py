@@ -186,19 +186,26 @@ def compared_profiles(profiles: np.ndarray, preset: Preset) -> np.ndarray:
 COARSE_SAMPLES = 64
 
 
+def clearest(reach: np.ndarray, count: int) -> np.ndarray:
+    """The indices, in order, of the ``count`` samples farthest from the query's boundary
+    (``reach``; among equals the first: the farthest-point order spreads them)."""
+    keep: np.ndarray = np.sort(np.argsort(-reach, kind="stable")[:count])
+    return keep
+
+
 def coarse(
     profiles: np.ndarray, reach: np.ndarray, gallery: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A query and candidates cut down for a coarse first comparison that shortlists
     candidates: the query's ``COARSE_SAMPLES`` samples farthest from its boundary
-    (among equals the first: the farthest-point order spreads them), and each
+    (:func:`clearest`), and each
     candidate's first ``COARSE_SAMPLES`` samples (spread over its surface the same way).
 
     Returns
     -------
     profiles (q', C), reach (q',), gallery (n, m'', K).
     """
-    keep = np.sort(np.argsort(-reach, kind="stable")[:COARSE_SAMPLES])
+    keep = clearest(reach, COARSE_SAMPLES)
     return profiles[keep], reach[keep], gallery[:, :COARSE_SAMPLES]
 
 
