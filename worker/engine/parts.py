@@ -198,8 +198,8 @@ def coarse(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A query and candidates cut down for a coarse first comparison that shortlists
     candidates: the query's ``COARSE_SAMPLES`` samples farthest from its boundary
-    (:func:`clearest`), and each
-    candidate's first ``COARSE_SAMPLES`` samples (spread over its surface the same way).
+    (:func:`clearest`), and each candidate's first ``COARSE_SAMPLES`` samples (spread over
+    its surface by the same farthest-point order).
 
     Returns
     -------
