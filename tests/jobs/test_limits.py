@@ -98,17 +98,26 @@ def test_a_consumer_can_start_its_fork_server_before_the_first_job():
     # In a fresh interpreter: this test process may have started one already.
     script = (
         "import os\n"
+        "import time\n"
         "from pathlib import Path\n"
         "from worker.jobs.limits import start_fork_server\n"
         "start_fork_server()\n"
-        "for stat in Path('/proc').glob('[0-9]*/stat'):\n"
-        "    try:\n"
-        "        fields = stat.read_text().rsplit(')', 1)[1].split()\n"
-        "        command = (stat.parent / 'cmdline').read_bytes()\n"
-        "    except OSError:\n"
-        "        continue\n"
-        "    if int(fields[1]) == os.getpid():\n"
-        "        print(command.replace(b'\\0', b' ').decode())\n"
+        "def children():\n"
+        "    for stat in Path('/proc').glob('[0-9]*/stat'):\n"
+        "        try:\n"
+        "            fields = stat.read_text().rsplit(')', 1)[1].split()\n"
+        "            command = (stat.parent / 'cmdline').read_bytes()\n"
+        "        except OSError:\n"
+        "            continue\n"
+        "        if int(fields[1]) == os.getpid():\n"
+        "            yield command.replace(b'\\0', b' ').decode()\n"
+        # The server is forked, then execs: until it has, its command line is not its own.
+        "for _ in range(100):\n"
+        "    listed = list(children())\n"
+        "    if any('forkserver' in command for command in listed):\n"
+        "        break\n"
+        "    time.sleep(0.05)\n"
+        "print('\\n'.join(listed))\n"
     )
     children = subprocess.run(
         [sys.executable, "-c", script], capture_output=True, text=True, check=True, timeout=60
