@@ -62,6 +62,7 @@ from benchmarks.common import (
 )
 from worker.engine.compare import fuse, partiality, query_weights
 from worker.engine.descriptor import ShapeDescriptor
+from worker.engine.parts import compared_profiles, grid_radii
 from worker.engine.presets import PARTS, Preset, get_preset
 from worker.evaluation.compute import compute_descriptors
 from worker.evaluation.datasets import read_labels
@@ -159,29 +160,38 @@ POSE_NOISE = 0.02
 #: How far apart synthetic objects are, in units of the real wholes' spread.
 WARP = 8.0
 #: What a stored gallery was made by: one made otherwise is made again.
-MODEL_VERSION = 3
+MODEL_VERSION = 4
 
 
 class ObjectWarps:
     """What makes synthetic objects of one real whole differ: object ``o`` changes every
-    profile value ``v`` (a log of a ball's area ratio) to ``v + u_o + b_o sin(w_o v +
-    phi_o)``. A change of the value alone, so that it is the same whatever radius or scale
-    the value is compared at (a part's columns are a whole's shifted); its size, ``u`` and
-    ``b``, that of the real wholes' differences (the spread of their mean profiles)."""
+    value ``v`` of a descriptor's area profiles (a log of a ball's area ratio) to ``v + s
+    (u_o + b_o sin(w_o v + phi_o))``. A change of the value alone, so that it is the same
+    whatever radius or scale the value is compared at (a part's columns are a whole's
+    shifted); its size ``s`` that of the real wholes' differences (the spread of their
+    mean profiles). Centroid profiles change alike in their own units, their spread ``s'``
+    taking the place of ``s``: ``v + s' (u_o + b_o sin(w_o v s / s' + phi_o))``."""
 
     def __init__(
-        self, objects: int, wholes: Sequence[ShapeDescriptor], rng: np.random.Generator
+        self,
+        objects: int,
+        wholes: Sequence[ShapeDescriptor],
+        columns: int,
+        rng: np.random.Generator,
     ) -> None:
         means = np.stack([d.parts.astype(np.float64).mean(axis=0) for d in wholes])
-        spread = WARP * float(means.std(axis=0).mean())
-        self.shift = spread * rng.normal(size=objects)
-        self.amplitude = spread * rng.uniform(0.0, 1.0, size=objects)
+        kinds = [means[:, a : a + columns] for a in range(0, means.shape[1], columns)]
+        self.spread = np.repeat([WARP * float(k.std(axis=0).mean()) for k in kinds], columns)
+        self.shift = rng.normal(size=objects)
+        self.amplitude = rng.uniform(0.0, 1.0, size=objects)
         self.frequency = rng.uniform(1.0, 4.0, size=objects)
         self.phase = rng.uniform(0.0, 2 * np.pi, size=objects)
 
     def __call__(self, o: int, profiles: np.ndarray) -> np.ndarray:
-        wave = np.sin(self.frequency[o] * profiles + self.phase[o])
-        warped: np.ndarray = profiles + self.shift[o] + self.amplitude[o] * wave
+        """(m, C) or (m, 2C) ``profiles`` as object ``o``'s."""
+        scale = self.spread[: profiles.shape[1]]
+        wave = np.sin(self.frequency[o] * profiles * self.spread[0] / scale + self.phase[o])
+        warped: np.ndarray = profiles + scale * (self.shift[o] + self.amplitude[o] * wave)
         return warped
 
 
@@ -207,14 +217,14 @@ def build_gallery(
     rng = np.random.default_rng(seed)
     objects = size // POSES
     flat = synthetic(synthetic_model(preset.name), objects, POSES + 1, rng)
-    warps = ObjectWarps(objects, wholes, rng)
+    warps = ObjectWarps(objects, wholes, len(grid_radii(preset)), rng)
     shape = preset.parts_shape()
     assert shape is not None, "the preset has no parts modality"
-    bases = np.stack([descriptor_vectors(d, preset)[PARTS] for d in wholes]).astype(np.float32)
+    bases = [d.parts.astype(np.float64) for d in wholes]
 
     def shapes() -> Iterator[tuple[int, dict[str, np.ndarray]]]:
         for o in range(objects):
-            profiles = warps(o, bases[o % len(wholes)])
+            profiles = compared_profiles(warps(o, bases[o % len(wholes)]), preset)
             for pose in range(POSES):
                 noise = POSE_NOISE * rng.standard_normal(shape, dtype=np.float32)
                 vectors = {m: v[o * (POSES + 1) + pose] for m, v in flat.items()}

@@ -83,6 +83,7 @@ from worker.engine.compare import (
 from worker.engine.parts import (
     COARSE_SAMPLES,
     PartsMatch,
+    area_profiles,
     best_scale,
     can_hold,
     clearest,
@@ -188,7 +189,7 @@ class GalleryIndex:
         parts_path: Path | None = None,
     ) -> None:
         self.preset = preset
-        self.store = GalleryVectors(dims, parts_shape, parts_path)
+        self.store = GalleryVectors(dims, parts_shape, parts_path, preset.parts_radii)
         self.dims = self.store.dims
         self.modalities = self.store.modalities
         self.refit_fraction = refit_fraction
@@ -531,15 +532,16 @@ class GalleryIndex:
             if n == 0 or k <= 0:
                 return [], 1.0
             flat = tuple(m for m in weights if m != PARTS)
-            few = coarse(profiles, reach, self.store.coarse[:n])
+            few = coarse(profiles, reach, self.store.coarse[:n], self.preset)
             # The coarse pass at each step of the grid, the best chosen over the candidates.
             scales = range(0, scale_count(self.preset), self.preset.parts_scale_steps)
             if self.words is not None:
                 count = min(max(WORD_CANDIDATES, n // WORD_SHARE), WORD_MAX_CANDIDATES)
                 voting = VOTE_SAMPLES if count < WORD_MAX_CANDIDATES else COARSE_SAMPLES
                 voters = clearest(reach, voting)
+                areas = area_profiles(profiles[voters], self.preset)
                 scales, found_ids = self._word_candidates(
-                    (profiles[voters], reach[voters]), few[:2], count, excluded
+                    (areas, reach[voters]), few[:2], count, excluded
                 )
                 positions = np.sort(self.store.positions(found_ids))
             else:

@@ -8,12 +8,12 @@ mean at each refit (``shift``) to avoid cancellation, so it always equals
 
 The parts modality's profiles (:mod:`worker.engine.parts`), when the preset has it, are
 kept as float16 (the precision they are stored in) in two places: the first
-``COARSE_SAMPLES`` samples of each shape in memory, by position (what the coarse pass and
-the inverted file read, for many shapes), and every sample in :class:`PartsRows`, by
-slot (what the exact pass reads, for a shortlist): in memory, or in a file read row by
-row, so that a gallery of a million shapes keeps 1.9 KB a shape of profiles in memory
-instead of 15 KB. Slots are never reused, so the file only grows, and a saved index's
-rows are never overwritten.
+``COARSE_SAMPLES`` samples of each shape in memory, by position, their area profiles
+alone (what the coarse pass and the inverted file read, for many shapes), and every
+sample in :class:`PartsRows`, by slot, with its centroid profiles (what the exact pass
+reads, for a shortlist): in memory, or in a file read row by row, so that a gallery of a
+million shapes keeps 1.9 KB a shape of profiles in memory instead of 24 KB. Slots are
+never reused, so the file only grows, and a saved index's rows are never overwritten.
 """
 
 from __future__ import annotations
@@ -100,6 +100,8 @@ class GalleryVectors:
     dims : modality -> M_m, the length of its flat vector.
     parts_shape : (m, K) of a shape's compared parts profiles; None: no parts.
     parts_path : the file of every sample's profiles (:class:`PartsRows`); None: in memory.
+    coarse_values : the first values of each sample the coarse rows keep (the area
+        profiles', :func:`worker.engine.parts.coarse`); None: all ``K``.
     """
 
     def __init__(
@@ -107,12 +109,14 @@ class GalleryVectors:
         dims: Mapping[str, int],
         parts_shape: tuple[int, int] | None = None,
         parts_path: Path | None = None,
+        coarse_values: int | None = None,
     ) -> None:
         self.dims = dict(dims)
         self.parts_shape = parts_shape
         m, k = parts_shape or (0, 0)
         # The first samples of each shape by position, and every sample's by slot.
-        self.coarse = np.empty((INITIAL_CAPACITY, min(m, COARSE_SAMPLES), k), dtype=np.float16)
+        width = k if coarse_values is None else min(k, coarse_values)
+        self.coarse = np.empty((INITIAL_CAPACITY, min(m, COARSE_SAMPLES), width), dtype=np.float16)
         self.rows = PartsRows((m, k), parts_path) if parts_shape else None
         self.slots = np.full(INITIAL_CAPACITY, -1, dtype=np.int64)
         self.modalities = tuple(m for m in (*MODALITIES, SIZE) if m in self.dims)
@@ -149,7 +153,7 @@ class GalleryVectors:
             parts = np.asarray(vectors[PARTS])
             if parts.shape != self.parts_shape:
                 raise ValueError(f"parts: expected {self.parts_shape}, got {parts.shape}")
-            self.coarse[i] = parts[: self.coarse.shape[1]]
+            self.coarse[i] = parts[: self.coarse.shape[1], : self.coarse.shape[2]]
             self.slots[i] = self.rows.append(parts)
         for m, x in rows.items():
             self.vectors[m][i] = x

@@ -18,9 +18,12 @@ from worker.engine.parts import (
     _to_single,
     ball_area_profiles,
     ball_area_profiles_reference,
+    ball_centroid_profiles,
+    ball_centroid_profiles_reference,
     best_scale,
     boundary_reach,
     can_hold,
+    coarse,
     compared_by_size,
     compared_profiles,
     grid_radii,
@@ -37,6 +40,9 @@ from worker.evaluation.partial import noisy_surface, planar_cut
 from worker.evaluation.variants import decimated, subdivided
 
 DEFAULT = get_preset(DEFAULT_PRESET)
+#: Areas alone, and the discs' centroids beside them on the first 9 radii.
+AREAS = replace(DEFAULT, parts_centroid_radii=0, parts_centroid_weight=0.0)
+CENTROIDS = replace(DEFAULT, parts_centroid_radii=9, parts_centroid_weight=3.0)
 #: The engine's profiles are half precision: their rounding, relative.
 HALF = 2.0**-10
 
@@ -48,6 +54,18 @@ def test_ball_area_profiles_match_the_plain_sums():
     mass = rng.uniform(0.5, 1.5, size=400)
     fast = ball_area_profiles(distances, mass, 0.1, 34)
     np.testing.assert_allclose(fast, ball_area_profiles_reference(distances, mass, 0.1, 34))
+
+
+def test_ball_centroid_profiles_match_the_plain_sums():
+    rng = np.random.default_rng(0)
+    distances = rng.uniform(0.0, 3.0, size=(400, 30))
+    samples = rng.choice(400, size=30, replace=False)
+    distances[samples, np.arange(30)] = 0.0
+    mass = rng.uniform(0.5, 1.5, size=400)
+    positions = rng.normal(size=(400, 3))
+    fast = ball_centroid_profiles(distances, mass, positions, samples, 0.1, 34)
+    plain = ball_centroid_profiles_reference(distances, mass, positions, samples, 0.1, 34)
+    np.testing.assert_allclose(fast, plain, rtol=1e-12)
 
 
 def _sphere(radius: float = 2.0) -> tuple[trimesh.Trimesh, np.ndarray, np.ndarray]:
@@ -72,6 +90,21 @@ def test_ball_area_profiles_follow_a_spheres_caps():
     np.testing.assert_allclose(np.exp(profiles), np.broadcast_to(caps, profiles.shape), rtol=0.04)
 
 
+def test_ball_centroid_profiles_follow_a_spheres_caps():
+    """A cap of geodesic radius ``r`` on a sphere of radius ``R``: its centroid lies
+    halfway down it (Archimedes: a sphere's zones have areas as their heights), ``R (1 -
+    cos(r / R)) / 2`` below its pole, about ``|H| r^2 / 4``."""
+    radius = 2.0
+    sphere, mass, distances = _sphere(radius)
+    samples = np.arange(0, len(sphere.vertices), len(sphere.vertices) // 20)[:20]
+    profiles = ball_centroid_profiles(distances, mass, sphere.vertices, samples, 0.5, 24)
+    radii = 0.5 * 2.0 ** (np.arange(24) / GRID_STEPS_PER_OCTAVE)
+    caps = radius * (1 - np.cos(radii / radius)) / (2 * radii)
+    # The vertices inside a small cap jitter its centroid; over the samples it averages out.
+    np.testing.assert_allclose(profiles, np.broadcast_to(caps, profiles.shape), rtol=0.1)
+    np.testing.assert_allclose(profiles.mean(axis=0), caps, rtol=0.03)
+
+
 def test_boundary_reach_is_the_distance_to_the_open_boundary():
     radius = 2.0
     sphere, _, distances = _sphere(radius)
@@ -90,20 +123,33 @@ def _profiles(rng: np.random.Generator, shapes: int, samples: int) -> np.ndarray
     return -np.cumsum(steps, axis=2)
 
 
-@pytest.mark.parametrize("extra", [0, 4])
-def test_part_dissimilarity_matches_the_plain_reference(extra):
+def _with_centroids(rng: np.random.Generator, profiles: np.ndarray) -> np.ndarray:
+    """``profiles`` followed by smooth, rising random centroid profiles, as a surface's."""
+    steps = rng.uniform(0.0, 0.05, size=profiles.shape)
+    return np.concatenate([profiles, np.cumsum(steps, axis=-1)], axis=-1)
+
+
+@pytest.mark.parametrize(
+    ("extra", "base"), [(0, AREAS), (4, AREAS), (0, CENTROIDS), (4, CENTROIDS)]
+)
+def test_part_dissimilarity_matches_the_plain_reference(extra, base):
     """Scales past the grid's (``parts_extra_scales``) leave out the radii past the
-    profiles' last column, in both."""
-    preset = replace(DEFAULT, parts_extra_scales=extra)
+    profiles' last column, in both; the centroids, when compared, where the areas are."""
+    preset = replace(base, parts_extra_scales=extra)
     rng = np.random.default_rng(1)
-    gallery = compared_profiles(_profiles(rng, 5, 40), preset)
-    query = _profiles(rng, 1, 30)[0]
+    wholes, query = _profiles(rng, 5, 40), _profiles(rng, 1, 30)[0]
+    if preset.parts_centroid_radii:
+        wholes, query = _with_centroids(rng, wholes), _with_centroids(rng, query)
+    gallery = compared_profiles(wholes, preset)
+    assert gallery.shape[2] == preset.parts_radii + preset.parts_centroid_radii
     reach = np.where(rng.random(30) < 0.3, np.inf, rng.uniform(0.05, 1.5, size=30))
     fast = part_dissimilarity(query, reach, gallery, preset)
     plain = part_dissimilarity_reference(query, reach, gallery, preset)
     np.testing.assert_allclose(fast.dissimilarity, plain.dissimilarity, rtol=1e-9)
     assert fast.scale == plain.scale
+    rough = scale_scores(query, reach, gallery, preset, rough=True)
     scores = scale_scores(query, reach, gallery, preset)
+    np.testing.assert_allclose(rough, scores, rtol=1e-4)
     assert scores.shape[0] == (5 + extra) * preset.parts_scale_steps + 1
     assert np.isfinite(scores).all()  # every scale has samples with enough radii
 
@@ -162,6 +208,23 @@ def test_a_rough_pass_scores_as_the_exact_one_to_single_precision():
     np.testing.assert_array_equal(np.isfinite(rough), np.isfinite(exact))
     finite = np.isfinite(exact)
     np.testing.assert_allclose(rough[finite], exact[finite], rtol=1e-4)
+
+
+def test_the_coarse_pass_compares_the_areas_alone():
+    """The passes that shortlist read the areas: a query's centroid columns and a
+    candidate's are left out, and the scores are the areas-only preset's."""
+    rng = np.random.default_rng(6)
+    wholes = _with_centroids(rng, _profiles(rng, 6, 80))
+    query = _with_centroids(rng, _profiles(rng, 1, 100))[0]
+    reach = rng.uniform(0.1, 2.0, 100)
+    profiles, clear, gallery = coarse(query, reach, compared_profiles(wholes, CENTROIDS), CENTROIDS)
+    alone = coarse(
+        query[:, : len(grid_radii(AREAS))], reach, compared_profiles(wholes, AREAS), AREAS
+    )
+    for mine, theirs in zip((profiles, clear, gallery), alone, strict=True):
+        np.testing.assert_array_equal(mine, theirs)
+    with_them = scale_scores(profiles, clear, gallery, CENTROIDS)
+    np.testing.assert_array_equal(with_them, scale_scores(*alone, AREAS))
 
 
 def test_a_whole_contains_every_part_of_itself():

@@ -18,6 +18,7 @@ from worker.engine.compare import (
 )
 from worker.engine.parts import (
     COARSE_SAMPLES,
+    area_profiles,
     coarse,
     compared_profiles,
     grid_radii,
@@ -27,6 +28,7 @@ from worker.engine.parts import (
     scale_scores,
     sized_dissimilarity,
     sized_scales,
+    with_centroids,
 )
 from worker.engine.presets import (
     DEFAULT_PRESET,
@@ -196,11 +198,28 @@ DEFAULT = get_preset(DEFAULT_PRESET)  # D1, product rule, with the parts modalit
 
 
 def _parts_gallery(n: int, seed: int) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """Flat vectors and whole-surface parts profiles (n, m, C) for the default preset."""
+    """Flat vectors and whole-surface parts profiles (n, m, 2C) for the default preset:
+    smooth falling area profiles and rising centroid profiles, as a surface's."""
     rng = np.random.default_rng(seed)
     samples, columns = DEFAULT.gdm_samples, len(grid_radii(DEFAULT))
-    steps = rng.uniform(0.0, 0.3, size=(n, samples, columns))
-    return _gallery(n, seed, DEFAULT), -np.cumsum(steps, axis=2)
+    areas = -np.cumsum(rng.uniform(0.0, 0.3, size=(n, samples, columns)), axis=2)
+    centroids = np.cumsum(rng.uniform(0.0, 0.05, size=(n, samples, columns)), axis=2)
+    return _gallery(n, seed, DEFAULT), with_centroids(areas, centroids)
+
+
+def _shifted(profiles: np.ndarray, columns: float) -> np.ndarray:
+    """A part's (m, 2C) profiles whose radii grow by ``2^(columns / 8)`` against its
+    whole's ``profiles``: column ``c`` of each kind is the whole's ``c - columns``, linear
+    between two (the first ones: the whole's first)."""
+    width = len(grid_radii(DEFAULT))
+    at = np.arange(width) - columns
+    return np.concatenate(
+        [
+            np.stack([np.interp(at, np.arange(width), row) for row in kind])
+            for kind in (profiles[:, :width], profiles[:, width:])
+        ],
+        axis=1,
+    )
 
 
 @pytest.mark.parametrize("n", [6, 90], ids=["all-shortlisted", "coarse-first"])
@@ -229,7 +248,7 @@ def test_a_partial_search_ranks_as_the_exhaustive_product(n):
     assert found[0].id == source and scale == 1.0
     assert [set(m.scores) for m in found] == [set(weights)] * 3
     if n <= PARTS_SHORTLIST:
-        whole = compared_profiles(profiles.astype(np.float16).astype(np.float64), DEFAULT)
+        whole = compared_profiles(profiles, DEFAULT).astype(np.float16).astype(np.float64)
         per = {m: dissimilarity(query[m][None], vectors[m], "D1")[0] for m in weights if m != PARTS}
         per[PARTS] = part_dissimilarity(part, reach, whole, DEFAULT).dissimilarity
         fused = fuse(per, "product", weights)
@@ -256,13 +275,13 @@ def test_a_partial_search_of_a_metric_collection_scores_each_shape_at_its_size()
         for i in range(n)
     )
     source = 3
-    part = np.roll(profiles[source, :200], 3, axis=1).astype(np.float16).astype(np.float64)
+    part = _shifted(profiles[source, :200], 3).astype(np.float16).astype(np.float64)
     reach = np.full(200, np.inf)
     weights = query_weights(preset, 1.0)
     query = {m: vectors[m][source] for m in MODALITIES}
     query[SIZE] = np.array([2.0 ** (-3 / 8)])
     found, scale = index.partial_search(query, part, reach, weights, 6, sized=True)
-    whole = compared_profiles(profiles.astype(np.float16).astype(np.float64), preset)
+    whole = compared_profiles(profiles, preset).astype(np.float16).astype(np.float64)
     per = {m: dissimilarity(query[m][None], vectors[m], "D1")[0] for m in weights if m != PARTS}
     centres = sized_scales(2.0 ** (-3 / 8), vectors[SIZE][:, 0], preset)
     per[PARTS] = sized_dissimilarity(part, reach, whole, preset, centres).dissimilarity
@@ -294,7 +313,7 @@ def test_a_metric_partial_search_shortlists_only_shapes_that_can_hold_the_query(
         (i, {**{m: vectors[m][i] for m in vectors}, PARTS: compared_profiles(profiles[i], preset)})
         for i in range(n)
     )
-    part = np.roll(exact[:200], 3, axis=1)
+    part = _shifted(exact[:200], 3)
     query = {m: vectors[m][n - 1] for m in MODALITIES}
     query[SIZE] = np.array([2.0 ** (-3 / 8)])
     weights = query_weights(preset, 1.0)
@@ -306,7 +325,7 @@ def test_a_metric_partial_search_shortlists_only_shapes_that_can_hold_the_query(
 def test_parts_profiles_are_saved_and_loaded(tmp_path, in_file):
     """Every sample's profiles, kept in memory or in a file beside the saved index (read
     row by row; a removed shape's slot is not reused, so a saved index's rows never
-    change), and the coarse rows by position."""
+    change), and the coarse rows (the first samples' area profiles) by position."""
     vectors, profiles = _parts_gallery(5, seed=2)
     path = tmp_path / "index.parts" if in_file else None
     index = GalleryIndex(
@@ -324,7 +343,8 @@ def test_parts_profiles_are_saved_and_loaded(tmp_path, in_file):
         want = compared_profiles(profiles[item - 10], DEFAULT).astype(np.float16)
         position = loaded.store.pos[item]
         np.testing.assert_array_equal(loaded.store.parts_at(np.array([position]))[0], want)
-        np.testing.assert_array_equal(loaded.store.coarse[position], want[:COARSE_SAMPLES])
+        coarse_rows = want[:COARSE_SAMPLES, : DEFAULT.parts_radii]  # their areas alone
+        np.testing.assert_array_equal(loaded.store.coarse[position], coarse_rows)
     if in_file:  # rows added after the save go after the saved ones
         loaded.add(20, {**{m: vectors[m][0] for m in MODALITIES}, PARTS: compared})
         assert loaded.store.slots[loaded.store.pos[20]] == 5
@@ -493,9 +513,7 @@ def test_the_inverted_file_chooses_the_scale_every_shape_compared_chooses(monkey
     the same ranking (candidates compared at that scale only)."""
     rng = np.random.default_rng(9)
     index, pose, _ = _posed_index(monkeypatch, rng)
-    whole = pose(7)[:150]
-    # Column c of the part is column c - j of its whole (the first j: the whole's first).
-    part = np.concatenate([np.repeat(whole[:, :1], j, axis=1), whole[:, : whole.shape[1] - j]], 1)
+    part = _shifted(pose(7)[:150], j)
     query = ({}, part, np.full(150, np.inf), {PARTS: 1.0}, 10)
     found, scale = index.partial_search(*query)
     assert scale == 2.0 ** (j / 8) and found[0].id % 40 == 7
@@ -511,11 +529,12 @@ def test_a_scale_whose_votes_miss_its_best_shapes_is_found_by_another_scale_s_le
     part's own scale, and the ranking every shape compared gives."""
     rng = np.random.default_rng(9)
     index, pose, _ = _posed_index(monkeypatch, rng)
-    whole, shift = pose(7)[:150], 2  # columns: the part's own scale is step 2 of the grid
-    part = np.concatenate([np.repeat(whole[:, :1], shift, 1), whole[:, :-shift]], axis=1)
+    shift = 2  # columns: the part's own scale is step 2 of the grid
+    part = _shifted(pose(7)[:150], shift)
     own = np.arange(7, 400, 40)
     others = np.setdiff1d(np.arange(400), own)
-    few = coarse(part, np.full(150, np.inf), index.store.coarse[index.store.positions(others)])
+    gallery = index.store.coarse[index.store.positions(others)]
+    few = coarse(part, np.full(150, np.inf), gallery, DEFAULT)
     j = DEFAULT.parts_scale_steps * shift
     at_own_scale = scale_scores(*few[:3], DEFAULT, range(j, j + 1), rough=True)
     others = others[np.argsort(-at_own_scale[0])]  # the probe there: the farthest others
@@ -593,7 +612,8 @@ def test_twice_the_coarse_pass_s_samples_vote_while_the_candidates_are_under_the
     query = ({}, part, reach, {PARTS: 1.0}, 10)
     found, _ = index.partial_search(*query)
     clear = np.sort(np.argsort(-reach)[:voting])
-    assert np.array_equal(rows[0], samples_at_scale(part[clear], reach[clear], 0, DEFAULT)[0])
+    areas = area_profiles(part[clear], DEFAULT)  # the votes read the areas alone
+    assert np.array_equal(rows[0], samples_at_scale(areas, reach[clear], 0, DEFAULT)[0])
     assert found[0].id % 40 == 9
     assert [m.id for m in found] == _every_shape_compared(index, *query)[0]
 
@@ -608,11 +628,7 @@ def test_between_the_grid_s_steps_the_shortlist_finds_the_scale_every_shape_comp
     gives."""
     rng = np.random.default_rng(10)
     index, pose, _ = _posed_index(monkeypatch, rng)
-    whole = pose(11)[:150]
-    # Column c of the part is column c - q / 4 of its whole, linear between two (the
-    # first columns: the whole's first).
-    shifted = np.arange(whole.shape[1]) - quarters / 4
-    part = np.stack([np.interp(shifted, np.arange(whole.shape[1]), row) for row in whole])
+    part = _shifted(pose(11)[:150], quarters / 4)
     query = ({}, part, np.full(150, np.inf), {PARTS: 1.0}, 10)
     found, scale = index.partial_search(*query)
     assert scale == 2.0 ** (quarters / 32) and found[0].id % 40 == 11

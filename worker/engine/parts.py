@@ -18,6 +18,11 @@ ends or narrows, a thin limb's falling like ``1 / r``), on a grid of radii
 logarithm (:func:`ball_area_profiles`). These are the geodesic distances of the GDM
 itself, summarized per sample instead of by the whole matrix's singular values: intrinsic,
 so a pose does not move them, and area-weighted, so the triangulation hardly does.
+Beside them, on the same radii, how far each ball's centroid lies from its sample over
+the radius (:func:`ball_centroid_profiles`, about ``|H| r / 4``): extrinsic, it sees how
+the surface bends where the areas see only its Gaussian curvature. A preset compares the
+first ``parts_centroid_radii`` of them, weighted ``parts_centroid_weight``, valid where
+the areas are (:func:`compared_profiles`, :func:`samples_at_scale`).
 
 A sample's ball of radius ``r`` is the same on a part as on the whole when it does not
 reach the part's open boundary, that is when ``r`` is below the sample's *reach*, its
@@ -99,8 +104,7 @@ def grid_radii(preset: Preset) -> np.ndarray:
     every query scale."""
     if preset.parts_first_radius is None:
         return np.zeros(0)
-    columns = 2 * (preset.parts_radii - 1) + preset.parts_scales
-    return preset.parts_first_radius * 2.0 ** (np.arange(columns) / GRID_STEPS_PER_OCTAVE)
+    return _radii(preset.parts_first_radius, 2 * (preset.parts_radii - 1) + preset.parts_scales)
 
 
 def ball_area_profiles(
@@ -109,10 +113,8 @@ def ball_area_profiles(
     """Log of the area of each sample's geodesic balls over ``pi r^2``, at the radii
     ``r_i = first_radius 2^(i / 8)``, ``i < columns``.
 
-    One pass over the distances: each vertex's area goes to the first radius that
-    reaches it (``ceil(8 log2(d / r_0))`` on this geometric grid, which a binary search
-    takes ten times as long to find), and the cumulative sums are the balls' areas.
-    :func:`ball_area_profiles_reference` is the plain version.
+    One pass over the distances (:func:`_ball_sums`); :func:`ball_area_profiles_reference`
+    is the plain version.
 
     Parameters
     ----------
@@ -126,29 +128,129 @@ def ball_area_profiles(
     -------
     (m, C) float, ``log(max(a(c, r) / (pi r^2), floor))``.
     """
-    n, m = distances.shape
-    ratio = np.maximum(np.asarray(distances, dtype=np.float64), 0.0) / first_radius
-    with np.errstate(divide="ignore"):  # a sample's own vertex: log2(0) = -inf, bin 0
-        first = np.ceil(GRID_STEPS_PER_OCTAVE * np.log2(ratio))
-    first = np.clip(first, 0, columns).astype(np.int64)
-    first += (columns + 1) * np.arange(m, dtype=np.int64)[None, :]
-    per_bin = np.bincount(
-        first.ravel(),
-        weights=np.broadcast_to(np.asarray(mass, dtype=np.float64)[:, None], (n, m)).ravel(),
-        minlength=m * (columns + 1),
-    )
-    areas = np.cumsum(per_bin.reshape(m, columns + 1), axis=1)[:, :columns]
-    return _log_ratio(areas, first_radius * 2.0 ** (np.arange(columns) / GRID_STEPS_PER_OCTAVE))
+    return ball_profiles(distances, mass, first_radius, columns)[0]
 
 
 def ball_area_profiles_reference(
     distances: np.ndarray, mass: np.ndarray, first_radius: float, columns: int
 ) -> np.ndarray:
     """:func:`ball_area_profiles` by summing the vertex areas within each radius."""
-    radii = first_radius * 2.0 ** (np.arange(columns) / GRID_STEPS_PER_OCTAVE)
+    radii = _radii(first_radius, columns)
     d = np.asarray(distances, dtype=np.float64)
     areas = np.stack([mass @ (d <= r) for r in radii], axis=1)
     return _log_ratio(areas, radii)
+
+
+def ball_centroid_profiles(
+    distances: np.ndarray,
+    mass: np.ndarray,
+    positions: np.ndarray,
+    samples: np.ndarray,
+    first_radius: float,
+    columns: int,
+) -> np.ndarray:
+    """How far each sample's geodesic ball's centroid lies from the sample, over the
+    radius, ``|centroid(c, r) - x_c| / r``, on :func:`ball_area_profiles`' radii.
+
+    An integral invariant (Pottmann et al. 2007, "Principal curvatures from the integral
+    invariant viewpoint"): on a smooth surface the centroid of a small geodesic disc lies
+    ``|H| r^2 / 4`` from its centre along the normal (``H`` the mean curvature), so this
+    ratio is ``|H| r / 4``, scale-free, and averaged over the disc instead of
+    differentiated (noise moves it little). The area profiles are intrinsic; this sees
+    how the surface bends in space, which tells a limb's section from a flat back
+    (docs/decisions.md, "Default v14: the discs' centroids beside their areas").
+
+    Parameters
+    ----------
+    distances, mass, first_radius, columns : as :func:`ball_area_profiles`.
+    positions : (n, 3) float, the vertices, in the distances' unit.
+    samples : (m,) int, the vertex of each sample (each column's own).
+
+    Returns
+    -------
+    (m, C) float; :func:`ball_centroid_profiles_reference` is the plain version.
+    """
+    centroids = ball_profiles(distances, mass, first_radius, columns, positions, samples)[1]
+    assert centroids is not None
+    return centroids
+
+
+def ball_profiles(
+    distances: np.ndarray,
+    mass: np.ndarray,
+    first_radius: float,
+    columns: int,
+    positions: np.ndarray | None = None,
+    samples: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`ball_area_profiles` and, given ``positions`` and ``samples``,
+    :func:`ball_centroid_profiles` (else None), from one pass over the distances."""
+    weights = np.asarray(mass, dtype=np.float64)[:, None]
+    if positions is not None:
+        weights = weights * np.column_stack([np.ones(len(positions)), positions])
+    sums = _ball_sums(distances, weights, first_radius, columns)  # (m, C, 1 or 4)
+    radii = _radii(first_radius, columns)
+    areas = _log_ratio(sums[..., 0], radii)
+    if positions is None or samples is None:
+        return areas, None
+    offsets = sums[..., 1:] / sums[..., :1] - np.asarray(positions)[samples][:, None, :]
+    centroids: np.ndarray = np.linalg.norm(offsets, axis=2) / radii
+    return areas, centroids
+
+
+def ball_centroid_profiles_reference(
+    distances: np.ndarray,
+    mass: np.ndarray,
+    positions: np.ndarray,
+    samples: np.ndarray,
+    first_radius: float,
+    columns: int,
+) -> np.ndarray:
+    """:func:`ball_centroid_profiles` by averaging the positions within each radius."""
+    d = np.asarray(distances, dtype=np.float64)
+    out = np.empty((d.shape[1], columns))
+    for i, r in enumerate(_radii(first_radius, columns)):
+        for c in range(d.shape[1]):
+            inside = d[:, c] <= r
+            centroid = mass[inside] @ positions[inside] / mass[inside].sum()
+            out[c, i] = np.linalg.norm(centroid - positions[samples[c]]) / r
+    return out
+
+
+def _radii(first_radius: float, columns: int) -> np.ndarray:
+    radii: np.ndarray = first_radius * 2.0 ** (np.arange(columns) / GRID_STEPS_PER_OCTAVE)
+    return radii
+
+
+def _ball_sums(
+    distances: np.ndarray, weights: np.ndarray, first_radius: float, columns: int
+) -> np.ndarray:
+    """(m, C, w) the sums of each vertex's ``weights`` (n, w) over each sample's geodesic
+    balls of the radii ``first_radius 2^(i / 8)``.
+
+    One pass over the distances: each vertex goes to the first radius that reaches it
+    (``ceil(8 log2(d / r_0))`` on this geometric grid, which a binary search takes ten
+    times as long to find), and the cumulative sums are the balls'."""
+    n, m = distances.shape
+    ratio = np.maximum(np.asarray(distances, dtype=np.float64), 0.0) / first_radius
+    with np.errstate(divide="ignore"):  # a sample's own vertex: log2(0) = -inf, bin 0
+        first = np.ceil(GRID_STEPS_PER_OCTAVE * np.log2(ratio))
+    first = np.clip(first, 0, columns).astype(np.int64)
+    first += (columns + 1) * np.arange(m, dtype=np.int64)[None, :]
+    bins = first.ravel()
+    sums = np.stack(
+        [
+            np.bincount(
+                bins,
+                weights=np.broadcast_to(weight[:, None], (n, m)).ravel(),
+                minlength=m * (columns + 1),
+            )
+            for weight in np.asarray(weights, dtype=np.float64).T
+        ],
+        axis=1,
+    )
+    out: np.ndarray = np.cumsum(sums.reshape(m, columns + 1, -1), axis=1)[:, :columns]
+    return out
 
 
 def _log_ratio(areas: np.ndarray, radii: np.ndarray) -> np.ndarray:
@@ -176,10 +278,30 @@ def boundary_reach(distances: np.ndarray, boundary: np.ndarray) -> np.ndarray:
 
 
 def compared_profiles(profiles: np.ndarray, preset: Preset) -> np.ndarray:
-    """(..., m, K) of wholes' (..., m, C) profiles: the radii a query's are compared with (every
-    second column of the grid; a gallery keeps only these)."""
-    compared: np.ndarray = profiles[..., 0 : 2 * preset.parts_radii : 2]
-    return compared
+    """(..., m, K + K') of wholes' (..., m, C) or (..., m, 2C) profiles: the radii a query's
+    are compared with (every second column of the grid; a gallery keeps only these), the
+    areas' ``parts_radii`` and, when the preset compares them, the first
+    ``parts_centroid_radii`` of the centroids' (:func:`with_centroids`) times their
+    weight."""
+    areas: np.ndarray = profiles[..., 0 : 2 * preset.parts_radii : 2]
+    if not preset.parts_centroid_radii:
+        return areas
+    first = len(grid_radii(preset))
+    centroids = profiles[..., first : first + 2 * preset.parts_centroid_radii : 2]
+    return np.concatenate([areas, preset.parts_centroid_weight * centroids], axis=-1)
+
+
+def with_centroids(areas: np.ndarray, centroids: np.ndarray | None) -> np.ndarray:
+    """A descriptor's parts profiles: (m, C) :func:`ball_area_profiles`, followed by the
+    (m, C) :func:`ball_centroid_profiles` on the same radii when there are any."""
+    return areas if centroids is None else np.concatenate([areas, centroids], axis=-1)
+
+
+def area_profiles(profiles: np.ndarray, preset: Preset) -> np.ndarray:
+    """(..., m, C) the area profiles of a query's (..., m, C) or (..., m, 2C)
+    (:func:`with_centroids`): what the passes that shortlist compare."""
+    areas: np.ndarray = profiles[..., : len(grid_radii(preset))]
+    return areas
 
 
 #: Samples a coarse comparison keeps of a query and of each candidate (:func:`coarse`).
@@ -194,19 +316,20 @@ def clearest(reach: np.ndarray, count: int) -> np.ndarray:
 
 
 def coarse(
-    profiles: np.ndarray, reach: np.ndarray, gallery: np.ndarray
+    profiles: np.ndarray, reach: np.ndarray, gallery: np.ndarray, preset: Preset
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A query and candidates cut down for a coarse first comparison that shortlists
     candidates: the query's ``COARSE_SAMPLES`` samples farthest from its boundary
     (:func:`clearest`), and each candidate's first ``COARSE_SAMPLES`` samples (spread over
-    its surface by the same farthest-point order).
+    its surface by the same farthest-point order), their area profiles alone.
 
     Returns
     -------
     profiles (q', C), reach (q',), gallery (n, m'', K).
     """
     keep = clearest(reach, COARSE_SAMPLES)
-    return profiles[keep], reach[keep], gallery[:, :COARSE_SAMPLES]
+    areas = area_profiles(profiles[keep], preset)
+    return areas, reach[keep], gallery[:, :COARSE_SAMPLES, : preset.parts_radii]
 
 
 def part_dissimilarity(
@@ -262,13 +385,14 @@ def scale_scores(
     if n == 0 or not compared:
         return out
     asked = [(query, within.astype(np.float64)) for _, _, query, within in compared]
+    radii = preset.parts_radii
     if rough:
         found = _nearest_squared_rough(flat, asked, per_shape)
     else:
-        rows = _GalleryRows(flat)
+        rows = _GalleryRows(flat, radii)
         found = [_nearest_squared(query, valid, rows, n, per_shape) for query, valid in asked]
     for (row, j, _, within), nearest in zip(compared, found, strict=True):
-        used = within.sum(axis=1).astype(np.float64)
+        used = within[:, :radii].sum(axis=1).astype(np.float64)
         rms = np.sqrt(np.maximum(nearest, 0.0) / used[:, None])
         out[row] = used @ rms / used.sum() + prior * np.log(_scale(j, preset))
     return out
@@ -359,18 +483,28 @@ def samples_at_scale(
     :func:`scale_columns` (linear between two columns of the grid, which is geometric:
     linear in ``log r``) and (q', K) bool, which of those radii are within the sample's
     reach and the profiles' last column (past ``parts_scales``, the largest are not);
-    samples with fewer than ``parts_min_radii`` of them left out."""
+    samples with fewer than ``parts_min_radii`` of them left out. Profiles with their
+    centroids (:func:`with_centroids`) add the first ``parts_centroid_radii`` of those
+    radii's centroid profiles, times their weight, valid where the areas are:
+    (q', K + K') both."""
     columns = scale_columns(j, preset)
-    last = profiles.shape[1] - 1
+    first = len(grid_radii(preset))
+    last = min(profiles.shape[1], first) - 1
     below = np.minimum(np.floor(columns).astype(np.int64), last)
     above = np.minimum(below + 1, last)
     fraction = columns - np.floor(columns)
     radii = grid_radii(preset)[0] * 2.0 ** (columns / GRID_STEPS_PER_OCTAVE)
     within = (radii[None, :] <= reach[:, None]) & (columns <= last)[None, :]
     keep = within.sum(axis=1) >= preset.parts_min_radii
-    kept = profiles[keep]
+    kept, within = profiles[keep], within[keep]
     at = kept[:, below] * (1.0 - fraction) + kept[:, above] * fraction
-    return at, within[keep]
+    count = preset.parts_centroid_radii
+    if count and profiles.shape[1] > first:
+        low, high, share = first + below[:count], first + above[:count], fraction[:count]
+        centroids = kept[:, low] * (1.0 - share) + kept[:, high] * share
+        at = np.concatenate([at, preset.parts_centroid_weight * centroids], axis=1)
+        within = np.concatenate([within, within[:, :count]], axis=1)
+    return at, within
 
 
 def best_scale(scores: np.ndarray, preset: Preset, scales: range | None = None) -> PartsMatch:
@@ -417,21 +551,26 @@ def _to_single(rows: np.ndarray, out: np.ndarray, signs: np.ndarray) -> None:
 
 
 class _GalleryRows:
-    """Candidates' samples as :func:`_nearest_squared` reads them at every scale: (N, K)
-    as stored (float16 or wider: the exact distances are computed from these values in
+    """Candidates' samples as :func:`_nearest_squared` reads them at every scale: (N, K +
+    K') as stored (float16 or wider: the exact distances are computed from these values in
     double precision), in single precision, and the single's sums of squares over the
-    first radii, for each count of radii asked for."""
+    first radii (the first ``radii`` columns are the areas', any after them the
+    centroids' of the first radii), for each count of radii asked for."""
 
-    def __init__(self, rows: np.ndarray) -> None:
+    def __init__(self, rows: np.ndarray, radii: int) -> None:
         self.exact = rows
+        self.radii = radii
         self.single = np.empty(rows.shape, dtype=np.float32)
         _to_single(rows, self.single, np.empty(rows.shape, dtype=np.uint32))
         self._squares: dict[int, np.ndarray] = {}
 
     def squares(self, count: int) -> np.ndarray:
-        """(N,) ``sum_{k < count} y_k^2`` in single precision."""
+        """(N,) ``sum y_k^2`` in single precision over the first ``count`` radii's
+        columns."""
         if count not in self._squares:
-            first = self.single[:, :count]
+            centroids = min(count, self.exact.shape[1] - self.radii)
+            columns = np.concatenate([np.arange(count), self.radii + np.arange(centroids)])
+            first = self.single[:, columns]
             self._squares[count] = np.einsum("nk,nk->n", first, first)
         return self._squares[count]
 
@@ -444,13 +583,14 @@ def _nearest_squared(
 
     The nearest row is found in single precision by one matrix product per block, the
     expansion ``|q|^2 - 2 q.y + |y|^2`` (a row's valid radii are the first ones, those
-    within its reach, so the candidates' ``sum_k valid_ck y_k^2`` is one vector for all
+    within its reach, and its valid centroids those radii's, so the candidates'
+    ``sum_k valid_ck y_k^2`` is one vector for all
     query rows with as many valid radii: the rows are taken in that order and each group
     adds its vector), and its distance is computed again in double precision from the
     difference: the expansion's rounding never reaches the result, only which of two
     rows within it of each other is nearest.
     """
-    counts = valid.sum(axis=1).astype(np.int64)
+    counts = valid[:, : rows.radii].sum(axis=1).astype(np.int64)
     order = np.argsort(counts, kind="stable")
     query, valid, counts = query[order], valid[order], counts[order]
     weighted = (-2.0 * valid * query).astype(np.float32)  # |q|^2 left out: the same
@@ -529,6 +669,11 @@ def part_dissimilarity_reference(
     """:func:`part_dissimilarity` by direct differences, one sample pair at a time."""
     grid = grid_radii(preset)
     steps = preset.parts_scale_steps
+    areas, centroids = profiles[:, : len(grid)], profiles[:, len(grid) :]
+
+    def value(row: np.ndarray, column: float) -> float:
+        i, t = int(column), column - int(column)
+        return float(row[i] if t == 0 else (1 - t) * row[i] + t * row[i + 1])
 
     def at_scale(j: int) -> list[float] | None:
         samples = []
@@ -536,16 +681,20 @@ def part_dissimilarity_reference(
             at, clear = [], []
             for k in range(preset.parts_radii):
                 column = j / steps + 2 * k
-                if column > profiles.shape[1] - 1:  # past the profiles' last radius
+                if column > len(grid) - 1:  # past the profiles' last radius
                     at.append(0.0)
                     clear.append(False)
                     continue
-                i, t = int(column), column - int(column)
-                below = profiles[c, i]
-                at.append(below if t == 0 else (1 - t) * below + t * profiles[c, i + 1])
+                at.append(value(areas[c], column))
                 clear.append(grid[0] * 2.0 ** (column / GRID_STEPS_PER_OCTAVE) <= reach[c])
+            if centroids.size:  # the first radii's centroids, valid where their areas are
+                for k in range(preset.parts_centroid_radii):
+                    column = j / steps + 2 * k
+                    centroid = preset.parts_centroid_weight * value(centroids[c], column)
+                    at.append(centroid if clear[k] else 0.0)
+                    clear.append(clear[k])
             valid = np.array(clear)
-            if valid.sum() >= preset.parts_min_radii:
+            if valid[: preset.parts_radii].sum() >= preset.parts_min_radii:
                 samples.append((np.array(at)[valid], valid))
         if not samples:
             return None
@@ -554,9 +703,10 @@ def part_dissimilarity_reference(
             total = weight = 0.0
             for values, valid in samples:
                 whole = candidate[:, valid]
-                nearest = np.min(np.mean((whole - values) ** 2, axis=1))
-                total += valid.sum() * np.sqrt(nearest)
-                weight += valid.sum()
+                used = valid[: preset.parts_radii].sum()
+                nearest = np.min(np.sum((whole - values) ** 2, axis=1)) / used
+                total += used * np.sqrt(nearest)
+                weight += used
             prior = preset.parts_scale_prior * np.log(2.0 ** (j / (steps * GRID_STEPS_PER_OCTAVE)))
             scores.append(total / weight + prior)
         return scores

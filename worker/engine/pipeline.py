@@ -44,7 +44,12 @@ from .modal import (
     small_ddt,
     voronoi_areas,
 )
-from .parts import ball_area_profiles, boundary_reach, grid_radii
+from .parts import (
+    ball_profiles,
+    boundary_reach,
+    grid_radii,
+    with_centroids,
+)
 from .presets import Preset
 from .resample import resample_mesh
 from .scans import grid_sight, unshadowed
@@ -83,7 +88,11 @@ def _made_two_sided(preset: Preset, facing: float) -> bool:
 
 
 def parts_descriptor(
-    resampled: Mesh, sample_distances: np.ndarray, vertex_areas: np.ndarray, preset: Preset
+    resampled: Mesh,
+    samples: np.ndarray,
+    sample_distances: np.ndarray,
+    vertex_areas: np.ndarray,
+    preset: Preset,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The parts modality (:mod:`~worker.engine.parts`) of a resampled surface in its
     canonical frame, from the GDM's sample distances.
@@ -95,13 +104,20 @@ def parts_descriptor(
 
     Returns
     -------
-    profiles : (m, C) float16, log geodesic-ball area profiles on the preset's grid.
+    profiles : (m, C) float16, log geodesic-ball area profiles on the preset's grid,
+        followed by their balls' centroid profiles when the preset compares them
+        (:func:`~worker.engine.parts.with_centroids`, (m, 2C)).
     reach : (m,) float, each sample's distance to the open boundary, in square roots of
         the area (``inf`` when the surface is closed).
     """
     unit = float(np.sqrt(vertex_areas.sum()))
     radii = grid_radii(preset)
-    profiles = ball_area_profiles(sample_distances, vertex_areas, radii[0] * unit, len(radii))
+    first = radii[0] * unit
+    positions = resampled.vertices if preset.parts_centroid_radii else None
+    profiles, centroids = ball_profiles(
+        sample_distances, vertex_areas, first, len(radii), positions, samples
+    )
+    profiles = with_centroids(profiles, centroids)
     loops = boundary_loops(resampled)
     boundary = np.unique(np.concatenate([loops.start, loops.end]))
     return profiles.astype(np.float16), boundary_reach(sample_distances, boundary) / unit
@@ -240,7 +256,7 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
     lap("modal")
     parts, reach = np.zeros((0, 0), dtype=np.float16), np.zeros(0)
     if preset.has_parts:
-        parts, reach = parts_descriptor(described, gdm, ops.vertex_areas, preset)
+        parts, reach = parts_descriptor(described, samples, gdm, ops.vertex_areas, preset)
         lap("parts")
     return ShapeDescriptor(
         preset=preset.name,

@@ -125,6 +125,10 @@ class Preset:
         its columns the profiles are interpolated).
     parts_scale_prior : ``lambda`` of the prior ``lambda log s`` against shrinking a whole.
     parts_min_radii : a query sample with fewer radii clear of its boundary is left out.
+    parts_centroid_radii : the first radii compared that also compare the discs'
+        centroids (:func:`worker.engine.parts.ball_centroid_profiles`); 0: areas only.
+    parts_centroid_weight : the centroid profiles' weight beside the areas' (``w``: each
+        difference of a centroid profile counts as ``w`` times one of an area profile).
     partial_loop : the query's longest open boundary loop (in square roots of its area)
         from which it starts to look partial, and at which it looks wholly so
         (:func:`worker.engine.compare.partiality`).
@@ -182,6 +186,8 @@ class Preset:
     parts_scale_steps: int = 1
     parts_scale_prior: float = 0.02
     parts_min_radii: int = 3
+    parts_centroid_radii: int = 0
+    parts_centroid_weight: float = 0.0
     partial_loop: tuple[float, float] = (0.1, 0.3)
     normalize_scale: bool = True
     dissimilarity: Dissimilarity = "D2"
@@ -240,6 +246,10 @@ class Preset:
             raise ValueError("parts_extra_scales: a number of steps of the grid, from 0")
         if self.parts_scale_steps < 1:
             raise ValueError("parts_scale_steps: at least one query scale per step of the grid")
+        if not 0 <= self.parts_centroid_radii <= self.parts_radii:
+            raise ValueError("parts_centroid_radii: from 0 up to parts_radii")
+        if (self.parts_centroid_radii > 0) != (self.parts_centroid_weight > 0):
+            raise ValueError("parts_centroid_radii and parts_centroid_weight come together")
         if not 0.0 <= self.partial_loop[0] < self.partial_loop[1]:
             raise ValueError("partial_loop must rise from a non-negative start")
 
@@ -249,10 +259,11 @@ class Preset:
         return self.parts_first_radius is not None
 
     def parts_shape(self) -> tuple[int, int] | None:
-        """(samples, compared radii) of a whole's parts profiles; None without parts."""
+        """(samples, compared values) of a whole's parts profiles, the areas' radii and
+        the centroids'; None without parts."""
         if self.parts_first_radius is None or self.gdm_samples is None:
             return None
-        return self.gdm_samples, self.parts_radii
+        return self.gdm_samples, self.parts_radii + self.parts_centroid_radii
 
     def weight(self, modality: str) -> float:
         return self.fusion_weights.get(modality, 1.0)
