@@ -101,22 +101,22 @@ class GalleryVectors:
     parts_shape : (m, K) of a shape's compared parts profiles; None: no parts.
     parts_path : the file of every sample's profiles (:class:`PartsRows`); None: in memory.
     coarse_values : the first values of each sample the coarse rows keep (the area
-        profiles', :func:`worker.engine.parts.coarse`); None: all ``K``.
+        profiles', :func:`worker.engine.parts.coarse`).
     """
 
     def __init__(
         self,
         dims: Mapping[str, int],
-        parts_shape: tuple[int, int] | None = None,
-        parts_path: Path | None = None,
-        coarse_values: int | None = None,
+        parts_shape: tuple[int, int] | None,
+        parts_path: Path | None,
+        coarse_values: int,
     ) -> None:
         self.dims = dict(dims)
         self.parts_shape = parts_shape
         m, k = parts_shape or (0, 0)
         # The first samples of each shape by position, and every sample's by slot.
-        width = k if coarse_values is None else min(k, coarse_values)
-        self.coarse = np.empty((INITIAL_CAPACITY, min(m, COARSE_SAMPLES), width), dtype=np.float16)
+        shape = (INITIAL_CAPACITY, min(m, COARSE_SAMPLES), min(k, coarse_values))
+        self.coarse = np.empty(shape, dtype=np.float16)
         self.rows = PartsRows((m, k), parts_path) if parts_shape else None
         self.slots = np.full(INITIAL_CAPACITY, -1, dtype=np.int64)
         self.modalities = tuple(m for m in (*MODALITIES, SIZE) if m in self.dims)
