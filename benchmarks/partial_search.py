@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from app.gallery.index import GalleryIndex
+from app.gallery.index import GalleryIndex, Match
 from app.gallery.persistence import FORMAT_VERSION, load_index, save_index
 from app.gallery.service import descriptor_vectors, flat_vectors
 from app.gallery.words import (
@@ -309,16 +309,18 @@ def measure_gallery(
         top10: list[float] = []
         as_good: list[bool] = []  # this search's first at most the exhaustive first's score
         own: list[tuple[bool, bool]] = []  # the query's object first: this search, exhaustive
+        answers: list[list[Match]] = []  # each timed partial search's matches
         queries = [
             (
                 {m: np.asarray(v) for m, v in query["flat"].items()},
                 np.asarray(query["profiles"]),
                 np.asarray(query["reach"]),
                 query["weights"],
+                query["object"],
             )
             for query in made["queries"]
         ]
-        for q, (flat, profiles, reach, weights) in enumerate(queries):
+        for q, (flat, profiles, reach, weights, _) in enumerate(queries):
             if q == 0:  # warm-up
                 index.search(flat, 10)
                 index.partial_search(flat, profiles, reach, weights, 10)
@@ -326,14 +328,13 @@ def measure_gallery(
             index.search(flat, 10)
             whole_ms.append(1000 * (time.perf_counter() - start))
             start = time.perf_counter()
-            index.partial_search(flat, profiles, reach, weights, 10)
+            answers.append(index.partial_search(flat, profiles, reach, weights, 10)[0])
             partial_ms.append(1000 * (time.perf_counter() - start))
         # After the timed queries: an exhaustive pass reads every shape's rows and would
         # leave the next timed query's caches cold.
-        for (flat, profiles, reach, weights), query in list(
-            zip(queries, made["queries"], strict=True)
-        )[:exhaustive_queries]:
-            first = index.partial_search(flat, profiles, reach, weights, 10)[0]
+        for (flat, profiles, reach, weights, obj), first in zip(
+            queries[:exhaustive_queries], answers, strict=False
+        ):
             words, index.words = index.words, None
             best = index.partial_search(flat, profiles, reach, weights, 10)[0]
             index.words = words
@@ -341,7 +342,7 @@ def measure_gallery(
             top1.append(found[0] == every[0])
             as_good.append(first[0].score <= best[0].score * (1 + 1e-9))
             top10.append(len(set(found) & set(every)) / len(every))
-            own.append((found[0] // POSES == query["object"], every[0] // POSES == query["object"]))
+            own.append((found[0] // POSES == obj, every[0] // POSES == obj))
         return {
             "size": size,
             "p50_ms": float(np.percentile(partial_ms, 50)),
