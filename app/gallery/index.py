@@ -88,6 +88,7 @@ from worker.engine.parts import (
     can_hold,
     clearest,
     coarse,
+    led_part_dissimilarity,
     samples_at_scale,
     scale_count,
     scale_scores,
@@ -503,9 +504,11 @@ class GalleryIndex:
         ``WORD_MAX_CANDIDATES``), scored at that scale only (:meth:`_word_candidates`).
         The best ``max(PARTS_SHORTLIST, 2 k)`` by that product are scored with every
         sample, their scale chosen among the chosen one and the ``SHORTLIST_SCALES`` on
-        either side of it, or with ``sized``, each shape's near the scale its size and the
-        query's imply (:func:`~worker.engine.parts.sized_dissimilarity`), the shortlist
-        then drawn from the shapes large enough to hold the query.
+        either side of it (the best there compared at each, the rest where those choose:
+        :func:`~worker.engine.parts.led_part_dissimilarity`), or with ``sized``, each
+        shape's near the scale its size and the query's imply
+        (:func:`~worker.engine.parts.sized_dissimilarity`), the shortlist then drawn from
+        the shapes large enough to hold the query.
 
         Parameters
         ----------
@@ -568,7 +571,9 @@ class GalleryIndex:
                     max(0, rough_parts.j - SHORTLIST_SCALES),
                     min(scale_count(self.preset), rough_parts.j + SHORTLIST_SCALES + 1),
                 )
-                found = self._parts_scores(profiles, reach, shortlisted, tried)
+                found = led_part_dissimilarity(
+                    profiles, reach, shortlisted, self.preset, tried, rough_parts.j
+                )
             per[PARTS] = found.dissimilarity
             fused = np.asarray(fuse(per, "product", dict(weights)), dtype=np.float64)
             ids = self.store.ids[positions]

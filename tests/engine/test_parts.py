@@ -27,6 +27,7 @@ from worker.engine.parts import (
     compared_by_size,
     compared_profiles,
     grid_radii,
+    led_part_dissimilarity,
     part_dissimilarity,
     part_dissimilarity_reference,
     scale_count,
@@ -181,6 +182,53 @@ def test_the_exact_pass_over_several_blocks_matches_the_plain_reference():
     plain = part_dissimilarity_reference(query, reach, gallery, DEFAULT, scales)
     np.testing.assert_allclose(fast.dissimilarity, plain.dissimilarity, rtol=1e-9)
     assert fast.scale == plain.scale
+
+
+def test_a_shortlist_led_by_its_best_finds_the_scale_every_scale_finds():
+    """Parts of one of 40 candidates (float16, as a gallery keeps them), scaled up as
+    their area would be: started from the coarse pass's scale, a few leaders compared at
+    every scale find the scale and the dissimilarities of every candidate compared at every
+    scale, exactly, including when the coarse pass started them a scale away."""
+    rng = np.random.default_rng(8)
+    wholes = _profiles(rng, 40, 120)
+    gallery = compared_profiles(wholes, DEFAULT).astype(np.float16)
+    for trial in range(6):
+        part = np.roll(wholes[trial, rng.choice(120, size=60, replace=False)], trial % 3, axis=1)
+        reach = np.where(rng.random(60) < 0.5, np.inf, rng.uniform(0.1, 1.5, size=60))
+        rough = part_dissimilarity(*coarse(part, reach, gallery, DEFAULT), DEFAULT)
+        start = min(rough.j + trial % 2, scale_count(DEFAULT) - 1)
+        scales = range(max(0, start - 3), min(scale_count(DEFAULT), start + 4))
+        every = part_dissimilarity(part, reach, gallery, DEFAULT, scales)
+        led = led_part_dissimilarity(part, reach, gallery, DEFAULT, scales, start, leaders=2)
+        assert led.j == every.j
+        np.testing.assert_allclose(led.dissimilarity, every.dissimilarity, rtol=1e-12)
+
+
+def test_a_shortlist_led_by_its_best_compares_a_rival_at_every_scale():
+    """A candidate that is no leader at the starting scale but matches best at the scale
+    the leaders choose is compared at every scale too: the scale is the one where it
+    matches best, as when every candidate is compared at every scale."""
+    rng = np.random.default_rng(9)
+    wholes = _profiles(rng, 6, 80)
+    part = np.roll(wholes[4, :30], 2, axis=1)  # the part of shape 4, two scales up
+    gallery = compared_profiles(wholes, DEFAULT)
+    reach = np.full(30, np.inf)
+    every = part_dissimilarity(part, reach, gallery, DEFAULT)
+    assert np.argmin(every.dissimilarity) == 4
+    scales = range(scale_count(DEFAULT))
+    at_first = scale_scores(part, reach, gallery, DEFAULT, range(1))[0]
+    assert np.argmin(at_first) != 4  # at scale 0 another candidate leads
+    led = led_part_dissimilarity(part, reach, gallery, DEFAULT, scales, 0, leaders=1)
+    assert led.j == every.j
+    np.testing.assert_allclose(led.dissimilarity, every.dissimilarity, rtol=1e-12)
+
+
+def test_a_shortlist_with_no_sample_clear_of_the_boundary_matches_nothing():
+    rng = np.random.default_rng(10)
+    gallery = compared_profiles(_profiles(rng, 5, 40), DEFAULT)
+    part = _profiles(rng, 1, 20)[0]
+    led = led_part_dissimilarity(part, np.full(20, 1e-6), gallery, DEFAULT, range(2, 9), 5)
+    assert np.isinf(led.dissimilarity).all() and led.scale == 1.0
 
 
 def test_float16_rows_are_widened_exactly():

@@ -357,6 +357,60 @@ def part_dissimilarity(
     return best_scale(scale_scores(profiles, reach, gallery, preset, scales), preset, scales)
 
 
+#: Candidates a shortlist compares at every scale tried: the best at the scale a coarse
+#: pass chose, and those within ``SCALE_RIVAL_MARGIN`` of the best match at the scale they
+#: choose (:func:`led_part_dissimilarity`).
+SCALE_LEADERS = 8
+SCALE_RIVAL_MARGIN = 0.01
+
+
+def led_part_dissimilarity(
+    profiles: np.ndarray,
+    reach: np.ndarray,
+    gallery: np.ndarray,
+    preset: Preset,
+    scales: range,
+    start: int,
+    leaders: int = SCALE_LEADERS,
+    margin: float = SCALE_RIVAL_MARGIN,
+) -> PartsMatch:
+    """:func:`part_dissimilarity` over ``scales`` for a shortlist whose best scale a
+    coarse pass put at ``start`` (one of ``scales``), comparing most candidates at one or
+    two scales instead of all: every candidate at ``start``, its ``leaders`` best there
+    at every scale, then every candidate at the best scale found; a candidate that scores
+    within ``margin`` (relative) of the best match there is compared at every scale as
+    well, and so on until none is left. The dissimilarities are
+    :func:`part_dissimilarity`'s at the scale chosen; the scale is its, unless a
+    candidate compared at fewer scales would have matched best at one where it was not
+    compared (docs/decisions.md, "The shortlist's scale chosen by its leaders")."""
+    start_row = scales.index(start)
+    scores = np.full((len(scales), len(gallery)), np.inf)
+    done = np.zeros(scores.shape, dtype=bool)
+
+    def compare(rows: range, columns: np.ndarray) -> None:
+        if len(rows) and len(columns):
+            scores[rows.start : rows.stop, columns] = scale_scores(
+                profiles, reach, gallery[columns], preset, scales[rows.start : rows.stop]
+            )
+            done[rows.start : rows.stop, columns] = True
+
+    compare(range(start_row, start_row + 1), np.arange(len(gallery)))
+    leading = np.argsort(scores[start_row], kind="stable")[:leaders]
+    compare(range(start_row), leading)
+    compare(range(start_row + 1, len(scales)), leading)
+    while True:
+        row = int(np.argmin(scores.min(axis=1)))
+        compare(range(row, row + 1), np.flatnonzero(~done[row]))
+        best = scores.min()
+        if not np.isfinite(best):  # no sample of the query compared at any scale
+            break
+        rivals = np.flatnonzero((scores[row] <= best * (1 + margin)) & ~done.all(axis=0))
+        if not len(rivals):
+            break
+        compare(range(len(scales)), rivals)
+    return best_scale(scores, preset, scales)
+
+
 def scale_scores(
     profiles: np.ndarray,
     reach: np.ndarray,
