@@ -15,6 +15,7 @@ from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.mesh_io import Mesh, clean_mesh, load_mesh
 from worker.engine.parts import (
     GRID_STEPS_PER_OCTAVE,
+    _least_row,
     _to_single,
     ball_area_profiles,
     ball_area_profiles_reference,
@@ -239,6 +240,14 @@ def test_float16_rows_are_widened_exactly():
     out = np.empty(rows.shape, dtype=np.float32)
     _to_single(rows, out, np.empty(rows.shape, dtype=np.uint32))
     np.testing.assert_array_equal(out.view(np.uint32), rows.astype(np.float32).view(np.uint32))
+
+
+def test_the_least_row_by_halving_is_numpys_minimum():
+    """Every count of rows, odd ones overlapping by one as they are halved."""
+    rng = np.random.default_rng(11)
+    for rows in range(1, 70):
+        values = rng.normal(size=(5, rows, 7)).astype(np.float32)
+        np.testing.assert_array_equal(_least_row(values), values.min(axis=1))
 
 
 def test_a_rough_pass_scores_as_the_exact_one_to_single_precision():
