@@ -133,6 +133,11 @@ PROBE_LEADERS = 4
 #: exhaustive ranking's first less often; at the cap the candidates hold it already, and
 #: the votes, which cost in proportion to the gallery, keep the coarse pass's samples).
 VOTE_SAMPLES = 128
+#: Beside the inverted file's candidates once they reach WORD_MAX_CANDIDATES, the best of
+#: the query searched as a whole (the preset's fusion), one in WHOLE_SHARE of as many
+#: (docs/decisions.md, "A million's partial candidates from its whole search too": below
+#: the cap the votes' candidates already hold them).
+WHOLE_SHARE = 8
 #: Query scales on either side of the coarse pass's that the shortlist tries (with the
 #: preset's four scales to a step of the grid, three quarters of a step: at 100,000 shapes
 #: the whole step agrees with the exhaustive ranking no more often, half of it less
@@ -546,6 +551,11 @@ class GalleryIndex:
                 scales, found_ids = self._word_candidates(
                     (areas, reach[voters]), few[:2], count, excluded
                 )
+                if count == WORD_MAX_CANDIDATES:
+                    # Fewer than one shape in WORD_SHARE: the whole query's best join them
+                    # (a part's whole-surface vectors still point at its object).
+                    whole = self.search(query, count // WHOLE_SHARE, exclude=excluded.tolist())
+                    found_ids = np.union1d(found_ids, np.array([m.id for m in whole], np.int64))
                 positions = np.sort(self.store.positions(found_ids))
             else:
                 positions = np.flatnonzero(~np.isin(self.store.ids[:n], excluded))

@@ -596,7 +596,7 @@ def test_twice_the_coarse_pass_s_samples_vote_while_the_candidates_are_under_the
     pass's ``COARSE_SAMPLES``. Either way the answer is the one every shape compared
     gives."""
     rng = np.random.default_rng(12)
-    index, pose, _ = _posed_index(monkeypatch, rng)
+    index, pose, vectors = _posed_index(monkeypatch, rng)
     monkeypatch.setattr(index_module, "WORD_MAX_CANDIDATES", cap)
     assert index.words is not None
     rows: list[np.ndarray] = []
@@ -609,13 +609,31 @@ def test_twice_the_coarse_pass_s_samples_vote_while_the_candidates_are_under_the
     monkeypatch.setattr(index.words, "voted", spy)
     part = pose(9)[:300]
     reach = 10.0 + rng.permutation(300)  # every radius clear, each sample its own reach
-    query = ({}, part, reach, {PARTS: 1.0}, 10)
+    query = ({m: vectors[m][9] for m in MODALITIES}, part, reach, {PARTS: 1.0}, 10)
     found, _ = index.partial_search(*query)
     clear = np.sort(np.argsort(-reach)[:voting])
     areas = area_profiles(part[clear], DEFAULT)  # the votes read the areas alone
     assert np.array_equal(rows[0], samples_at_scale(areas, reach[clear], 0, DEFAULT)[0])
     assert found[0].id % 40 == 9
     assert [m.id for m in found] == _every_shape_compared(index, *query)[0]
+
+
+@pytest.mark.parametrize(("share", "joined"), [(8, True), (10**9, False)])
+def test_at_the_cap_the_whole_query_s_best_join_the_voted_candidates(monkeypatch, share, joined):
+    """Once the inverted file's candidates reach ``WORD_MAX_CANDIDATES``, the best
+    ``count / WHOLE_SHARE`` of the query searched as a whole are candidates as well: a
+    shape whose flat vectors are the query's, though its parts are another object's and
+    the votes leave it out, is found first when the product weighs the flat modalities."""
+    rng = np.random.default_rng(13)
+    index, pose, vectors = _posed_index(monkeypatch, rng)
+    monkeypatch.setattr(index_module, "WORD_MAX_CANDIDATES", 32)
+    monkeypatch.setattr(index_module, "WHOLE_SHARE", share)
+    flat = {m: vectors[m][17] for m in MODALITIES}  # shape 17: object 17, pose 0
+    weights = {"ddt": 0.25, PARTS: 0.5, "spectrum": 0.5}
+    found, _ = index.partial_search(flat, pose(3)[:150], np.full(150, np.inf), weights, 10)
+    assert (found[0].id == 17) is joined
+    if not joined:
+        assert found[0].id % 40 == 3  # the votes' object
 
 
 @pytest.mark.parametrize("quarters", [3, 10, 18])
