@@ -137,7 +137,7 @@ VOTE_SAMPLES = 128
 #: the query searched as a whole (the preset's fusion), one in WHOLE_SHARE of as many
 #: (docs/decisions.md, "A million's partial candidates from its whole search too": below
 #: the cap the votes' candidates already hold them).
-WHOLE_SHARE = 8
+WHOLE_SHARE = 16
 #: Query scales on either side of the coarse pass's that the shortlist tries (with the
 #: preset's four scales to a step of the grid, three quarters of a step: at 100,000 shapes
 #: the whole step agrees with the exhaustive ranking no more often, half of it less
@@ -506,7 +506,8 @@ class GalleryIndex:
         grid, the scale of the best match chosen; from ``WORDS_FROM`` shapes, the
         inverted file of the samples' profiles (:mod:`.words`) chooses the scale and
         ``n / WORD_SHARE`` candidates (from ``WORD_CANDIDATES`` to
-        ``WORD_MAX_CANDIDATES``), scored at that scale only (:meth:`_word_candidates`).
+        ``WORD_MAX_CANDIDATES``, with the whole query's best ``count / WHOLE_SHARE`` at
+        the cap), scored at that scale only (:meth:`_word_candidates`).
         The best ``max(PARTS_SHORTLIST, 2 k)`` by that product are scored with every
         sample, their scale chosen among the chosen one and the ``SHORTLIST_SCALES`` on
         either side of it (the best there compared at each, the rest where those choose:

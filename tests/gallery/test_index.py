@@ -618,7 +618,7 @@ def test_twice_the_coarse_pass_s_samples_vote_while_the_candidates_are_under_the
     assert [m.id for m in found] == _every_shape_compared(index, *query)[0]
 
 
-@pytest.mark.parametrize(("share", "joined"), [(8, True), (10**9, False)])
+@pytest.mark.parametrize(("share", "joined"), [(16, True), (10**9, False)])
 def test_at_the_cap_the_whole_query_s_best_join_the_voted_candidates(monkeypatch, share, joined):
     """Once the inverted file's candidates reach ``WORD_MAX_CANDIDATES``, the best
     ``count / WHOLE_SHARE`` of the query searched as a whole are candidates as well: a
