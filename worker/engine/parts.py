@@ -407,7 +407,8 @@ def led_part_dissimilarity(
         rivals = np.flatnonzero((scores[row] <= best * (1 + margin)) & ~done.all(axis=0))
         if not len(rivals):
             break
-        compare(range(len(scales)), rivals)
+        compare(range(row), rivals)  # their row is compared already
+        compare(range(row + 1, len(scales)), rivals)
     return best_scale(scores, preset, scales)
 
 
