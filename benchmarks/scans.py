@@ -6,7 +6,8 @@ For each size, the walk-through's quadruped-3 seen from its left side by an orth
 depth grid of about ``--pixels`` pixels on it (as ``examples/partial/quadruped-3-depth``
 was made), written as an organized PCD (ascii, binary), as a structured E57 scan, as its
 points without the grid (in another order, in the camera's frame: an XYZ text file and a
-binary PLY of vertices), and its surface (what :func:`~worker.engine.scans.read_pcd`
+binary PLY of vertices; the PLY's points also turned out of that frame, so that they lie
+on no pixel lattice), and its surface (what :func:`~worker.engine.scans.read_pcd`
 makes of the binary file) as an OFF mesh: a mesh of the same size. Each file is described by
 :func:`~worker.engine.pipeline.describe_file` ``--repeats`` times, the files' order
 alternated, in one process; the table gives the median load (read, triangulate, clean)
@@ -46,6 +47,14 @@ def points_ply(points: np.ndarray) -> bytes:
     return header.encode() + points.astype("<f4").tobytes()
 
 
+def random_rotation() -> np.ndarray:
+    """A seeded rotation (3, 3): the points turned about the camera out of its frame, where
+    they lie on no pixel lattice (:func:`~worker.engine.scans.sensor_grid`)."""
+    q, r = np.linalg.qr(np.random.default_rng(1).standard_normal((3, 3)))
+    q = q * np.sign(np.diag(r))
+    return q if np.linalg.det(q) > 0 else -q
+
+
 def scan_files(pixels: int) -> tuple[dict[str, bytes], int, tuple[int, int]]:
     """The scan's files by name (the mesh first), its points and its grid (width,
     height)."""
@@ -62,6 +71,7 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], int, tuple[int, int]]:
         "scan.e57": e57_bytes(points, viewpoint),
         "scan.xyz (no grid)": "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in seen.tolist()).encode(),
         "scan.ply (no grid)": points_ply(seen),
+        "scan.ply (no grid, turned)": points_ply(seen @ random_rotation().T),
     }
     return files, cloud.points, cloud.grid
 

@@ -27,7 +27,13 @@ from worker.engine.scans import (
     view_frame,
     viewed_surface,
 )
-from worker.evaluation.samples import pcd_gz_bytes
+from worker.evaluation.samples import (
+    DEPTH_DIRECTION,
+    PARTIAL_SOURCE,
+    depth_scan,
+    pcd_gz_bytes,
+    sample_mesh,
+)
 
 HEIGHT, WIDTH = 30, 40
 
@@ -270,21 +276,30 @@ def triangles(vertices: np.ndarray, faces: np.ndarray) -> set[tuple[tuple[float,
     return {tuple(sorted(map(tuple, vertices[face].round(9).tolist()))) for face in faces}
 
 
-def test_a_cloud_without_its_grid_is_triangulated_as_its_grid_is():
+@pytest.mark.parametrize("turned", [False, True])
+def test_a_cloud_without_its_grid_is_triangulated_as_its_grid_is(turned):
     """The two planes' points in random order, from the same viewpoint, make the grid's
     surface: every point, no triangle across the gap between the planes, none over the
     pixels that saw nothing; a grid's square split along either diagonal (four points on
-    a circle), so the same area in as many triangles. Each faces the sensor."""
+    a circle), so the same area in as many triangles. Each faces the sensor. In the
+    camera's frame the points lie on its pixel lattice (:func:`scans.sensor_grid`);
+    turned away from it they do not, and the Delaunay triangulation of their image
+    makes the same surface."""
     points, _ = two_planes()
     points[5:9, 20:30] = np.nan  # a hole the far plane's grid leaves open
     points[2, 3] = np.nan  # a missing pixel
+    turn = random_rotation(np.random.default_rng(3)) if turned else np.eye(3)
+    points = points @ turn.T
     grid_vertices, grid_triangles = organized_surface(points, np.zeros(3))
     shuffled = points.reshape(-1, 3)[np.random.default_rng(0).permutation(HEIGHT * WIDTH)]
+    finite = shuffled[np.isfinite(shuffled).all(axis=1)]
+    assert (scans.sensor_grid(finite, np.zeros(3)) is None) == turned
     vertices, faces = viewed_surface(shuffled, np.zeros(3))
     assert {tuple(v) for v in vertices.tolist()} == {tuple(v) for v in grid_vertices.tolist()}
     assert len(vertices) == len(grid_vertices) and len(faces) == len(grid_triangles)
     corners = vertices[faces]
-    assert np.allclose(corners[:, :, 2].min(axis=1), corners[:, :, 2].max(axis=1))  # one plane
+    depths = (corners @ turn)[:, :, 2]
+    assert np.allclose(depths.min(axis=1), depths.max(axis=1))  # one plane
     normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     grid_corners = grid_vertices[grid_triangles]
     grid_normals = np.cross(
@@ -298,6 +313,59 @@ def test_a_cloud_without_its_grid_is_triangulated_as_its_grid_is():
     read, read_faces, cloud = read_pcd(pcd((shuffled + moved).reshape(1, -1, 3), viewpoint=moved))
     assert cloud == Cloud(len(grid_vertices)) and len(read_faces) == len(grid_triangles)
     assert triangles(read - moved, read_faces) == triangles(vertices, faces)
+
+
+def test_lattice_steps_number_a_sensor_s_columns_and_refuse_other_values():
+    """Columns 0.02 apart, each value rounded as float32 or six digits of text would,
+    two columns missing: each value's column. Values off a lattice, all equal, or each
+    column's values at two places 0.35 of the pitch apart: none."""
+    rng = np.random.default_rng(0)
+    columns = np.concatenate([np.arange(12), [14, 15, 19]])
+    steps = rng.choice(columns, 400)
+    values = -0.3 + 0.02 * steps + rng.normal(scale=1e-8, size=400)
+    assert np.array_equal(scans.lattice_steps(values), steps - steps.min())
+    assert np.array_equal(scans.lattice_steps(values[::-1]), (steps - steps.min())[::-1])
+    assert scans.lattice_steps(rng.uniform(size=400)) is None
+    assert scans.lattice_steps(np.full(10, 0.5)) is None
+    spread = values + 0.007 * (rng.uniform(size=400) > 0.5)
+    assert scans.lattice_steps(spread) is None
+
+
+@pytest.mark.parametrize("frame", ["camera", "x backwards", "orthographic along y"])
+def test_points_on_a_camera_s_lattice_are_read_by_its_grid(frame):
+    """A view's points in another order, in a frame where the camera looks along an axis
+    (a pinhole camera along +z, one along -x, the depth example's orthographic grid
+    along y): the organized cloud's own triangles, each facing the sensor; the same as
+    float32 and six-digit text. Turned out of that frame, or points sharing pixels (a
+    voxel grid's, a whole object's): no lattice."""
+    if frame == "orthographic along y":
+        grid, viewpoint = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), 2000)
+        grid = grid - viewpoint
+    else:
+        grid, _ = two_planes()
+        grid[5:9, 20:30] = np.nan
+        if frame == "x backwards":
+            grid = np.stack([-grid[..., 2], grid[..., 0], grid[..., 1]], axis=-1)
+    want = triangles(*organized_surface(grid, np.zeros(3)))
+    seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()]
+    shuffled = seen[np.random.default_rng(0).permutation(len(seen))]
+    for points in (
+        shuffled,
+        shuffled.astype(np.float32).astype(float),
+        np.array([[float(f"{c:.6g}") for c in row] for row in shuffled.tolist()]),
+    ):
+        lattice = scans.sensor_grid(points, np.zeros(3))
+        assert lattice is not None and np.isfinite(lattice).all(axis=2).sum() == len(points)
+        vertices, faces = viewed_surface(points, np.zeros(3))
+        assert triangles(vertices, faces) == triangles(*organized_surface(lattice, np.zeros(3)))
+        corners = vertices[faces]
+        normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        assert (np.einsum("ij,ij->i", normals, -corners.mean(axis=1)) > 0).all()
+    assert triangles(*viewed_surface(shuffled, np.zeros(3))) == want
+    turned = shuffled @ random_rotation(np.random.default_rng(1)).T
+    assert scans.sensor_grid(turned, np.zeros(3)) is None
+    voxels = np.stack(np.meshgrid(*[np.arange(6.0)] * 3), axis=-1).reshape(-1, 3) + 10.0
+    assert scans.sensor_grid(voxels, np.zeros(3)) is None
 
 
 @pytest.mark.parametrize("direction", [(0, 0, 2), (1, 0, 0), (0.95, 0.3, 0), (-1, 2, -3)])

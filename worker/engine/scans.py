@@ -13,10 +13,12 @@ of points) is read as one view: its points seen from its sensor (the PCD's
 ``VIEWPOINT``; the origin of the points' frame otherwise, where a depth camera writes
 them) each lie on their own ray, so the rays' directions are the pixels a grid would
 have given, and their Delaunay triangulation is the grid's (:func:`viewed_surface`),
-gaps left open as the grid leaves them. Points of which some hide behind others as
-seen from there (a whole object's, a scan merged from several views) are refused:
-their neighbours are not known, and guessing them fuses touching sheets
-(docs/decisions.md, "Point clouds stay refused"). So is an E57 scan without indices.
+gaps left open as the grid leaves them. In the camera's own frame the pixels are a
+lattice, and the grid itself is found again (:func:`sensor_grid`). Points of which some
+hide behind others as seen from there (a whole object's, a scan merged from several
+views) are refused: their neighbours are not known, and guessing them fuses touching
+sheets (docs/decisions.md, "Point clouds stay refused"). So is an E57 scan without
+indices.
 
 The grid is triangulated as a scanner's software does: two triangles per square of four
 valid pixels, one per square of three (:func:`grid_faces`). Where the surface seen by two
@@ -209,7 +211,9 @@ def viewed_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarra
     along a diagonal. As on a grid, a triangle is left out when an edge crosses a gap:
     longer in the image than ``GAP_SPACINGS`` times the spacing of its ends (each point's
     distance to its nearest in the image; a missing pixel leaves a hole as the grid
-    does), or shadowed (:func:`unshadowed`, an occluding edge along the ray).
+    does), or shadowed (:func:`unshadowed`, an occluding edge along the ray). Points on
+    a camera's pixel lattice (:func:`sensor_grid`) are triangulated by that grid instead
+    (:func:`organized_surface`), each triangle facing the sensor.
 
     Raises
     ------
@@ -224,6 +228,9 @@ def viewed_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarra
     finite = points[np.isfinite(points).all(axis=1)]
     if len(finite) < 3:
         raise PointCloudError(f"The file holds too few points to make a surface. {UPLOAD_A_VIEW}")
+    lattice = sensor_grid(finite, viewpoint)
+    if lattice is not None:
+        return _facing(*organized_surface(lattice, viewpoint), viewpoint)
     where = ", ".join(f"{c:g}" for c in viewpoint)
     rays = finite - viewpoint
     length = np.linalg.norm(rays, axis=1)
@@ -267,6 +274,96 @@ def viewed_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarra
     turn = ax * by - ay * bx
     faces[turn > 0] = faces[turn > 0][:, ::-1]
     return finite, faces
+
+
+#: :func:`lattice_steps`: values closer than this share of their span are one row or
+#: column of pixels (float32's rounding is 1e-7 of a coordinate, six digits of text
+#: 1e-6), and their rows must stand ``LATTICE_MIN_PITCH`` times that far apart and within
+#: ``LATTICE_RESIDUAL`` of a pitch of the lattice.
+LATTICE_TOLERANCE = 1e-5
+LATTICE_MIN_PITCH = 10.0
+LATTICE_RESIDUAL = 0.1
+#: :func:`sensor_grid`: a lattice of more pixels than this many times the points is not
+#: a sensor's image of them.
+LATTICE_MAX_FILL = 64
+
+
+def lattice_steps(values: np.ndarray) -> np.ndarray | None:
+    """(n,) int, each of ``values`` (n,) as a step of a regular lattice (0 at the least):
+    the columns of a sensor's pixels, equally spaced, each holding any number of the
+    values (a pixel's rounding apart), and columns missing between them; None when the
+    values are no such lattice."""
+    order = np.argsort(values, kind="stable")
+    ordered = values[order]
+    span = float(ordered[-1] - ordered[0])
+    if not span > 0.0:
+        return None
+    starts = np.flatnonzero(np.diff(ordered) > LATTICE_TOLERANCE * span) + 1
+    bounds = np.concatenate([[0], starts, [len(ordered)]])
+    low, high = ordered[bounds[:-1]], ordered[bounds[1:] - 1]
+    centres = 0.5 * (low + high)
+    if len(centres) < 2:
+        return None
+    pitch = float(np.diff(centres).min())
+    if pitch < LATTICE_MIN_PITCH * LATTICE_TOLERANCE * span:
+        return None
+    position = (centres - centres[0]) / pitch
+    step = np.round(position)
+    if np.abs(position - step).max() > LATTICE_RESIDUAL or (high - low).max() > (
+        LATTICE_RESIDUAL * pitch
+    ):
+        return None
+    steps = np.empty(len(values), dtype=np.int64)
+    steps[order] = np.repeat(step.astype(np.int64), np.diff(bounds))
+    return steps
+
+
+def sensor_grid(points: np.ndarray, viewpoint: np.ndarray) -> np.ndarray | None:
+    """The organized cloud (h, w, 3) (``nan`` where no point is) of ``points`` (n, 3) that
+    lie on a camera's pixel lattice, or None.
+
+    A camera at ``viewpoint`` looking along an axis of the points' frame (a depth camera
+    writes its points so, along z) sees them on its image's lattice: a pinhole camera's
+    ``(x / z, y / z)`` are equally spaced in each coordinate, an orthographic grid's
+    ``(x, y)`` (:func:`lattice_steps`). Tried along each axis, both ways; the first
+    lattice on which every point has its own pixel is the grid, and triangulating it
+    needs no Delaunay triangulation.
+    """
+    rays = points - viewpoint
+    for axis in (2, 0, 1):
+        across = [k for k in (0, 1, 2) if k != axis]
+        depth = rays[:, axis]
+        images = [rays[:, across]]
+        if (depth > 0.0).all() or (depth < 0.0).all():
+            images.insert(0, rays[:, across] / depth[:, None])
+        for image in images:
+            rows = lattice_steps(image[:, 1])
+            columns = None if rows is None else lattice_steps(image[:, 0])
+            if rows is None or columns is None:
+                continue
+            height, width = int(rows.max()) + 1, int(columns.max()) + 1
+            if height * width > LATTICE_MAX_FILL * len(points):
+                continue
+            pixel = rows * width + columns
+            if np.unique(pixel).size < len(points):
+                continue
+            grid = np.full((height * width, 3), np.nan)
+            grid[pixel] = points
+            return grid.reshape(height, width, 3)
+    return None
+
+
+def _facing(
+    points: np.ndarray, faces: np.ndarray, viewpoint: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``points`` and ``faces`` with every triangle wound so that its normal faces
+    ``viewpoint``."""
+    corners = points[faces]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    away = np.einsum("ij,ij->i", normals, corners[:, 0] - viewpoint) > 0.0
+    faces = faces.copy()
+    faces[away] = faces[away][:, ::-1]
+    return points, faces
 
 
 def read_pcd(
