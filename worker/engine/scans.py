@@ -284,8 +284,9 @@ LATTICE_TOLERANCE = 1e-5
 LATTICE_MIN_PITCH = 10.0
 LATTICE_RESIDUAL = 0.1
 #: :func:`sensor_grid`: a lattice of more pixels than this many times the points is not
-#: a sensor's image of them.
-LATTICE_MAX_FILL = 64
+#: a sensor's image of them (nor worth its memory: a view fills a good share of its
+#: bounding box).
+LATTICE_MAX_FILL = 16
 
 
 def lattice_steps(values: np.ndarray) -> np.ndarray | None:
@@ -325,9 +326,10 @@ def sensor_grid(points: np.ndarray, viewpoint: np.ndarray) -> np.ndarray | None:
     A camera at ``viewpoint`` looking along an axis of the points' frame (a depth camera
     writes its points so, along z) sees them on its image's lattice: a pinhole camera's
     ``(x / z, y / z)`` are equally spaced in each coordinate, an orthographic grid's
-    ``(x, y)`` (:func:`lattice_steps`). Tried along each axis, both ways; the first
-    lattice on which every point has its own pixel is the grid, and triangulating it
-    needs no Delaunay triangulation.
+    ``(x, y)`` (:func:`lattice_steps`). Tried along each axis, as a pinhole camera when
+    every point lies on one side of the viewpoint along it, then as an orthographic one;
+    the first lattice on which every point has its own pixel is the grid, and
+    triangulating it needs no Delaunay triangulation.
     """
     rays = points - viewpoint
     for axis in (2, 0, 1):
