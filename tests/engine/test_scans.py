@@ -90,14 +90,21 @@ def lzf_literals(raw: bytes) -> bytes:
     )
 
 
-def pcd(points: np.ndarray, data: str = "ascii", viewpoint=(0.0, 0.0, 0.0)) -> bytes:
+def pcd(
+    points: np.ndarray,
+    data: str = "ascii",
+    viewpoint=(0.0, 0.0, 0.0),
+    orientation=(1.0, 0.0, 0.0, 0.0),
+) -> bytes:
     """``points`` (h, w, 3) as a PCD file with an extra ``rgb`` field, stored as ``data``
-    (``binary_compressed`` by literal runs only, :func:`lzf_literals`)."""
+    (``binary_compressed`` by literal runs only, :func:`lzf_literals`), its sensor at
+    ``viewpoint`` turned by the quaternion ``orientation`` (w x y z)."""
     height, width = points.shape[:2]
+    pose = " ".join(map(str, [*viewpoint, *orientation]))
     header = (
         "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z rgb\nSIZE 4 4 4 4\nTYPE F F F U\n"
         f"COUNT 1 1 1 1\nWIDTH {width}\nHEIGHT {height}\n"
-        f"VIEWPOINT {' '.join(map(str, viewpoint))} 1 0 0 0\nPOINTS {width * height}\n"
+        f"VIEWPOINT {pose}\nPOINTS {width * height}\n"
         f"DATA {data}\n"
     )
     flat = points.reshape(-1, 3)
@@ -366,6 +373,36 @@ def test_points_on_a_camera_s_lattice_are_read_by_its_grid(frame):
     assert scans.sensor_grid(turned, np.zeros(3)) is None
     voxels = np.stack(np.meshgrid(*[np.arange(6.0)] * 3), axis=-1).reshape(-1, 3) + 10.0
     assert scans.sensor_grid(voxels, np.zeros(3)) is None
+
+
+def test_a_pcd_without_its_grid_is_read_in_its_sensor_s_frame(monkeypatch):
+    """A PCD of HEIGHT 1 whose points were moved out of the camera's frame, its VIEWPOINT
+    the camera's position and orientation (a quaternion, PCL's ``w x y z``): the lattice
+    is found in the camera's frame, the organized cloud's own triangles. With the
+    identity orientation the points lie on no lattice and are triangulated from their
+    image; a VIEWPOINT that is not numbers is refused with a sentence."""
+    quarter_turn = np.array([np.cos(np.pi / 4), 0.0, 0.0, np.sin(np.pi / 4)])  # about z
+    np.testing.assert_allclose(scans._rotation(2 * quarter_turn) @ [1, 0, 0], [0, 1, 0], atol=1e-12)
+    orientation = np.array([0.9, 0.3, -0.2, 0.25])
+    turn = scans._rotation(orientation)
+    np.testing.assert_allclose(turn @ turn.T, np.eye(3), atol=1e-12)
+    points, _ = two_planes()
+    points[5:9, 20:30] = np.nan
+    position = np.array([0.5, -2.0, 7.0])
+    moved = points @ turn.T + position
+    seen = moved.reshape(-1, 3)[np.random.default_rng(0).permutation(HEIGHT * WIDTH)]
+    found = []
+    search = scans.sensor_grid
+    monkeypatch.setattr(scans, "sensor_grid", lambda *a: found.append(search(*a)) or found[-1])
+    read, faces, cloud = read_pcd(pcd(seen.reshape(1, -1, 3), "binary", position, orientation))
+    assert found[-1] is not None and cloud == Cloud(len(read))
+    single = moved.astype(np.float32).astype(float)
+    assert triangles(read, faces) == triangles(*organized_surface(single, position))
+    read, faces, _ = read_pcd(pcd(seen.reshape(1, -1, 3), "binary", position))
+    assert found[-1] is None and len(read) == HEIGHT * WIDTH - 40
+    bad = pcd(seen.reshape(1, -1, 3), viewpoint=position).replace(b"VIEWPOINT 0.5", b"VIEWPOINT x")
+    with pytest.raises(UnreadableMeshError, match="VIEWPOINT is not seven numbers"):
+        read_mesh(bad, "scan.pcd")
 
 
 @pytest.mark.parametrize("direction", [(0, 0, 2), (1, 0, 0), (0.95, 0.3, 0), (-1, 2, -3)])

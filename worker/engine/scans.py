@@ -66,6 +66,8 @@ GAP_SPACINGS = 1.5
 
 #: PCD field types (``TYPE`` and ``SIZE``) as numpy's little-endian type letters.
 _PCD_TYPES = {"F": "f", "I": "i", "U": "u"}
+#: PCL's ``VIEWPOINT`` when a header has none: at the origin, the identity quaternion.
+_PCD_VIEWPOINT = ["0", "0", "0", "1", "0", "0", "0"]
 
 
 @dataclass(frozen=True)
@@ -199,7 +201,9 @@ def organized_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.nda
     return flat[valid.ravel()], number[faces]
 
 
-def viewed_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def viewed_surface(
+    points: np.ndarray, viewpoint: np.ndarray, axes: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """A cloud without a grid read as one view: (n, 3) its finite points and (m, 3) the
     triangles of the surface its sensor saw, facing the sensor.
 
@@ -212,8 +216,9 @@ def viewed_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarra
     longer in the image than ``GAP_SPACINGS`` times the spacing of its ends (each point's
     distance to its nearest in the image; a missing pixel leaves a hole as the grid
     does), or shadowed (:func:`unshadowed`, an occluding edge along the ray). Points on
-    a camera's pixel lattice (:func:`sensor_grid`) are triangulated by that grid instead
-    (:func:`organized_surface`), each triangle facing the sensor.
+    a camera's pixel lattice (:func:`sensor_grid`, the sensor's ``axes`` (3, 3) as
+    columns in the points' frame, theirs by default) are triangulated by that grid
+    instead (:func:`organized_surface`), each triangle facing the sensor.
 
     Raises
     ------
@@ -228,7 +233,7 @@ def viewed_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarra
     finite = points[np.isfinite(points).all(axis=1)]
     if len(finite) < 3:
         raise PointCloudError(f"The file holds too few points to make a surface. {UPLOAD_A_VIEW}")
-    lattice = sensor_grid(finite, viewpoint)
+    lattice = sensor_grid(finite, viewpoint, axes)
     if lattice is not None:
         return _facing(*organized_surface(lattice, viewpoint), viewpoint)
     where = ", ".join(f"{c:g}" for c in viewpoint)
@@ -319,12 +324,15 @@ def lattice_steps(values: np.ndarray) -> np.ndarray | None:
     return steps
 
 
-def sensor_grid(points: np.ndarray, viewpoint: np.ndarray) -> np.ndarray | None:
+def sensor_grid(
+    points: np.ndarray, viewpoint: np.ndarray, axes: np.ndarray | None = None
+) -> np.ndarray | None:
     """The organized cloud (h, w, 3) (``nan`` where no point is) of ``points`` (n, 3) that
     lie on a camera's pixel lattice, or None.
 
-    A camera at ``viewpoint`` looking along an axis of the points' frame (a depth camera
-    writes its points so, along z) sees them on its image's lattice: a pinhole camera's
+    A camera at ``viewpoint`` looking along one of its ``axes`` (3, 3), the sensor's frame
+    as columns in the points' (by default the points' own: a depth camera writes its
+    points in its frame, looking along z) sees them on its image's lattice: a pinhole camera's
     ``(x / z, y / z)`` are equally spaced in each coordinate, an orthographic grid's
     ``(x, y)`` (:func:`lattice_steps`). Tried along each axis, as a pinhole camera when
     every point lies on one side of the viewpoint along it, then as an orthographic one;
@@ -332,6 +340,8 @@ def sensor_grid(points: np.ndarray, viewpoint: np.ndarray) -> np.ndarray | None:
     triangulating it needs no Delaunay triangulation.
     """
     rays = points - viewpoint
+    if axes is not None:
+        rays = rays @ axes
     for axis in (2, 0, 1):
         across = [k for k in (0, 1, 2) if k != axis]
         depth = rays[:, axis]
@@ -432,12 +442,39 @@ def read_pcd(
         raise UnreadableMeshError(
             "The PCD file's points do not match its header: it is damaged or truncated."
         ) from exc
-    viewpoint = np.array([float(v) for v in header.get("VIEWPOINT", ["0"] * 7)[:3]])
+    pose = _pcd_viewpoint(header)
+    viewpoint = pose[:3]
     if height <= 1 or width <= 1:  # no grid: one view seen from its viewpoint
-        points, faces = viewed_surface(xyz.astype(np.float64), viewpoint)
+        points, faces = viewed_surface(xyz.astype(np.float64), viewpoint, _rotation(pose[3:]))
         return points, faces, Cloud(len(points))
     points, faces = organized_surface(xyz.astype(np.float64).reshape(height, width, 3), viewpoint)
     return points, faces, Cloud(len(points), (width, height))
+
+
+def _pcd_viewpoint(header: dict[str, list[str]]) -> np.ndarray:
+    """(7,) a PCD's ``VIEWPOINT``: the sensor's position, then its orientation as a
+    quaternion ``qw qx qy qz`` (PCL's default, the identity, where the header has none)."""
+    values = header.get("VIEWPOINT", [])[:7]
+    try:
+        return np.array([float(v) for v in values + _PCD_VIEWPOINT[len(values) :]])
+    except ValueError as exc:
+        raise UnreadableMeshError("The PCD header's VIEWPOINT is not seven numbers.") from exc
+
+
+def _rotation(quaternion: np.ndarray) -> np.ndarray:
+    """(3, 3) the rotation of a quaternion ``w x y z`` (any length; the identity for a
+    zero one): the sensor's axes as columns."""
+    norm = float(np.linalg.norm(quaternion))
+    if not norm > 0.0:
+        return np.eye(3)
+    w, x, y, z = quaternion / norm
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def read_e57(
