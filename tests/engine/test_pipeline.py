@@ -255,21 +255,24 @@ def test_a_range_scan_written_as_a_mesh_describes_as_its_organized_cloud(small_p
     assert uploaded.kept_area_fraction == pytest.approx(cloud.kept_area_fraction, rel=1e-6)
 
 
-@pytest.mark.parametrize("turned", [False, True])
-def test_a_view_s_points_without_their_grid_describe_as_its_organized_cloud(turned):
+@pytest.mark.parametrize("frame", ["camera", "turned", "world"])
+def test_a_view_s_points_without_their_grid_describe_as_its_organized_cloud(frame):
     """The quadruped's left side seen by a depth camera (6,000 pixels on it): its points
-    in another order, in the camera's frame (on its pixel lattice) or turned out of it
-    (triangulated from their image), without the grid (an XYZ file), describe no
-    farther from the organized cloud (a PCD) than the same grid split along its squares'
-    other diagonals does, in every modality of the default: the reading adds nothing to
-    the scan's own tessellation noise."""
+    in another order, in the camera's frame (on its pixel lattice), turned about the
+    camera (triangulated from their image), or in the mesh's frame, turned (seen from
+    where they are thinnest, :func:`~worker.engine.scans.one_view`), without the grid (an
+    XYZ file), describe no farther from the organized cloud (a PCD) than the same grid
+    split along its squares' other diagonals does, in every modality of the default: the
+    reading adds nothing to the scan's own tessellation noise."""
     preset = get_preset(DEFAULT_PRESET)
     grid, viewpoint = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), 6000)
     organized = describe_file(pcd_bytes(grid, viewpoint), preset, "scan.pcd")
     other_diagonals = describe_file(pcd_bytes(grid[:, ::-1].copy(), viewpoint), preset, "scan.pcd")
-    seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()] - viewpoint
+    seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()]
     shuffled = seen[np.random.default_rng(0).permutation(len(seen))]
-    if turned:
+    if frame != "world":
+        shuffled = shuffled - viewpoint
+    if frame != "camera":
         shuffled = shuffled @ random_rotation(np.random.default_rng(1)).T
     xyz = "\n".join(f"{x!r} {y!r} {z!r}" for x, y, z in shuffled.tolist()).encode()
     points = describe_file(xyz, preset, "scan.xyz")

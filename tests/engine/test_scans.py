@@ -375,6 +375,38 @@ def test_points_on_a_camera_s_lattice_are_read_by_its_grid(frame):
     assert scans.sensor_grid(voxels, np.zeros(3)) is None
 
 
+def test_one_view_written_in_another_frame_is_seen_from_where_it_is_thinnest():
+    """The depth example's view written in its mesh's frame and turned (seen from the
+    origin, most of its points hide behind others): read as seen from afar along the
+    direction the points spread least in, the organized cloud's surface (every point on
+    it, the same area to 2%). A whole object's points are still refused with the
+    sentence about the sensor the file gave."""
+    grid, _ = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), 2000)
+    turn = random_rotation(np.random.default_rng(2))
+    grid = grid @ turn.T
+    sight = turn @ np.array(DEPTH_DIRECTION)
+    vertices, faces = organized_surface(grid, scans.thinnest_viewpoint(grid.reshape(-1, 3), sight))
+    seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()]
+    shuffled = seen[np.random.default_rng(0).permutation(len(seen))]
+    with pytest.raises(PointCloudError, match=r"not one view from the sensor at \(0, 0, 0\)"):
+        viewed_surface(shuffled, np.zeros(3))
+    read, read_faces = scans.one_view(shuffled, np.zeros(3))
+    used = np.unique(read_faces).size
+    assert len(read) == len(seen) and used >= np.unique(faces).size - 0.01 * len(seen)
+
+    def area(points: np.ndarray, triangles: np.ndarray) -> float:
+        corners = points[triangles]
+        doubled = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        return float(np.linalg.norm(doubled, axis=1).sum() / 2)
+
+    assert area(read, read_faces) == pytest.approx(area(vertices, faces), rel=0.005)
+    text = "\n".join(f"{x!r} {y!r} {z!r}" for x, y, z in shuffled.tolist()).encode()
+    assert read_mesh(text, "view.xyz").cloud == Cloud(len(seen))
+    sphere = trimesh.creation.icosphere(subdivisions=4).vertices
+    with pytest.raises(PointCloudError, match=r"sensor at \(0, 0, 0\): some lie beside"):
+        scans.one_view(sphere, np.zeros(3))
+
+
 def test_a_pcd_without_its_grid_is_read_in_its_sensor_s_frame(monkeypatch):
     """A PCD of HEIGHT 1 whose points were moved out of the camera's frame, its VIEWPOINT
     the camera's position and orientation (a quaternion, PCL's ``w x y z``): the lattice

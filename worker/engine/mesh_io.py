@@ -30,7 +30,7 @@ from .errors import (
     UnreadableMeshError,
 )
 from .formats import DEFAULT_MAX_DECOMPRESSED_BYTES, DEFAULT_MAX_FACES, mesh_format
-from .scans import Cloud, read_e57, read_pcd, viewed_surface
+from .scans import Cloud, one_view, read_e57, read_pcd
 from .tol import TOL
 from .topology import edge_keys, unique_rows, used_vertices
 
@@ -476,7 +476,8 @@ def _read_arrays(
     """A file's vertices (n, 3) float and triangles (m, 3) int as it numbers them, after
     the checks of the file itself (format, size, triangles, indices, coordinates), and
     its cloud when it was points (points without triangles read as one view seen from
-    the origin of their frame, :func:`~.scans.viewed_surface`)."""
+    the origin of their frame, or from afar along their thinnest direction,
+    :func:`~.scans.one_view`)."""
     if isinstance(source, bytes | bytearray | memoryview):
         if filename is None:
             raise ValueError("filename is required when the mesh is given as bytes")
@@ -500,7 +501,7 @@ def _read_arrays(
                 f"The cloud has {len(vertices):,} points; the limit is {max_faces // 2:,}. "
                 "Subsample it before uploading."
             )
-        vertices, faces = viewed_surface(vertices, np.zeros(3))
+        vertices, faces = one_view(vertices, np.zeros(3))
         cloud = Cloud(len(vertices))
     if len(faces) > max_faces:
         raise TooManyFacesError(

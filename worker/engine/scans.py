@@ -14,11 +14,12 @@ of points) is read as one view: its points seen from its sensor (the PCD's
 them) each lie on their own ray, so the rays' directions are the pixels a grid would
 have given, and their Delaunay triangulation is the grid's (:func:`viewed_surface`),
 gaps left open as the grid leaves them. In the camera's own frame the pixels are a
-lattice, and the grid itself is found again (:func:`sensor_grid`). Points of which some
-hide behind others as seen from there (a whole object's, a scan merged from several
-views) are refused: their neighbours are not known, and guessing them fuses touching
-sheets (docs/decisions.md, "Point clouds stay refused"). So is an E57 scan without
-indices.
+lattice, and the grid itself is found again (:func:`sensor_grid`). A view written in
+another frame is seen from afar along the direction it is thinnest in
+(:func:`one_view`). Points of which some hide behind others as seen from there (a whole
+object's, a scan merged from several views) are refused: their neighbours are not
+known, and guessing them fuses touching sheets (docs/decisions.md, "Point clouds stay
+refused"). So is an E57 scan without indices.
 
 The grid is triangulated as a scanner's software does: two triangles per square of four
 valid pixels, one per square of three (:func:`grid_faces`). Where the surface seen by two
@@ -281,6 +282,49 @@ def viewed_surface(
     return finite, faces
 
 
+#: :func:`thinnest_viewpoint`: how far from the points, in their extents, a guessed
+#: sensor stands (its rays all but parallel, an orthographic scanner's).
+GUESSED_SENSOR_EXTENTS = 1e3
+
+
+def one_view(
+    points: np.ndarray, viewpoint: np.ndarray, axes: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`viewed_surface` from ``viewpoint``; points that are not one view from there
+    (one view written in another frame than its sensor's, the sensor elsewhere) are tried
+    once more from afar along the direction they spread least in
+    (:func:`thinnest_viewpoint`), where a scanner that saw them all would stand, and
+    when the triangles so made are an orthographic grid's, once more along its own line
+    of sight (:func:`grid_sight`: exact, where the least spread can be degrees off). When
+    that fails too, the first refusal stands: it names the sensor the file gave."""
+    try:
+        return viewed_surface(points, viewpoint, axes)
+    except PointCloudError as refusal:
+        try:
+            vertices, faces = viewed_surface(points, thinnest_viewpoint(points))
+            sight = grid_sight(vertices, faces)
+            if sight is None:
+                return vertices, faces
+            return viewed_surface(points, thinnest_viewpoint(points, sight))
+        except PointCloudError:
+            raise refusal from None
+
+
+def thinnest_viewpoint(points: np.ndarray, direction: np.ndarray | None = None) -> np.ndarray:
+    """(3,) a point ``GUESSED_SENSOR_EXTENTS`` extents away from ``points`` (n, 3)'s
+    centroid along ``direction`` (3,), by default their least principal axis: one view is
+    a height field, thinnest along its line of sight."""
+    finite = points[np.isfinite(points).all(axis=1)]
+    if len(finite) < 3:
+        return np.zeros(3)
+    centre = finite.mean(axis=0)
+    if direction is None:
+        direction = np.linalg.svd(finite - centre, full_matrices=False)[2][-1]
+    extent = float(np.ptp(finite, axis=0).max())
+    viewpoint: np.ndarray = centre + GUESSED_SENSOR_EXTENTS * extent * direction
+    return viewpoint
+
+
 #: :func:`lattice_steps`: values closer than this share of their span are one row or
 #: column of pixels (float32's rounding is 1e-7 of a coordinate, six digits of text
 #: 1e-6), and their rows must stand ``LATTICE_MIN_PITCH`` times that far apart and within
@@ -445,7 +489,7 @@ def read_pcd(
     pose = _pcd_viewpoint(header)
     viewpoint = pose[:3]
     if height <= 1 or width <= 1:  # no grid: one view seen from its viewpoint
-        points, faces = viewed_surface(xyz.astype(np.float64), viewpoint, _rotation(pose[3:]))
+        points, faces = one_view(xyz.astype(np.float64), viewpoint, _rotation(pose[3:]))
         return points, faces, Cloud(len(points))
     points, faces = organized_surface(xyz.astype(np.float64).reshape(height, width, 3), viewpoint)
     return points, faces, Cloud(len(points), (width, height))
