@@ -92,8 +92,9 @@ MESH_FILE: dict[str, Any] = {
     "writes (.pcd: one point per pixel, triangulated by its grid), a laser scanner's "
     "structured scan (.e57, one scan: its points' rows and columns are its grid), or one "
     "view's points without a grid (.xyz, .pts, .csv, a .ply or .obj without faces: in "
-    "the sensor's frame; a .pcd of HEIGHT 1 from its VIEWPOINT), triangulated as seen "
-    "from the sensor (points that are not one view are 422 `no_faces`): "
+    "the sensor's frame, or any other and seen from afar along their thinnest "
+    "direction; a .pcd of HEIGHT 1 from its VIEWPOINT), triangulated as seen from the "
+    "sensor (points that are not one view are 422 `no_faces`): "
     + " ".join(f".{f}" for f in MESH_FORMATS)
     + ", optionally .gz-compressed, told by the file name's extension (any other is "
     "415 `unsupported_format`); a file that is not a readable surface of at least 10 "
