@@ -343,8 +343,9 @@ def test_points_on_a_camera_s_lattice_are_read_by_its_grid(frame):
     """A view's points in another order, in a frame where the camera looks along an axis
     (a pinhole camera along +z, one along -x, the depth example's orthographic grid
     along y): the organized cloud's own triangles, each facing the sensor; the same as
-    float32 and six-digit text. Turned out of that frame, or points sharing pixels (a
-    voxel grid's, a whole object's): no lattice."""
+    float32 and six-digit text, and with noise along the rays (a depth camera's). Turned
+    out of that frame, or points sharing pixels (a voxel grid's, a whole object's): no
+    lattice."""
     if frame == "orthographic along y":
         grid, viewpoint = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), 2000)
         grid = grid - viewpoint
@@ -369,6 +370,16 @@ def test_points_on_a_camera_s_lattice_are_read_by_its_grid(frame):
         normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
         assert (np.einsum("ij,ij->i", normals, -corners.mean(axis=1)) > 0).all()
     assert triangles(*viewed_surface(shuffled, np.zeros(3))) == want
+    if frame == "camera":  # a depth camera's noise moves each point along its own ray
+        noisy = (
+            grid * (1.0 + 0.01 * np.random.default_rng(1).normal(size=grid.shape[:2]))[..., None]
+        )
+        points = noisy.reshape(-1, 3)[np.random.default_rng(0).permutation(HEIGHT * WIDTH)]
+        points = points[np.isfinite(points).all(axis=1)]
+        assert scans.sensor_grid(points, np.zeros(3)) is not None
+        assert triangles(*viewed_surface(points, np.zeros(3))) == triangles(
+            *organized_surface(noisy, np.zeros(3))
+        )
     turned = shuffled @ random_rotation(np.random.default_rng(1)).T
     assert scans.sensor_grid(turned, np.zeros(3)) is None
     voxels = np.stack(np.meshgrid(*[np.arange(6.0)] * 3), axis=-1).reshape(-1, 3) + 10.0
