@@ -6,8 +6,9 @@ For each size, the walk-through's quadruped-3 seen from its left side by an orth
 depth grid of about ``--pixels`` pixels on it (as ``examples/partial/quadruped-3-depth``
 was made), written as an organized PCD (ascii, binary), as a structured E57 scan, as its
 points without the grid (in another order, in the camera's frame: an XYZ text file and a
-binary PLY of vertices; the PLY's points also turned out of that frame, so that they lie
-on no pixel lattice), and its surface (what :func:`~worker.engine.scans.read_pcd`
+binary PLY of vertices; the PLY's points also turned about the camera, so that they lie
+on no pixel lattice, and turned in the mesh's frame, the camera elsewhere), and its
+surface (what :func:`~worker.engine.scans.read_pcd`
 makes of the binary file) as an OFF mesh: a mesh of the same size. Each file is described by
 :func:`~worker.engine.pipeline.describe_file` ``--repeats`` times, the files' order
 alternated, in one process; the table gives the median load (read, triangulate, clean)
@@ -72,6 +73,7 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], int, tuple[int, int]]:
         "scan.xyz (no grid)": "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in seen.tolist()).encode(),
         "scan.ply (no grid)": points_ply(seen),
         "scan.ply (no grid, turned)": points_ply(seen @ random_rotation().T),
+        "scan.ply (no grid, mesh's frame)": points_ply((seen + viewpoint) @ random_rotation().T),
     }
     return files, cloud.points, cloud.grid
 
