@@ -368,7 +368,7 @@ def format_matches(body: dict[str, Any]) -> str:
     elif facts.get("input_points"):
         title += (
             f"\nThe query is a scanner's point cloud: {facts['input_points']:,} points, "
-            "triangulated as seen from its sensor."
+            "triangulated as one view."
         )
     kept = facts.get("kept_area_fraction")
     if _partial(kept):

@@ -221,7 +221,7 @@ function partial(kept) {
 function pointCloud(facts) {
   if (!facts || facts.input_points == null) return null;
   const points = `a scanner's point cloud: ${facts.input_points.toLocaleString("en")} points`;
-  if (!facts.input_grid) return `${points}, triangulated as seen from its sensor`;
+  if (!facts.input_grid) return `${points}, triangulated as one view`;
   const [width, height] = facts.input_grid;
   return `${points} on a ${width} x ${height} grid, triangulated by it`;
 }

@@ -186,7 +186,7 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_or_as_seen_from_its_camer
     assert [m["name"] for m in as_points["matches"]] == [m["name"] for m in body["matches"]]
     assert as_points["query"]["input_points"] == points and "input_grid" not in as_points["query"]
     assert as_points["partial"]["single_view"]
-    assert f"{points:,} points, triangulated as seen from its sensor" in format_matches(as_points)
+    assert f"{points:,} points, triangulated as one view" in format_matches(as_points)
 
     whole = trimesh.PointCloud(load_mesh(example("quadruped-2")).vertices).export(file_type="ply")
     refused = _error(service.client.post("/query", files={"file": ("scan.ply", whole)}), 422)
