@@ -28,6 +28,7 @@ import trimesh
 from worker.engine.pipeline import describe_file
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.engine.scans import read_pcd
+from worker.evaluation.partial import random_rotation
 from worker.evaluation.samples import (
     DEPTH_DIRECTION,
     PARTIAL_SOURCE,
@@ -48,14 +49,6 @@ def points_ply(points: np.ndarray) -> bytes:
     return header.encode() + points.astype("<f4").tobytes()
 
 
-def random_rotation() -> np.ndarray:
-    """A seeded rotation (3, 3): the points turned about the camera out of its frame, where
-    they lie on no pixel lattice (:func:`~worker.engine.scans.sensor_grid`)."""
-    q, r = np.linalg.qr(np.random.default_rng(1).standard_normal((3, 3)))
-    q = q * np.sign(np.diag(r))
-    return q if np.linalg.det(q) > 0 else -q
-
-
 def scan_files(pixels: int) -> tuple[dict[str, bytes], int, tuple[int, int]]:
     """The scan's files by name (the mesh first), its points and its grid (width,
     height)."""
@@ -65,6 +58,7 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], int, tuple[int, int]]:
     assert cloud.grid is not None
     mesh = cast(str, trimesh.Trimesh(vertices, faces, process=False).export(file_type="off"))
     seen = (vertices - viewpoint)[np.random.default_rng(0).permutation(len(vertices))]
+    turn = random_rotation(np.random.default_rng(1))  # out of the camera's frame: no lattice
     files = {
         "mesh.off": mesh.encode(),
         "scan.pcd (ascii)": pcd_bytes(points, viewpoint),
@@ -72,8 +66,8 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], int, tuple[int, int]]:
         "scan.e57": e57_bytes(points, viewpoint),
         "scan.xyz (no grid)": "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in seen.tolist()).encode(),
         "scan.ply (no grid)": points_ply(seen),
-        "scan.ply (no grid, turned)": points_ply(seen @ random_rotation().T),
-        "scan.ply (no grid, mesh's frame)": points_ply((seen + viewpoint) @ random_rotation().T),
+        "scan.ply (no grid, turned)": points_ply(seen @ turn.T),
+        "scan.ply (no grid, mesh's frame)": points_ply((seen + viewpoint) @ turn.T),
     }
     return files, cloud.points, cloud.grid
 

@@ -508,17 +508,12 @@ def _pcd_viewpoint(header: dict[str, list[str]]) -> np.ndarray:
 def _rotation(quaternion: np.ndarray) -> np.ndarray:
     """(3, 3) the rotation of a quaternion ``w x y z`` (any length; the identity for a
     zero one): the sensor's axes as columns."""
-    norm = float(np.linalg.norm(quaternion))
-    if not norm > 0.0:
+    from scipy.spatial.transform import Rotation
+
+    if not float(np.linalg.norm(quaternion)) > 0.0:
         return np.eye(3)
-    w, x, y, z = quaternion / norm
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    matrix: np.ndarray = Rotation.from_quat(quaternion, scalar_first=True).as_matrix()
+    return matrix
 
 
 def read_e57(
