@@ -26,6 +26,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from .tol import TOL
+
 #: Bins of each of the three angular features of a point pair.
 FPFH_BINS = 11
 #: The features' radius in voxels.
@@ -94,7 +96,7 @@ def voxel_points(
     unit[unit == 0] = 1.0
     direction = np.stack([np.bincount(cell, normals[:, a] / unit[:, 0]) for a in range(3)], axis=1)
     length = np.linalg.norm(direction, axis=1)
-    kept = length > 1e-9 * counts
+    kept = length > TOL.cancelled_normals * counts
     return mean[kept], direction[kept] / length[kept, None]
 
 
@@ -128,16 +130,15 @@ def pair_features(
     phi = np.where(swap, -a2, a1)
     v = np.cross(u, d)
     v_length = np.linalg.norm(v, axis=1)
-    degenerate = v_length < 1e-12
+    degenerate = v_length < TOL.parallel_sine
     v = v / np.where(degenerate, 1.0, v_length)[:, None]
     w = np.cross(u, v)
     alpha = (v * nt).sum(axis=1)
     theta = np.arctan2((w * nt).sum(axis=1), (u * nt).sum(axis=1))
-    zero = degenerate | ~np.isfinite(phi)
     return (
-        np.where(zero, 0.0, alpha),
-        np.where(zero, 0.0, phi),
-        np.where(zero, 0.0, theta),
+        np.where(degenerate, 0.0, alpha),
+        np.where(degenerate, 0.0, phi),
+        np.where(degenerate, 0.0, theta),
     )
 
 
@@ -257,7 +258,7 @@ def ransac(
         s, t = source[picks], target[picks]
         edges_s = np.linalg.norm(s - np.roll(s, 1, axis=1), axis=2)
         edges_t = np.linalg.norm(t - np.roll(t, 1, axis=1), axis=2)
-        ratio = edges_t / np.maximum(edges_s, 1e-300)
+        ratio = edges_t / np.where(edges_s > 0, edges_s, np.inf)
         implied = np.median(ratio, axis=1)
         valid = (
             (ratio.min(axis=1) >= EDGE_RATIO * ratio.max(axis=1))
@@ -317,7 +318,7 @@ def icp(
         grow = float(np.clip((1.0 + step[6]) * scale, *scales)) / scale if scaled else 1.0
         rotation, scale = turn @ rotation, grow * scale
         translation = centre + grow * (turn @ (translation - centre) + step[3:6])
-        if np.abs(step).max() < 1e-9:
+        if np.abs(step).max() < TOL.icp_step:
             break
     return rotation, translation, scale
 

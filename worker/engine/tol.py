@@ -49,6 +49,12 @@ class Tolerances:
     # A geodesic ball's area over pi r^2 is floored here before its logarithm: the
     # parts modality's profiles stay finite where a thin part's ball saturates.
     parts_ratio_floor: float = 1e-3
+    # Rigid verification: a voxel whose unit normals sum to less than this times their
+    # count has none (they cancel); a point pair whose line is within this sine of its
+    # source's normal has no Darboux frame; ICP stops at a step below this.
+    cancelled_normals: float = 1e-9
+    parallel_sine: float = 1e-12
+    icp_step: float = 1e-9
 
 
 TOL = Tolerances()
