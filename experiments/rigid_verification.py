@@ -110,7 +110,7 @@ def main() -> None:
         sources = np.array([index[m.name] for m in done.meshes])
         score = query_matrices(done.descriptors, computed.descriptors, preset, jobs=args.jobs)
         d = score[PRESET_ROW if args.ranking == "preset" else PARTS]
-        copies, units, shortlists, shortlists_out = [], [], [], []
+        copies, units, candidates = [], [], []
         for q, (m, desc) in enumerate(zip(done.meshes, done.descriptors, strict=True)):
             copies.append(make_variant(wholes[sources[q]], variant, m.name))
             scale = part_dissimilarity(
@@ -119,29 +119,23 @@ def main() -> None:
             assert desc.area is not None, "the preset records each shape's size"
             sides = 2.0 if desc.single_view else 1.0  # a view's parts are two-sided
             units.append(float(np.sqrt(sides * desc.area)) * scale)
-            order = np.argsort(d[q], kind="stable")
-            shortlists.append(order[: args.shortlist])
-            shortlists_out.append(order[order != sources[q]][: args.shortlist])
+            # one more than the shortlist: the shortlist with the source left out, too
+            candidates.append(np.argsort(d[q], kind="stable")[: args.shortlist + 1])
+        n = len(copies)
         with ProcessPoolExecutor(args.jobs, initializer=_hold, initargs=(wholes,)) as pool:
             fits = list(
-                pool.map(
-                    verify,
-                    copies + copies,
-                    units + units,
-                    shortlists + shortlists_out,
-                    [args.voxel] * (2 * len(copies)),
-                    [args.window] * (2 * len(copies)),
-                )
+                pool.map(verify, copies, units, candidates, [args.voxel] * n, [args.window] * n)
             )
-        n = len(copies)
-        first = np.array([s[0] for s in shortlists])
-        verified = np.array([s[np.argmax(f)] for s, f in zip(shortlists, fits[:n], strict=True)])
-        first_out = np.array([s[0] for s in shortlists_out])
-        verified_out = np.array(
-            [s[np.argmax(f)] for s, f in zip(shortlists_out, fits[n:], strict=True)]
-        )
+        first, verified, first_out, verified_out = (np.empty(n, dtype=np.int64) for _ in range(4))
+        listed = np.zeros(n, dtype=bool)
+        for q in range(n):
+            kept = np.arange(args.shortlist)
+            out = np.flatnonzero(candidates[q] != sources[q])[: args.shortlist]
+            listed[q] = sources[q] in candidates[q][kept]
+            first[q], first_out[q] = candidates[q][kept[0]], candidates[q][out[0]]
+            verified[q] = candidates[q][kept[np.argmax(fits[q][kept])]]
+            verified_out[q] = candidates[q][out[np.argmax(fits[q][out])]]
         own = labels[sources]
-        listed = np.mean([sources[q] in shortlists[q] for q in range(n)])
         cells = [
             100 * np.mean(labels[first] == own),
             100 * np.mean(labels[verified] == own),
@@ -151,7 +145,7 @@ def main() -> None:
             100 * np.mean(labels[verified_out] == own),
         ]
         print(
-            f"| {variant} | {n} | {100 * listed:.1f} | "
+            f"| {variant} | {n} | {100 * listed.mean():.1f} | "
             + " | ".join(f"{c:.1f}" for c in cells)
             + " |"
         )
