@@ -34,6 +34,7 @@ from worker.engine.mesh_io import (
 from worker.engine.pipeline import describe_file, describe_mesh
 from worker.engine.presets import DEFAULT_PRESET, SIZE, get_preset
 from worker.engine.scans import organized_surface
+from worker.engine.surface_points import ANCHOR_VOXEL
 from worker.evaluation.partial import far_viewpoint, grid_mesh, range_image
 from worker.evaluation.samples import (
     DEPTH_DIRECTION,
@@ -68,7 +69,7 @@ def figure_descriptor(figure, small_preset) -> ShapeDescriptor:
     return describe_mesh(figure, small_preset)
 
 
-def test_descriptor_shapes_and_record(figure_descriptor, small_preset):
+def test_descriptor_shapes_and_record(figure, figure_descriptor, small_preset):
     d = figure_descriptor
     assert d.gdm.shape == (small_preset.gdm_singular_values,)
     assert d.ddt.shape == small_preset.ddt_core_shape
@@ -76,7 +77,14 @@ def test_descriptor_shapes_and_record(figure_descriptor, small_preset):
     assert (d.preset, d.preset_version) == (small_preset.name, small_preset.version)
     assert abs(d.vertices - small_preset.n_vertices) <= 0.03 * small_preset.n_vertices
     assert np.all(np.diff(d.gdm) <= 0) and np.all(d.ddt >= 0)
-    assert set(d.timings) == {"resample", "gdm", "eigen_ddt", "modal"}
+    assert set(d.timings) == {"resample", "gdm", "eigen_ddt", "modal", "surface"}
+    # the file's surface gridded for rigid verification, in units of sqrt(its area)
+    assert d.surface.dtype == np.float16 and d.surface.shape[1] == 6 and len(d.surface) > 1000
+    area = face_areas(figure.vertices, figure.faces).sum()
+    assert d.surface_voxel == ANCHOR_VOXEL and d.surface_unit == pytest.approx(np.sqrt(area))
+    # centred, about a unit across (the quadruped is 1.6 units long)
+    assert np.abs(d.surface[:, :3].astype(float).mean(axis=0)).max() < 0.05
+    np.testing.assert_allclose(np.linalg.norm(d.surface[:, 3:].astype(float), axis=1), 1, atol=2e-3)
 
 
 def test_vertex_permutation(figure, figure_descriptor, small_preset):
@@ -215,7 +223,7 @@ def test_descriptor_round_trips(figure_descriptor):
 
 def test_describe_file_times_every_stage(small_preset):
     d = describe_file(example("quadruped-1"), small_preset)
-    assert list(d.timings) == ["load", "resample", "gdm", "eigen_ddt", "modal", "total"]
+    assert list(d.timings) == ["load", "resample", "gdm", "eigen_ddt", "modal", "surface", "total"]
     assert d.timings["total"] == pytest.approx(sum(v for k, v in d.timings.items() if k != "total"))
     assert d.kept_area_fraction == 1.0  # one connected surface
     assert d.input_points is None and d.input_grid is None  # a mesh, not a cloud

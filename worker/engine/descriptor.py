@@ -20,8 +20,9 @@ from .presets import MODALITIES, PARTS, SIZE
 #: TOSCA and SCAPE, its single views at least 0.998).
 ONE_VIEW_FACING = 0.95
 
-#: Every array a descriptor stores: the vector modalities, the parts and their reach.
-ARRAYS = (*MODALITIES, PARTS, "parts_reach")
+#: Every array a descriptor stores: the vector modalities, the parts and their reach, and
+#: the gridded surface.
+ARRAYS = (*MODALITIES, PARTS, "parts_reach", "surface")
 
 
 @dataclass
@@ -67,6 +68,11 @@ class ShapeDescriptor:
         one direction (:func:`~worker.engine.holes.facing_share`): about a half for a
         whole, a cut or a holed copy, near 1 for one view of a scanner. None for a
         descriptor stored before this was recorded.
+    surface : (m, 6) float16, the file's surface as points with normals on a grid
+        (:func:`~worker.engine.surface_points.gridded_surface`), for rigid verification
+        (:mod:`~worker.engine.rigid`); (0, 6) for a descriptor stored before it was kept.
+    surface_unit, surface_voxel : the grid's unit in the file's length unit, and its
+        spacing in units; None with no surface.
     """
 
     preset: str
@@ -86,6 +92,9 @@ class ShapeDescriptor:
     input_points: int | None = None
     input_grid: tuple[int, int] | None = None
     facing_share: float | None = None
+    surface: np.ndarray = field(default_factory=lambda: np.zeros((0, 6), dtype=np.float16))
+    surface_unit: float | None = None
+    surface_voxel: float | None = None
 
     @property
     def single_view(self) -> bool:
@@ -141,6 +150,8 @@ class ShapeDescriptor:
             "input_points": self.input_points,
             "input_grid": None if self.input_grid is None else list(self.input_grid),
             "facing_share": self.facing_share,
+            "surface_unit": self.surface_unit,
+            "surface_voxel": self.surface_voxel,
         }
 
     @classmethod
@@ -178,6 +189,12 @@ class ShapeDescriptor:
             input_points=meta.get("input_points"),
             input_grid=None if (grid := meta.get("input_grid")) is None else (grid[0], grid[1]),
             facing_share=meta.get("facing_share"),
+            # Descriptors stored before the surface was kept have none.
+            surface=np.asarray(arrays.get("surface", np.zeros((0, 6))), dtype=np.float16).reshape(
+                -1, 6
+            ),
+            surface_unit=meta.get("surface_unit"),
+            surface_voxel=meta.get("surface_voxel"),
         )
 
     def to_npz_bytes(self) -> bytes:

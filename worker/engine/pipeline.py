@@ -53,6 +53,7 @@ from .parts import (
 from .presets import Preset
 from .resample import resample_mesh
 from .scans import grid_sight, unshadowed
+from .surface_points import ANCHOR_VOXEL, VIEW_VOXEL, gridded_surface
 
 
 def resampled_surface(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Mesh:
@@ -181,7 +182,8 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
 
     Stages (timed): ``resample``, ``gdm`` (intrinsic Delaunay, heat-method GDM),
     ``eigen_ddt`` (eq. 3 eigenpairs and the DDT's modal representation), ``modal``
-    (GDM singular values), ``parts`` (the parts modality, when the preset has it).
+    (GDM singular values), ``parts`` (the parts modality, when the preset has it),
+    ``surface`` (the surface gridded for rigid verification).
 
     Parameters
     ----------
@@ -258,6 +260,11 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
     if preset.has_parts:
         parts, reach = parts_descriptor(described, samples, gdm, ops.vertex_areas, preset)
         lap("parts")
+    # In the file's frame: the canonical one may be a mirror image, which no rigid motion
+    # undoes. A view is wound toward its sensor; anything else is turned outward.
+    voxel = VIEW_VOXEL if two_sided_view else ANCHOR_VOXEL
+    grid, unit = gridded_surface(scanned.mesh, 2 if two_sided_view else 1, voxel, two_sided_view)
+    lap("surface")
     return ShapeDescriptor(
         preset=preset.name,
         preset_version=preset.version,
@@ -274,6 +281,9 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
         area=area,
         facing_share=facing,
         kept_area_fraction=scanned.kept_area_fraction if scanned.mesh is not mesh else None,
+        surface=grid,
+        surface_unit=unit,
+        surface_voxel=voxel,
     )
 
 

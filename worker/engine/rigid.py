@@ -10,8 +10,9 @@ rigid motion drawn from three matches at a time (RANSAC, Fischler and Bolles 198
 best refined by point-to-plane ICP (Chen and Medioni 1992), and the share of the query
 that then lies on the candidate (its *fitness*) is the verification's score.
 
-Both surfaces are taken as points with normals on a voxel grid (:func:`voxel_points`),
-the voxel a share of the candidate's unit (the square root of its area), and described by
+Both surfaces are taken as points with normals on a voxel grid (:mod:`.surface_points`,
+as each descriptor keeps its surface), the voxel a share of the candidate's unit (the
+square root of its area), and described by
 fast point feature histograms (:func:`fpfh`, Rusu, Blodow and Beetz 2009, "Fast Point
 Feature Histograms (FPFH) for 3D registration"). Their angles change with the side a
 normal points to, so both surfaces' normals must point out of the object, as a closed
@@ -20,12 +21,16 @@ mesh wound outward and a view wound toward its sensor have them.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
+from scipy.spatial.distance import cdist
 
+from .descriptor import ShapeDescriptor
+from .surface_points import ANCHOR_VOXEL, voxel_points
 from .tol import TOL
 
 #: Bins of each of the three angular features of a point pair.
@@ -36,9 +41,18 @@ FEATURE_VOXELS = 5.0
 INLIER_VOXELS = 1.5
 #: Three matches make a hypothesis when their pairwise distances agree within this ratio.
 EDGE_RATIO = 0.9
-#: Hypotheses drawn per fit (seeded), scored a block at a time.
-HYPOTHESES = 4000
-HYPOTHESIS_BLOCK = 500
+#: Triples of matches drawn per fit (seeded), a block at a time; of those whose edges
+#: agree, the first ``HYPOTHESES`` are scored, ``HYPOTHESIS_BLOCK`` at a time. Few agree
+#: (a quarter of a percent of a view's matches on a figure), so many are drawn.
+DRAWS = 1_000_000
+DRAW_BLOCK = 100_000
+HYPOTHESES = 2500
+HYPOTHESIS_BLOCK = 250
+#: A hypothesis is scored on this many of the matches (drawn once per fit); the best is
+#: refitted to its inliers among all.
+SCORING_MATCHES = 500
+#: Matches a fit draws from, at most (a view re-gridded on a whole has about 1,500).
+MAX_MATCHES = 4000
 #: ICP's steps and its correspondence distance in voxels; the fitness counts the query's
 #: points within that distance of the candidate.
 ICP_STEPS = 30
@@ -69,35 +83,6 @@ class RigidFit:
     translation: np.ndarray
     scale: float
     fitness: float
-
-
-def voxel_points(
-    points: np.ndarray, normals: np.ndarray, voxel: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """The mean point and normal of each occupied cell of a grid of ``voxel`` spacing.
-
-    Parameters
-    ----------
-    points, normals : (n, 3) float; normals need not be unit.
-    voxel : the cells' edge, in the points' units.
-
-    Returns
-    -------
-    (m, 3) points and (m, 3) unit normals, in the order of their cells; a cell whose
-    normals cancel is left out.
-    """
-    points = np.asarray(points, dtype=np.float64)
-    normals = np.asarray(normals, dtype=np.float64)
-    cells = np.floor((points - points.min(axis=0)) / voxel).astype(np.int64)
-    _, cell, counts = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
-    cell = cell.ravel()
-    mean = np.stack([np.bincount(cell, points[:, a]) for a in range(3)], axis=1) / counts[:, None]
-    unit = np.linalg.norm(normals, axis=1, keepdims=True)
-    unit[unit == 0] = 1.0
-    direction = np.stack([np.bincount(cell, normals[:, a] / unit[:, 0]) for a in range(3)], axis=1)
-    length = np.linalg.norm(direction, axis=1)
-    kept = length > TOL.cancelled_normals * counts
-    return mean[kept], direction[kept] / length[kept, None]
 
 
 def pair_features(
@@ -228,11 +213,11 @@ def umeyama(
 
 
 def feature_matches(query: Anchors, candidate: Anchors) -> np.ndarray:
-    """(k, 2) index pairs (query, candidate) whose features are each other's nearest."""
+    """(k, 2) index pairs: each query point and the candidate point of the nearest features.
+    Not only mutual nearest: on a view and a figure those are a few dozen, a handful of
+    them right, too few for the fit to be found reliably."""
     forward = np.asarray(cKDTree(candidate.features).query(query.features)[1])
-    backward = np.asarray(cKDTree(query.features).query(candidate.features)[1])
-    mutual = backward[forward] == np.arange(len(forward))
-    return np.stack([np.flatnonzero(mutual), forward[mutual]], axis=1)
+    return np.stack([np.arange(len(forward)), forward], axis=1)
 
 
 def ransac(
@@ -243,38 +228,52 @@ def ransac(
     seed: int = 0,
 ) -> tuple[np.ndarray, np.ndarray, float, int]:
     """The motion agreeing with most of the matches ``source[i] -> target[i]`` ((k, 3)
-    each): ``HYPOTHESES`` drawn from three matches whose pairwise distances agree within
-    ``EDGE_RATIO`` (after a scale within ``scales``: rigid when it is ``(1, 1)``), each
-    counting the matches it moves within ``inlier``; the best refitted to its inliers
-    (:func:`umeyama`). Returns rotation, translation, scale and the inliers' count."""
+    each): of ``DRAWS`` triples of matches, those whose pairwise distances agree within
+    ``EDGE_RATIO`` (after a scale within ``scales``: rigid when it is ``(1, 1)``) make
+    hypotheses, the first ``HYPOTHESES`` of them each counting the matches it moves
+    within ``inlier`` (of ``SCORING_MATCHES`` of them); the best refitted to its inliers
+    among all (:func:`umeyama`). Returns rotation, translation, scale and the inliers'
+    count. At most ``MAX_MATCHES`` matches are drawn from (a seeded sample): each pair's
+    lengths are held at once."""
     k = len(source)
     scaled = scales[0] != scales[1]
     best: tuple[np.ndarray, np.ndarray, float, int] = (np.eye(3), np.zeros(3), 1.0, 0)
     if k < 3:
         return best
     rng = np.random.default_rng(seed)
-    for _ in range(HYPOTHESES // HYPOTHESIS_BLOCK):
-        picks = rng.integers(0, k, size=(HYPOTHESIS_BLOCK, 3))
-        s, t = source[picks], target[picks]
-        edges_s = np.linalg.norm(s - np.roll(s, 1, axis=1), axis=2)
-        edges_t = np.linalg.norm(t - np.roll(t, 1, axis=1), axis=2)
-        ratio = edges_t / np.where(edges_s > 0, edges_s, np.inf)
-        implied = np.median(ratio, axis=1)
-        valid = (
-            (ratio.min(axis=1) >= EDGE_RATIO * ratio.max(axis=1))
+    if k > MAX_MATCHES:
+        kept = np.sort(rng.permutation(k)[:MAX_MATCHES])
+        source, target, k = source[kept], target[kept], MAX_MATCHES
+    # every pair's two lengths once; a triple's edges are three lookups
+    spans_s = cdist(source, source).astype(np.float32)
+    spans_t = cdist(target, target).astype(np.float32)
+    ratios = spans_t / np.where(spans_s > 0, spans_s, np.float32(np.inf))
+    scoring = np.sort(rng.permutation(k)[:SCORING_MATCHES])
+    scored = 0
+    for _ in range(DRAWS // DRAW_BLOCK):
+        picks = rng.integers(0, k, size=(DRAW_BLOCK, 3))
+        ends = (picks, np.roll(picks, 1, axis=1))
+        ratio = ratios[ends]
+        low, high = ratio.min(axis=1), ratio.max(axis=1)
+        implied = ratio.sum(axis=1) - low - high  # the median of three
+        valid = np.flatnonzero(
+            (low >= EDGE_RATIO * high)
             & (implied >= scales[0] * EDGE_RATIO)
             & (implied <= scales[1] / EDGE_RATIO)
-            & (edges_t > inlier).all(axis=1)
-        )
-        if not valid.any():
-            continue
-        rotation, translation, scale = umeyama(s[valid], t[valid], scaled)
-        moved = scale[:, None, None] * np.einsum("hij,kj->hki", rotation, source)
-        moved += translation[:, None, :]
-        counts = (np.linalg.norm(moved - target[None], axis=2) < inlier).sum(axis=1)
-        h = int(np.argmax(counts))
-        if counts[h] > best[3]:
-            best = (rotation[h], translation[h], float(scale[h]), int(counts[h]))
+            & (spans_t[ends] > inlier).all(axis=1)
+        )[: HYPOTHESES - scored]
+        for start in range(0, len(valid), HYPOTHESIS_BLOCK):
+            drawn = picks[valid[start : start + HYPOTHESIS_BLOCK]]
+            rotation, translation, scale = umeyama(source[drawn], target[drawn], scaled)
+            moved = scale[:, None, None] * (source[scoring] @ np.swapaxes(rotation, 1, 2))
+            moved += translation[:, None, :] - target[scoring][None]
+            counts = ((moved * moved).sum(axis=2) < inlier**2).sum(axis=1)
+            h = int(np.argmax(counts))
+            if counts[h] > best[3]:
+                best = (rotation[h], translation[h], float(scale[h]), int(counts[h]))
+        scored += len(valid)
+        if scored >= HYPOTHESES:
+            break
     if best[3] >= 3:
         turn, shift, factor, count = best
         agree = np.linalg.norm(factor * source @ turn.T + shift - target, axis=1) < inlier
@@ -347,3 +346,77 @@ def rigid_fit(
     placed = scale * query.points @ rotation.T + translation
     distance = tree.query(placed, distance_upper_bound=reach)[0]
     return RigidFit(rotation, translation, scale, float(np.isfinite(distance).mean()))
+
+
+#: A single view's best candidates that are verified, and re-ranked by their fitness.
+VERIFIED = 10
+#: How far from the scale the parts modality chose a fit may move a view (either way):
+#: the parts' scale is measured on a grid, and a view's area measures its object's only
+#: roughly (on TOSCA + SCAPE's views the median over-estimate is 13-16%).
+SCALE_WINDOW = 1.5
+
+
+def stored_anchors(surface: np.ndarray, voxel: float, factor: float = 1.0) -> Anchors:
+    """A descriptor's gridded surface (:attr:`~.descriptor.ShapeDescriptor.surface`, at
+    ``voxel`` of its unit) as anchors at ``ANCHOR_VOXEL`` after its points are multiplied
+    by ``factor`` (into another surface's units); re-gridded when its grid is finer."""
+    points = surface[:, :3].astype(np.float64) * factor
+    normals = surface[:, 3:].astype(np.float64)
+    if voxel * factor < ANCHOR_VOXEL * (1.0 - TOL.grid_match):
+        points, normals = voxel_points(points, normals, ANCHOR_VOXEL)
+    return Anchors(points, normals, fpfh(points, normals, FEATURE_VOXELS * ANCHOR_VOXEL))
+
+
+def verified_fitness(
+    query: ShapeDescriptor,
+    candidates: Sequence[ShapeDescriptor],
+    parts_scale: float,
+    metric: bool,
+) -> np.ndarray | None:
+    """(k,) the fitness of a single view on each of its candidates (:func:`rigid_fit` of
+    their kept surfaces), NaN on a candidate that is itself a single view (two views of an
+    object share only what both saw: on TOSCA + SCAPE's views all to all, ranking by it
+    lost a sixth of the nearest neighbours the parts found); or None when the query is no
+    single view or a surface is missing (a descriptor stored before surfaces were kept).
+
+    Parameters
+    ----------
+    query, candidates : descriptors with their surfaces.
+    parts_scale : the scale ``s`` the parts modality chose for the query; the query's
+        unit is ``1 / s`` of a candidate's in a collection without units, fitted within
+        ``SCALE_WINDOW`` of that.
+    metric : a collection of metric units: the query's unit in each candidate's is the
+        ratio of their ``surface_unit``, fitted at exactly that.
+    """
+    kept = [
+        (d.surface, d.surface_voxel, d.surface_unit)
+        for d in (query, *candidates)
+        if len(d.surface) and d.surface_voxel and d.surface_unit
+    ]
+    if not query.single_view or len(kept) <= len(candidates):
+        return None
+    (surface, voxel, unit), held = kept[0], kept[1:]
+    scales = (1.0, 1.0) if metric else (1.0 / SCALE_WINDOW, SCALE_WINDOW)
+    placed: dict[float, Anchors] = {}
+    fitness = np.full(len(candidates), np.nan)
+    for i, (candidate, (grid, grid_voxel, grid_unit)) in enumerate(
+        zip(candidates, held, strict=True)
+    ):
+        if candidate.single_view:
+            continue
+        factor = unit / grid_unit if metric else 1.0 / parts_scale
+        if factor not in placed:
+            placed[factor] = stored_anchors(surface, voxel, factor)
+        anchors = stored_anchors(grid, grid_voxel)
+        fitness[i] = rigid_fit(placed[factor], anchors, ANCHOR_VOXEL, scales).fitness
+    return fitness
+
+
+def verified_order(fitness: np.ndarray) -> np.ndarray:
+    """The candidates' positions after verification: those fitted (a finite fitness) take
+    the places they held among themselves, most of the query held first (ties in their
+    order); a candidate not fitted (NaN) keeps its place."""
+    order = np.arange(len(fitness))
+    fitted = np.flatnonzero(np.isfinite(fitness))
+    order[fitted] = fitted[np.argsort(-fitness[fitted], kind="stable")]
+    return order

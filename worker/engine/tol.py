@@ -55,6 +55,8 @@ class Tolerances:
     cancelled_normals: float = 1e-9
     parallel_sine: float = 1e-12
     icp_step: float = 1e-9
+    # A stored grid at most this much finer than the anchors' is used as it is.
+    grid_match: float = 1e-6
 
 
 TOL = Tolerances()
