@@ -45,6 +45,7 @@ from worker.engine.parts import (
     sized_scales,
 )
 from worker.engine.presets import MODALITIES, PARTS, SIZE, Preset
+from worker.engine.rigid import VERIFIED, verified_fitness, verified_order
 from worker.recognition import metrics
 
 from .compute import single_threaded_blas
@@ -85,6 +86,18 @@ def parts_matrix(
     In a collection of metric units a query is compared with each shape near the scale
     their sizes imply, as the service compares it (:func:`compared_by_size`).
     """
+    return parts_matches(queries, gallery, preset, jobs, themselves)[0]
+
+
+def parts_matches(
+    queries: Sequence[ShapeDescriptor],
+    gallery: Sequence[ShapeDescriptor],
+    preset: Preset,
+    jobs: int = 1,
+    themselves: bool = False,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`parts_matrix` and (q,) the scale the parts chose for each query (its best
+    match's)."""
     whole = compared_profiles(np.stack([g.parts.astype(np.float64) for g in gallery]), preset)
     profiles = [q.parts.astype(np.float64) for q in queries]
     reach = [q.parts_reach for q in queries]
@@ -98,11 +111,13 @@ def parts_matrix(
     ]
     rows = (profiles, reach, own, centres)
     if jobs <= 1 or len(queries) < 2:
-        return np.stack([_parts_row(whole, preset, *row) for row in zip(*rows, strict=True)])
-    with ProcessPoolExecutor(
-        max_workers=jobs, initializer=_hold_gallery, initargs=(whole, preset)
-    ) as pool:
-        return np.stack(list(pool.map(_held_row, *rows, chunksize=4)))
+        found = [_parts_row(whole, preset, *row) for row in zip(*rows, strict=True)]
+    else:
+        with ProcessPoolExecutor(
+            max_workers=jobs, initializer=_hold_gallery, initargs=(whole, preset)
+        ) as pool:
+            found = list(pool.map(_held_row, *rows, chunksize=4))
+    return np.stack([row for row, _ in found]), np.array([scale for _, scale in found])
 
 
 _HELD: dict[str, tuple[np.ndarray, Preset]] = {}
@@ -116,7 +131,7 @@ def _hold_gallery(whole: np.ndarray, preset: Preset) -> None:
 
 def _held_row(
     profiles: np.ndarray, reach: np.ndarray, own: int | None, centres: np.ndarray | None
-) -> np.ndarray:
+) -> tuple[np.ndarray, float]:
     return _parts_row(*_HELD["gallery"], profiles, reach, own, centres)
 
 
@@ -127,19 +142,61 @@ def _parts_row(
     reach: np.ndarray,
     own: int | None,
     centres: np.ndarray | None,
-) -> np.ndarray:
+) -> tuple[np.ndarray, float]:
     if centres is not None:  # each shape at its own scales: its own entry has no say
-        row = sized_dissimilarity(profiles, reach, whole, preset, centres).dissimilarity
+        match = sized_dissimilarity(profiles, reach, whole, preset, centres)
+        row = match.dissimilarity
         if own is not None:
             row[own] = 0.0
-        return row
+        return row, match.scale
     if own is None:
-        return part_dissimilarity(profiles, reach, whole, preset).dissimilarity
+        match = part_dissimilarity(profiles, reach, whole, preset)
+        return match.dissimilarity, match.scale
     scores = scale_scores(profiles, reach, whole, preset)
     scores[:, own] = np.inf
-    row = best_scale(scores, preset).dissimilarity
+    match = best_scale(scores, preset)
+    row = match.dissimilarity
     row[own] = 0.0
-    return row
+    return row, match.scale
+
+
+def verified_ranking(
+    d: np.ndarray,
+    queries: Sequence[ShapeDescriptor],
+    gallery: Sequence[ShapeDescriptor],
+    scales: np.ndarray,
+    preset: Preset,
+    jobs: int = 1,
+    themselves: bool = False,
+) -> np.ndarray:
+    """``d`` (q, n) with each single view's best ``VERIFIED`` candidates ranked by their
+    rigid fitness (:func:`worker.engine.rigid.verified_fitness`, as the service ranks
+    them): their scores handed out again, the lowest to the candidate holding most of the
+    query. ``scales``: each query's parts scale; ``themselves`` as :func:`parts_matrix`
+    (a query is not its own candidate)."""
+    out = d.copy()
+    tasks = []
+    for i, query in enumerate(queries):
+        if not query.single_view:
+            continue
+        order = np.argsort(d[i], kind="stable")
+        shortlist = order[order != i][:VERIFIED] if themselves else order[:VERIFIED]
+        tasks.append((i, shortlist))
+    args = (
+        [queries[i] for i, _ in tasks],
+        [[gallery[c] for c in shortlist] for _, shortlist in tasks],
+        [float(scales[i]) for i, _ in tasks],
+        [preset.units == "metric"] * len(tasks),
+    )
+    if jobs <= 1 or len(tasks) < 2:
+        fits = list(map(verified_fitness, *args))
+    else:
+        with ProcessPoolExecutor(max_workers=jobs, initializer=single_threaded_blas) as pool:
+            fits = list(pool.map(verified_fitness, *args, chunksize=2))
+    for (i, shortlist), fitness in zip(tasks, fits, strict=True):
+        if fitness is not None:
+            out[i, shortlist[verified_order(fitness)]] = np.sort(d[i, shortlist], kind="stable")
+    return out
 
 
 def query_matrices(
@@ -167,12 +224,13 @@ def query_matrices(
     if baselines is not None:
         flat[0][BASELINE], flat[1][BASELINE] = baselines
     out = cross_dissimilarities(flat[0], flat[1], preset)
-    out[PARTS] = parts_matrix(queries, gallery, preset, jobs, themselves=themselves)
+    out[PARTS], scales = parts_matches(queries, gallery, preset, jobs, themselves=themselves)
     per = dict(out)
     if preset.units == "metric":
         asked, held = (np.stack([d.vector(SIZE) for d in side]) for side in (queries, gallery))
         per[SIZE] = preset_dissimilarity(SIZE, asked, held, preset)
-    out[PRESET_ROW] = weighed_by_partiality(per, query_partiality(queries, preset), preset)
+    fused = weighed_by_partiality(per, query_partiality(queries, preset), preset)
+    out[PRESET_ROW] = verified_ranking(fused, queries, gallery, scales, preset, jobs, themselves)
     return out
 
 
@@ -193,13 +251,15 @@ def collection_matrices(
     Returns
     -------
     {"parts": (n, n), PRESET_ROW: (n, n)}; row ``i`` weighed by query ``i``'s
-    partiality, so neither is symmetric; a pair the parts cannot compare (:func:`ranked_last`)
+    partiality (a single view's best verified, :func:`verified_ranking`), so neither is
+    symmetric; a pair the parts cannot compare (:func:`ranked_last`)
     at the largest float.
     """
-    parts = parts_matrix(descriptors, descriptors, preset, jobs, themselves=True)
+    parts, scales = parts_matches(descriptors, descriptors, preset, jobs, themselves=True)
     per = {**per_modality, PARTS: parts}
     shares = query_partiality(descriptors, preset)
     fused = weighed_by_partiality(per, shares, preset)
+    fused = verified_ranking(fused, descriptors, descriptors, scales, preset, jobs, True)
     return {PARTS: ranked_last(parts), PRESET_ROW: ranked_last(fused)}
 
 
