@@ -331,7 +331,9 @@ def format_matches(body: dict[str, Any]) -> str:
     # The modalities that ranked (a weight above 0; a partial query's parts among them).
     matches = body["matches"]
     modalities = list(body["modalities"])
-    header = ["rank", "name", "label", "score", *modalities, "confidence"]
+    # A single view's verified matches: the share of it each holds once fitted rigidly.
+    fitted = any(m.get("fitness") is not None for m in matches)
+    header = ["rank", "name", "label", "score", *modalities, *(["fitness"] * fitted), "confidence"]
     rows = [
         [
             str(m["rank"]),
@@ -339,6 +341,7 @@ def format_matches(body: dict[str, Any]) -> str:
             m["label"] or "-",
             f"{m['score']:.4g}",
             *(f"{m['scores'][x]:.4g}" for x in modalities),
+            *([_share(m.get("fitness"))] * fitted),
             "-" if m["confidence"] is None else f"{m['confidence']:.0%}",
         ]
         for m in matches
@@ -379,6 +382,10 @@ def format_matches(body: dict[str, Any]) -> str:
     if body.get("partial"):
         title += "\n" + body["partial"]["note"]
     return "\n".join([title, *lines])
+
+
+def _share(value: float | None) -> str:
+    return "-" if value is None else f"{value:.0%}"
 
 
 def _partial(kept_area_fraction: float | None) -> bool:

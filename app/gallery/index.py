@@ -172,6 +172,7 @@ class SearchStats:
     seconds: float = 0.0
     partiality: float = 0.0  # how partial the query looks (0: ranked as a whole)
     kept_share: float | None = None  # share of its whole the query seems to have
+    parts_scale: float | None = None  # the parts' scale s of a partial query (kept 1/s^2)
     # The share's bounds: the parts' scale is measured on a grid (worker.engine.parts).
     kept_range: tuple[float, float] | None = None
     # The weight each modality's score carried in the fused score of this search.

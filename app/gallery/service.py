@@ -248,6 +248,7 @@ class Gallery:
             # The parts' scale is one of a grid: the share lies between its neighbours'.
             half_step = 2.0 ** (0.5 / GRID_STEPS_PER_OCTAVE)
             stats.partiality, stats.kept_share = share, 1.0 / scale**2
+            stats.parts_scale = scale
             stats.kept_range = (1.0 / (scale * half_step) ** 2, min(1.0, (half_step / scale) ** 2))
             stats.weights = {m: w for m, w in weights.items() if w > 0}
         else:

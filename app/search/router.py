@@ -163,6 +163,7 @@ def query_out(result: service.SearchResult) -> QueryOut:
                 confidence=m.confidence,
                 accepted=m.accepted,
                 closeness=m.closeness,
+                fitness=m.fitness,
             )
             for m in result.matches
         ],

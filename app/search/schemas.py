@@ -33,6 +33,13 @@ class MatchOut(BaseModel):
         "scale in every collection and for every query; empty until the collection has "
         "two shapes",
     )
+    fitness: float | None = Field(
+        None,
+        description="a single view's best matches (the first 10 by the parts): the share of "
+        "the view that lies on this match's surface once fitted to it rigidly (at the "
+        "parts' scale in a collection without units), the order they come in; null for "
+        "other queries and matches",
+    )
 
 
 class PartialOut(BaseModel):

@@ -8,7 +8,11 @@ results are domain objects the router turns into responses.
 
 from __future__ import annotations
 
+import importlib
+import math
+import time
 from dataclasses import dataclass, field
+from types import ModuleType
 
 from sqlalchemy.orm import Session
 
@@ -18,6 +22,7 @@ from worker.recognition.calibration import Calibration
 
 from ..descriptors import DescriptorSource, stored_descriptor, upload_descriptor
 from ..errors import ConflictError, InvalidInputError
+from ..gallery.index import Match
 from ..gallery.service import Gallery
 from ..links import collection_path
 from ..models import Mesh
@@ -61,6 +66,9 @@ class RankedMatch:
     #: Per modality: the share of the gallery's pairs of different objects farther apart
     #: (:mod:`app.gallery.reference`); empty before the gallery's first reference fit.
     closeness: dict[str, float] = field(default_factory=dict)
+    #: A single view's best candidates: the share of the view this one holds in place
+    #: (:func:`worker.engine.rigid.verified_fitness`); None for others.
+    fitness: float | None = None
 
 
 @dataclass
@@ -75,6 +83,8 @@ class PartialQuery:
     missing_range: tuple[float, float]
     single_view: bool = False
     cloud: bool = False
+    #: How many of the best matches were verified rigidly (0: none).
+    verified: int = 0
 
     @property
     def note(self) -> str:
@@ -82,11 +92,16 @@ class PartialQuery:
             # Described two-sided (its unseen side the image of the seen one), it matches
             # as nearly whole: the parts' scale does not measure what the scan misses.
             seen = "a scanner's point cloud" if self.cloud else "its faces all face one way"
+            ranked = (
+                f"the {self.verified} best by the parts that are there were fitted to it "
+                "rigidly and come first by how much of it they hold (fitness)"
+                if self.verified
+                else "matches are ranked by the parts that are there"
+            )
             return (
                 f"One view of its object ({seen}): its unseen side is taken as the mirror "
                 "image of the side it sees, so how much of the object is missing is not "
-                "measured; matches are ranked by the parts that are there, so they have no "
-                "confidence."
+                f"measured; {ranked}, so they have no confidence."
             )
         low, high = (round(100 * v) for v in self.missing_range)
         if high >= 10:
@@ -249,13 +264,21 @@ def rank(
     timings: dict[str, float],
     descriptor_source: DescriptorSource,
 ) -> SearchResult:
+    # A single view's best are verified (rigidly), however few matches were asked for.
+    asked = max(options.k, _rigid().VERIFIED) if descriptor.single_view else options.k
     matches, stats = gallery.search(
         descriptor,
-        options.k,
+        asked,
         fusion=options.fusion,
         modalities=options.modalities,
         exclude=exclude,
     )
+    fitness: dict[int, float] = {}
+    if descriptor.single_view and stats.parts_scale is not None:
+        clock = time.perf_counter()
+        matches, fitness = _verified(session, gallery, descriptor, matches, stats.parts_scale)
+        timings = {**timings, "verify": time.perf_counter() - clock}
+    matches = matches[: options.k]
     rows = meshes.by_ids(session, [m.id for m in matches])
     partial = None
     if stats.kept_share is not None and stats.kept_range is not None:
@@ -269,6 +292,7 @@ def rank(
             (low, high),
             single_view=descriptor.single_view,
             cloud=descriptor.input_points is not None,
+            verified=len(fitness),
         )
     reference = gallery.reference
     # The calibration is of whole queries' scores; a part's are on another scale.
@@ -299,6 +323,7 @@ def rank(
                     for m, v in match.scores.items()
                     if (c := reference.closeness(m, v)) is not None
                 },
+                fitness=fitness.get(match.id),
             )
         )
     return SearchResult(
@@ -313,6 +338,38 @@ def rank(
         partial=partial,
         weights=stats.weights,
     )
+
+
+def _verified(
+    session: Session,
+    gallery: Gallery,
+    descriptor: ShapeDescriptor,
+    matches: list[Match],
+    parts_scale: float,
+) -> tuple[list[Match], dict[int, float]]:
+    """A single view's ``VERIFIED`` best matches, those fitted most of the view held in
+    place first (:func:`worker.engine.rigid.verified_order`), then the rest, and each
+    fitted match's fitness; the matches as they are when one of them has no surface
+    kept."""
+    rigid = _rigid()
+    shortlist = matches[: rigid.VERIFIED]
+    preset = gallery.preset
+    stored = meshes.descriptors_for(session, [m.id for m in shortlist], preset.name, preset.version)
+    if len(stored) < len(shortlist):  # deleted a moment ago
+        return matches, {}
+    candidates = [ShapeDescriptor.from_npz_bytes(stored[m.id].data) for m in shortlist]
+    fitness = rigid.verified_fitness(descriptor, candidates, parts_scale, preset.units == "metric")
+    if fitness is None:
+        return matches, {}
+    order = rigid.verified_order(fitness)
+    held = {m.id: float(f) for m, f in zip(shortlist, fitness, strict=True) if math.isfinite(f)}
+    return [shortlist[i] for i in order] + matches[rigid.VERIFIED :], held
+
+
+def _rigid() -> ModuleType:
+    """:mod:`worker.engine.rigid`, imported by the first single view: it needs scipy,
+    which the service starts without (only workers describe)."""
+    return importlib.import_module("worker.engine.rigid")
 
 
 def _calibration_for(

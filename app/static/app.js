@@ -276,7 +276,10 @@ function matchCard(match, result) {
   score.className = "meta";
   score.textContent = `score ${match.score.toPrecision(3)}`;
   if (match.confidence !== null) score.textContent += `, confidence ${percent(match.confidence)}`;
-  else if (result.partial) score.textContent += ", no confidence (ranked by its parts)";
+  else if (match.fitness !== null && match.fitness !== undefined) {
+    score.textContent += `, holds ${percent(match.fitness)} of the view`;
+    score.title = "fitted rigidly: the share of the view that lies on this match's surface";
+  } else if (result.partial) score.textContent += ", no confidence (ranked by its parts)";
   card.append(title, meta, score);
   if (match.accepted !== null) {
     const verdict = document.createElement("div");

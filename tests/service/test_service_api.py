@@ -106,8 +106,8 @@ def test_a_cut_query_is_ranked_by_its_parts_and_says_so(service: Service, galler
     assert "ranked by the parts that are there" in body["partial"]["note"]
     assert not body["partial"]["single_view"] and body["query"]["facing_share"] < 0.95
     assert body["matches"][0]["label"] == "quadruped"
-    for m in body["matches"]:
-        assert "parts" in m["scores"] and m["confidence"] is None
+    for m in body["matches"]:  # a cut is not one view: not fitted rigidly
+        assert "parts" in m["scores"] and m["confidence"] is None and m["fitness"] is None
     table = format_matches(body)
     assert body["partial"]["note"] in table and "parts" in table.splitlines()[2]
     whole = service.query("quadruped-2", k=2).json()
@@ -139,10 +139,12 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_or_as_seen_from_its_camer
     service: Service, gallery
 ):
     """The example depth scan (an organized PCD of the quadruped's left side) is
-    triangulated by its grid and finds the quadruped by its parts; the answer, and an
-    enrolled scan's descriptor, say it was a cloud and of how many points. Its points
-    without the grid, in the camera's frame, are read as seen from the camera and find the
-    same; a whole object's points are a 422 that says what to send instead."""
+    triangulated by its grid and finds the quadruped: its parts' best are fitted to it
+    rigidly, and the enrolled poses come first by how much of it they hold (quadruped-1,
+    whose left side is the scanned pose's, then quadruped-0, whose legs moved). The answer,
+    and an enrolled scan's descriptor, say it was a cloud and of how many points. Its
+    points without the grid, in the camera's frame, are read as seen from the camera and
+    find the same; a whole object's points are a 422 that says what to send instead."""
     data = (EXAMPLES / DEPTH_SAMPLE).read_bytes()
     response = service.client.post(
         "/query", files={"file": (DEPTH_SAMPLE.name, data)}, data={"k": "3"}
@@ -150,7 +152,12 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_or_as_seen_from_its_camer
     assert response.status_code == 200, response.text
     body = response.json()
     assert body["partial"] is not None
-    assert [m["label"] for m in body["matches"][:2]] == ["quadruped", "quadruped"]
+    first, second, third = body["matches"]
+    assert [first["name"], second["name"]] == ["quadruped-1", "quadruped-0"]
+    assert first["fitness"] > 0.8 and first["fitness"] >= second["fitness"] >= third["fitness"]
+    assert "were fitted to it rigidly" in body["partial"]["note"]
+    table = format_matches(body).splitlines()
+    assert "fitness" in table[-4].split() and table[-3].split()[-2] == f"{first['fitness']:.0%}"
     cloud = read_pcd(gzip.decompress(data))[2]  # 56 x 77 pixels, 1,583 on the quadruped
     points, (width, height) = cloud.points, cloud.grid
     assert body["query"]["input_grid"] == [width, height]
@@ -164,6 +171,7 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_or_as_seen_from_its_camer
     )
     whole = service.query("quadruped-2", k=1).json()
     assert "input_grid" not in whole["query"] and "point cloud" not in format_matches(whole)
+    assert whole["matches"][0]["fitness"] is None and "fitness" not in format_matches(whole)
     assert service.client.post("/collections", json={"name": "scans"}).status_code == 201
     enrolled = service.client.post(
         "/collections/scans/meshes", files={"file": (DEPTH_SAMPLE.name, data)}
@@ -183,7 +191,8 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_or_as_seen_from_its_camer
     response = service.client.post("/query", files={"file": ("scan.xyz", xyz)}, data={"k": "3"})
     assert response.status_code == 200, response.text
     as_points = response.json()
-    assert [m["name"] for m in as_points["matches"]] == [m["name"] for m in body["matches"]]
+    # the same poses first; the third, another object, holds some half of either copy
+    assert [m["name"] for m in as_points["matches"][:2]] == [first["name"], second["name"]]
     assert as_points["query"]["input_points"] == points and "input_grid" not in as_points["query"]
     assert as_points["partial"]["single_view"]
     assert f"{points:,} points, triangulated as one view" in format_matches(as_points)

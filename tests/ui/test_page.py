@@ -241,13 +241,16 @@ def test_a_partial_scan_is_ranked_by_its_parts_and_the_page_says_so(page):
 
 
 def test_a_depth_camera_s_scan_is_searched_and_drawn_beside_its_match(page):
-    """The example organized cloud (.pcd): triangulated by its grid, ranked by its parts,
-    and drawn in 3D beside the quadruped it finds."""
+    """The example organized cloud (.pcd): triangulated by its grid, ranked by its parts
+    and fitted rigidly to the best, each card saying how much of the view it holds, and
+    drawn in 3D beside the quadruped it finds."""
     search_for(page, EXAMPLES / DEPTH_SAMPLE)
-    assert page.locator("#search-results .card .label").first.inner_text() == "quadruped"
+    first = page.locator("#search-results .card").first
+    assert first.locator(".label").inner_text() == "quadruped"
+    assert re.search(r"holds \d+% of the view", first.inner_text()), first.inner_text()
     progress = page.locator("#search-progress").inner_text()
     assert f"The query is {depth_cloud_phrase()}." in progress, progress
-    assert "One view of its object" in progress
+    assert "One view of its object" in progress and "fitted to it rigidly" in progress
     page.wait_for_function(
         "() => document.getElementById('view-compare').dataset.models === '2'", timeout=60_000
     )
