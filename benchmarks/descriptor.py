@@ -5,8 +5,8 @@
 
 For each size N, a fresh process describes one TOSCA mesh of every class with the
 preset resampled to N, through ``describe_file`` (its own stage timings: load,
-resample, gdm, eigen_ddt, modal, parts), and, on the very same resampled mesh in the same
-process, lapy's ShapeDNA (k=50), so the ratio is measured side by side. Peak
+resample, gdm, eigen_ddt, modal, parts, surface), and, on the very same resampled mesh in
+the same process, lapy's ShapeDNA (k=50), so the ratio is measured side by side. Peak
 memory is the process's maximum resident set size after describing (imports
 included; the line "after imports" is the process before its first mesh).
 """
@@ -40,9 +40,9 @@ MESHES = (
     "victoria0.off.gz",
     "wolf0.off.gz",
 )
-STAGES = ("load", "resample", "gdm", "eigen_ddt", "modal", "parts")
+STAGES = ("load", "resample", "gdm", "eigen_ddt", "modal", "parts", "surface")
 #: The stages after the resample, whose sum is the descriptor's time.
-DESCRIBING = ("gdm", "eigen_ddt", "modal", "parts")
+DESCRIBING = ("gdm", "eigen_ddt", "modal", "parts", "surface")
 
 
 def _measure(preset_name: str, n: int, repeats: int) -> dict[str, float]:
@@ -116,14 +116,15 @@ def main() -> None:
         f"{args.repeats} repeats each; medians in seconds\n"
     )
     print(
-        "| N | load | resample | GDM | eigen+DDT | modal | parts | descriptor "
-        "(GDM+eigen+modal+parts) | ShapeDNA (lapy) | ratio | peak RSS MB (after imports) |"
+        "| N | load | resample | GDM | eigen+DDT | modal | parts | surface | descriptor "
+        "(GDM+eigen+modal+parts+surface) | ShapeDNA (lapy) | ratio | peak RSS MB (after imports) |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(
             f"| {r['vertices']} | {r['load']:.3f} | {r['resample']:.3f} | {r['gdm']:.3f} | "
-            f"{r['eigen_ddt']:.3f} | {r['modal']:.3f} | {r['parts']:.3f} | {r['descriptor']:.3f} | "
+            f"{r['eigen_ddt']:.3f} | {r['modal']:.3f} | {r['parts']:.3f} | {r['surface']:.3f} | "
+            f"{r['descriptor']:.3f} | "
             f"{r['shapedna']:.3f} | {r['ratio']:.2f}x | "
             f"{r['peak_rss_mb']:.0f} ({r['rss_before_mb']:.0f}) |"
         )
