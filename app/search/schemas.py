@@ -125,7 +125,8 @@ class QueryOut(BaseModel):
     gallery_size: int
     matches: list[MatchOut]
     timings: dict[str, float] = Field(
-        description="seconds: descriptor stages of the query (if computed), 'search', 'total'"
+        description="seconds: descriptor stages of the query (if computed), 'search', "
+        "'verify' (a single view's rigid verification), 'total'"
     )
     query: dict[str, int | float | list[int]] = Field(
         default_factory=dict,
