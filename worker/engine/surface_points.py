@@ -46,8 +46,11 @@ def voxel_points(
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     cells = np.floor((points - points.min(axis=0)) / voxel).astype(np.int64)
-    _, cell, counts = np.unique(cells, axis=0, return_inverse=True, return_counts=True)
-    cell = cell.ravel()
+    # one integer per cell, in the order of (x, y, z): np.unique on rows, without its sort
+    # of rows
+    span = cells.max(axis=0) + 1
+    keys = (cells[:, 0] * span[1] + cells[:, 1]) * span[2] + cells[:, 2]
+    _, cell, counts = np.unique(keys, return_inverse=True, return_counts=True)
     mean = np.stack([np.bincount(cell, points[:, a]) for a in range(3)], axis=1) / counts[:, None]
     unit = np.linalg.norm(normals, axis=1, keepdims=True)
     unit[unit == 0] = 1.0
