@@ -1,4 +1,5 @@
-"""Rigid verification: point feature histograms against a plain loop, motions recovered
+"""Rigid verification: point feature histograms and RANSAC's triples against plain loops,
+motions recovered
 from matches with outliers, a depth view of a figure held by its own surface, not by
 another figure's, and a described view verified on the wholes of a shortlist."""
 
@@ -16,7 +17,9 @@ from worker.engine import rigid
 from worker.engine.pipeline import describe_mesh
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.engine.rigid import (
+    EDGE_RATIO,
     FPFH_BINS,
+    agreeing_triples,
     fpfh,
     pair_features,
     ransac,
@@ -138,6 +141,30 @@ def test_umeyama_recovers_a_motion_batched(scaled):
     np.testing.assert_allclose(rotation, turns, atol=1e-9)
     np.testing.assert_allclose(translation, shifts, atol=1e-9)
     np.testing.assert_allclose(scale, factors, atol=1e-9)
+
+
+@pytest.mark.parametrize("scales", [(1.0, 1.0), (0.7, 1.5)])
+def test_agreeing_triples_equal_the_plain_loop(scales):
+    rng = np.random.default_rng(7)
+    source = rng.uniform(size=(60, 3))
+    target = 1.1 * source + rng.normal(scale=0.03, size=(60, 3))
+    spans_s, spans_t = (np.linalg.norm(p[:, None] - p[None], axis=2) for p in (source, target))
+    ratios = (spans_t / np.where(spans_s > 0, spans_s, np.inf)).astype(np.float32)
+    picks = rng.integers(0, 60, size=(5000, 3))
+    reach = 0.05
+    expected = []
+    for t, triple in enumerate(picks):
+        edges = [(triple[i], triple[(i + 2) % 3]) for i in range(3)]
+        lengths = sorted(float(ratios[e]) for e in edges)
+        if (
+            lengths[0] >= EDGE_RATIO * lengths[2]
+            and scales[0] * EDGE_RATIO <= lengths[1] <= scales[1] / EDGE_RATIO
+            and all(spans_t[e] > reach for e in edges)
+        ):
+            expected.append(t)
+    found = agreeing_triples(picks, ratios, spans_t.astype(np.float32), reach, scales)
+    assert 0 < len(expected) < len(picks)
+    assert found.tolist() == expected
 
 
 @pytest.mark.parametrize("factor", [1.0, 1.3])

@@ -220,6 +220,33 @@ def feature_matches(query: Anchors, candidate: Anchors) -> np.ndarray:
     return np.stack([np.arange(len(forward)), forward], axis=1)
 
 
+def agreeing_triples(
+    picks: np.ndarray,
+    ratios: np.ndarray,
+    spans: np.ndarray,
+    reach: float,
+    scales: tuple[float, float],
+) -> np.ndarray:
+    """The triples of matches ``picks`` ((t, 3) indices) that make a hypothesis, in their
+    order: their three edges' length ratios (target over source, ``ratios`` (k, k)) agree
+    within ``EDGE_RATIO``, their median within ``EDGE_RATIO`` of ``scales``, and no edge
+    of the target (``spans`` (k, k)) is within ``reach``."""
+    k = len(ratios)
+    a, b, c = picks.T
+    # the edges (a, c), (b, a), (c, b) as flat indices into the (k, k) tables
+    edges = np.stack([a * k + c, b * k + a, c * k + b])
+    ratio = ratios.ravel()[edges]
+    low, high = ratio.min(axis=0), ratio.max(axis=0)
+    implied = ratio[0] + ratio[1] + ratio[2] - low - high  # the median of three
+    agree = np.flatnonzero(
+        (low >= EDGE_RATIO * high)
+        & (implied >= scales[0] * EDGE_RATIO)
+        & (implied <= scales[1] / EDGE_RATIO)
+    )
+    # only the few that agree are looked up again
+    return agree[(spans.ravel()[edges[:, agree]] > reach).all(axis=0)]
+
+
 def ransac(
     source: np.ndarray,
     target: np.ndarray,
@@ -252,16 +279,7 @@ def ransac(
     scored = 0
     for _ in range(DRAWS // DRAW_BLOCK):
         picks = rng.integers(0, k, size=(DRAW_BLOCK, 3))
-        ends = (picks, np.roll(picks, 1, axis=1))
-        ratio = ratios[ends]
-        low, high = ratio.min(axis=1), ratio.max(axis=1)
-        implied = ratio.sum(axis=1) - low - high  # the median of three
-        valid = np.flatnonzero(
-            (low >= EDGE_RATIO * high)
-            & (implied >= scales[0] * EDGE_RATIO)
-            & (implied <= scales[1] / EDGE_RATIO)
-            & (spans_t[ends] > inlier).all(axis=1)
-        )[: HYPOTHESES - scored]
+        valid = agreeing_triples(picks, ratios, spans_t, inlier, scales)[: HYPOTHESES - scored]
         for start in range(0, len(valid), HYPOTHESIS_BLOCK):
             drawn = picks[valid[start : start + HYPOTHESIS_BLOCK]]
             rotation, translation, scale = umeyama(source[drawn], target[drawn], scaled)
