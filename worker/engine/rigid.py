@@ -244,7 +244,8 @@ def agreeing_triples(
         & (implied <= scales[1] / EDGE_RATIO)
     )
     # only the few that agree are looked up again
-    return agree[(spans.ravel()[edges[:, agree]] > reach).all(axis=0)]
+    far: np.ndarray = agree[(spans.ravel()[edges[:, agree]] > reach).all(axis=0)]
+    return far
 
 
 def ransac(
