@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .mesh_io import Mesh
+from .mesh_io import Mesh, cross_areas, face_crosses
 from .tol import TOL
 
 #: The anchors' voxel in units (:mod:`.rigid`): about 2,500 cells on a whole.
@@ -95,14 +95,9 @@ def gridded_surface(mesh: Mesh, sides: int, voxel: float, wound: bool) -> tuple[
         moved to the surface's mean) and unit normal.
     unit : the unit, in the file's length unit.
     """
-    # Coordinate by coordinate on contiguous columns, as face_areas (bitwise its areas).
-    columns = np.asarray(mesh.vertices, dtype=np.float64).T
-    corner = np.stack([columns[:, k] for k in np.asarray(mesh.faces).T])  # (3, 3, m)
+    corner, cross = face_crosses(mesh.vertices, mesh.faces)
     u, v = corner[1] - corner[0], corner[2] - corner[0]
-    cross = np.stack(
-        [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
-    )
-    areas = 0.5 * np.sqrt((cross * cross).sum(axis=0))
+    areas = cross_areas(cross)
     total = float(areas.sum())
     unit = float(np.sqrt(sides * total))
     rng = np.random.default_rng(0)
