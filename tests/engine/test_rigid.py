@@ -28,6 +28,7 @@ from worker.engine.rigid import (
     umeyama,
     verified_fitness,
     verified_order,
+    whole_anchors,
 )
 from worker.engine.surface_points import VIEW_VOXEL
 from worker.evaluation.partial import single_view
@@ -248,6 +249,11 @@ def test_a_described_view_is_verified_on_wholes_only():
     fitness = verified_fitness(query, candidates, 1.0, metric=False)
     assert fitness is not None and np.isnan(fitness[-1])
     assert fitness[0] > 0.8 and fitness[0] > max(fitness[1:-1]) + 0.15, fitness
+    # a caller's kept anchors fit exactly as those made anew
+    kept = [whole_anchors(c) for c in candidates]
+    assert kept[-1] is None and all(a is not None for a in kept[:-1])
+    np.testing.assert_array_equal(verified_fitness(query, candidates, 1.0, False, kept), fitness)
     old = dataclasses.replace(wholes[1], surface=np.zeros((0, 6), dtype=np.float16))
+    assert whole_anchors(old) is None
     assert verified_fitness(query, [wholes[0], old], 1.0, metric=False) is None
     assert verified_fitness(wholes[0], wholes[1:], 1.0, metric=False) is None  # no view

@@ -18,12 +18,17 @@ from worker.engine.parts import (
     sized_dissimilarity,
     sized_scales,
 )
+from worker.engine.pipeline import describe_mesh
 from worker.engine.presets import DEFAULT_PRESET, PARTS, SIZE, get_preset, with_units
-from worker.evaluation.partial import PARTIAL_VARIANTS
-from worker.evaluation.partiality import parts_matrix, ranking_scores
+from worker.engine.rigid import verified_fitness, verified_order
+from worker.evaluation.partial import PARTIAL_VARIANTS, single_view
+from worker.evaluation.partiality import parts_matrix, ranking_scores, verified_ranking
 from worker.evaluation.robustness import PRESET_ROW
 from worker.evaluation.run import run_partiality
+from worker.evaluation.samples import sample_mesh
 from worker.evaluation.shapedna import BASELINE
+
+VERIFIED_WHOLES = [("quadruped", 1), ("biped", 0), ("hand", 0), ("spider", 0)]
 
 
 def test_the_partiality_command_s_help_names_every_variant(capsys, monkeypatch):
@@ -121,6 +126,30 @@ def test_in_metric_units_each_whole_is_compared_at_the_scale_the_sizes_give():
 
 
 @pytest.mark.slow  # describes 6 meshes and a cut copy of each
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_views_best_are_ranked_by_fitness_as_each_query_alone_ranks_them(jobs):
+    """The protocol makes each candidate's anchors once for all its queries (in parallel
+    or not): the same order as each query verified alone, anchors made anew. The parts'
+    order puts the biped first for either view of the quadruped; its own figure holds it."""
+    preset = get_preset(DEFAULT_PRESET)
+    wholes = [describe_mesh(sample_mesh(n, p), preset) for n, p in VERIFIED_WHOLES]
+    views = [
+        describe_mesh(single_view(sample_mesh("quadruped", 3), np.array(side)), preset)
+        for side in ([0.0, 1.0, 0.0], [1.0, 1.0, 1.0])
+    ]
+    d = np.array([[0.3, 0.1, 0.2, 0.4], [0.4, 0.1, 0.3, 0.2]])
+    scales = np.ones(len(views))
+    ranked = verified_ranking(d, views, wholes, scales, preset, jobs)
+    for i, view in enumerate(views):
+        shortlist = np.argsort(d[i], kind="stable")
+        fitness = verified_fitness(view, [wholes[c] for c in shortlist], 1.0, metric=False)
+        assert fitness is not None
+        expected = d[i].copy()
+        expected[shortlist[verified_order(fitness)]] = np.sort(d[i])
+        np.testing.assert_array_equal(ranked[i], expected)
+        assert np.argmin(ranked[i]) == 0  # the quadruped
+
+
 def test_run_writes_the_report_and_cut_copies_find_their_class(tmp_path):
     labels = tmp_path / "labels.csv"
     labels.write_text(

@@ -388,11 +388,23 @@ def stored_anchors(surface: np.ndarray, voxel: float, factor: float = 1.0) -> An
     return Anchors(points, normals, fpfh(points, normals, FEATURE_VOXELS * ANCHOR_VOXEL))
 
 
+def whole_anchors(candidate: ShapeDescriptor) -> Anchors | None:
+    """The anchors a single view is fitted on in ``candidate`` (:func:`stored_anchors` of
+    its kept surface at its own grid): the same for every query, so a caller verifying
+    many may keep them (:func:`verified_fitness`'s ``anchors``); None for a candidate that
+    is not fitted (a single view itself, or kept without its surface)."""
+    voxel = candidate.surface_voxel
+    if candidate.single_view or not (len(candidate.surface) and candidate.surface_unit):
+        return None
+    return None if voxel is None else stored_anchors(candidate.surface, voxel)
+
+
 def verified_fitness(
     query: ShapeDescriptor,
     candidates: Sequence[ShapeDescriptor],
     parts_scale: float,
     metric: bool,
+    anchors: Sequence[Anchors | None] | None = None,
 ) -> np.ndarray | None:
     """(k,) the fitness of a single view on each of its candidates (:func:`rigid_fit` of
     their kept surfaces), NaN on a candidate that is itself a single view (two views of an
@@ -408,6 +420,8 @@ def verified_fitness(
         ``SCALE_WINDOW`` of that.
     metric : a collection of metric units: the query's unit in each candidate's is the
         ratio of their ``surface_unit``, fitted at exactly that.
+    anchors : each candidate's :func:`whole_anchors` where the caller kept them (None
+        where not: made here).
     """
     kept = [
         (d.surface, d.surface_voxel, d.surface_unit)
@@ -420,16 +434,17 @@ def verified_fitness(
     scales = (1.0, 1.0) if metric else (1.0 / SCALE_WINDOW, SCALE_WINDOW)
     placed: dict[float, Anchors] = {}
     fitness = np.full(len(candidates), np.nan)
-    for i, (candidate, (grid, grid_voxel, grid_unit)) in enumerate(
-        zip(candidates, held, strict=True)
+    kept_anchors = anchors if anchors is not None else [None] * len(candidates)
+    for i, (candidate, (grid, grid_voxel, grid_unit), fitted) in enumerate(
+        zip(candidates, held, kept_anchors, strict=True)
     ):
         if candidate.single_view:
             continue
         factor = unit / grid_unit if metric else 1.0 / parts_scale
         if factor not in placed:
             placed[factor] = stored_anchors(surface, voxel, factor)
-        anchors = stored_anchors(grid, grid_voxel)
-        fitness[i] = rigid_fit(placed[factor], anchors, ANCHOR_VOXEL, scales).fitness
+        on = fitted if fitted is not None else stored_anchors(grid, grid_voxel)
+        fitness[i] = rigid_fit(placed[factor], on, ANCHOR_VOXEL, scales).fitness
     return fitness
 
 

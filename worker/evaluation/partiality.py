@@ -24,6 +24,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
+from contextlib import nullcontext
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -45,7 +47,7 @@ from worker.engine.parts import (
     sized_scales,
 )
 from worker.engine.presets import MODALITIES, PARTS, SIZE, Preset
-from worker.engine.rigid import VERIFIED, verified_fitness, verified_order
+from worker.engine.rigid import VERIFIED, verified_fitness, verified_order, whole_anchors
 from worker.recognition import metrics
 
 from .compute import single_threaded_blas
@@ -182,17 +184,27 @@ def verified_ranking(
         order = np.argsort(d[i], kind="stable")
         shortlist = order[order != i][:VERIFIED] if themselves else order[:VERIFIED]
         tasks.append((i, shortlist))
-    args = (
-        [queries[i] for i, _ in tasks],
-        [[gallery[c] for c in shortlist] for _, shortlist in tasks],
-        [float(scales[i]) for i, _ in tasks],
-        [preset.units == "metric"] * len(tasks),
-    )
-    if jobs <= 1 or len(tasks) < 2:
-        fits = list(map(verified_fitness, *args))
-    else:
-        with ProcessPoolExecutor(max_workers=jobs, initializer=single_threaded_blas) as pool:
-            fits = list(pool.map(verified_fitness, *args, chunksize=2))
+    # A candidate's anchors are the same for every query's fit: made once.
+    shortlisted = sorted({int(c) for _, shortlist in tasks for c in shortlist})
+    parallel = jobs > 1 and len(tasks) > 1
+    with (
+        ProcessPoolExecutor(max_workers=jobs, initializer=single_threaded_blas)
+        if parallel
+        else nullcontext()
+    ) as pool:
+        run = map if pool is None else partial(pool.map, chunksize=2)
+        anchors = run(whole_anchors, [gallery[c] for c in shortlisted])
+        made = dict(zip(shortlisted, anchors, strict=True))
+        fits = list(
+            run(
+                verified_fitness,
+                [queries[i] for i, _ in tasks],
+                [[gallery[c] for c in shortlist] for _, shortlist in tasks],
+                [float(scales[i]) for i, _ in tasks],
+                [preset.units == "metric"] * len(tasks),
+                [[made[c] for c in shortlist] for _, shortlist in tasks],
+            )
+        )
     for (i, shortlist), fitness in zip(tasks, fits, strict=True):
         if fitness is not None:
             out[i, shortlist[verified_order(fitness)]] = np.sort(d[i, shortlist], kind="stable")
