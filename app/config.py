@@ -85,6 +85,12 @@ class Settings(QueueSettings):
     query_cache_size: int = Field(
         default=1024, ge=0, description="descriptors of recent query uploads kept in memory"
     )
+    verify_cache_size: int = Field(
+        default=256,
+        ge=0,
+        description="enrolled shapes' surfaces as a single view's verification fits on them "
+        "(0.5-1 MB each), kept in memory",
+    )
     query_previews_kept: int = Field(
         default=256,
         ge=1,

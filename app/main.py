@@ -103,6 +103,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             galleries=Galleries(settings, metrics, read_sessions),
             keys=KeyRing(settings.api_key, read_sessions),
             recent_queries=Recent(settings.query_cache_size),
+            verify_anchors=Recent(settings.verify_cache_size),
         )
         app.state.shapes = state
         collector = JobCollector(state)

@@ -42,6 +42,13 @@ class Metrics:
             buckets=(0.0005, 0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.5, float("inf")),
             registry=r,
         )
+        self.verify_anchors = Counter(
+            "shapes_verify_anchors",
+            "A single view's verified candidates by whether their anchors were kept in "
+            "memory or made anew",
+            ["outcome"],
+            registry=r,
+        )
         self.index_size = Gauge("shapes_index_size", "Shapes in the index", ["preset"], registry=r)
         self.jobs_unfinished = Gauge(
             "shapes_jobs_unfinished", "Jobs queued or processing", registry=r

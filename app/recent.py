@@ -1,4 +1,5 @@
-"""Recent query uploads' descriptors, by content, so asking again costs nothing."""
+"""What was made of recent content (a query upload's descriptor, an enrolled shape's
+verification anchors), by its key, so asking again costs nothing."""
 
 from __future__ import annotations
 
@@ -11,8 +12,7 @@ V = TypeVar("V")
 
 
 class Recent(Generic[V]):
-    """A thread-safe least-recently-used map from a query's content key to what was
-    made of it (a descriptor is a few kilobytes).
+    """A thread-safe least-recently-used map from a content key to what was made of it.
 
     Parameters
     ----------

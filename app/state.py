@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session, sessionmaker
@@ -17,6 +18,9 @@ from .metrics import Metrics
 from .queue import DescriptorQueue
 from .recent import Recent
 from .storage import UploadStore
+
+if TYPE_CHECKING:  # the module needs scipy, imported by the first single view
+    from worker.engine.rigid import Anchors
 
 
 @dataclass
@@ -35,3 +39,4 @@ class AppState:
     galleries: Galleries
     keys: KeyRing
     recent_queries: Recent[ShapeDescriptor]
+    verify_anchors: Recent[Anchors]

@@ -8,6 +8,7 @@ results are domain objects the router turns into responses.
 
 from __future__ import annotations
 
+import hashlib
 import importlib
 import math
 import time
@@ -276,7 +277,9 @@ def rank(
     fitness: dict[int, float] = {}
     if descriptor.single_view and stats.parts_scale is not None:
         clock = time.perf_counter()
-        matches, fitness = _verified(session, gallery, descriptor, matches, stats.parts_scale)
+        matches, fitness = _verified(
+            session, state, gallery, descriptor, matches, stats.parts_scale
+        )
         timings = {**timings, "verify": time.perf_counter() - clock}
     matches = matches[: options.k]
     rows = meshes.by_ids(session, [m.id for m in matches])
@@ -342,6 +345,7 @@ def rank(
 
 def _verified(
     session: Session,
+    state: AppState,
     gallery: Gallery,
     descriptor: ShapeDescriptor,
     matches: list[Match],
@@ -350,15 +354,31 @@ def _verified(
     """A single view's ``VERIFIED`` best matches, those fitted most of the view held in
     place first (:func:`worker.engine.rigid.verified_order`), then the rest, and each
     fitted match's fitness; the matches as they are when one of them has no surface
-    kept."""
+    kept. Each candidate's anchors are kept (``state.verify_anchors``) by its stored
+    descriptor's content."""
     rigid = _rigid()
     shortlist = matches[: rigid.VERIFIED]
     preset = gallery.preset
     stored = meshes.descriptors_for(session, [m.id for m in shortlist], preset.name, preset.version)
     if len(stored) < len(shortlist):  # deleted a moment ago
         return matches, {}
-    candidates = [ShapeDescriptor.from_npz_bytes(stored[m.id].data) for m in shortlist]
-    fitness = rigid.verified_fitness(descriptor, candidates, parts_scale, preset.units == "metric")
+    candidates, anchors = [], []
+    for m in shortlist:
+        data = stored[m.id].data
+        candidate = ShapeDescriptor.from_npz_bytes(data)
+        key = hashlib.blake2b(data, digest_size=16).digest()
+        made = state.verify_anchors.get(key)
+        if made is not None:
+            state.metrics.verify_anchors.labels("kept").inc()
+        else:
+            made = rigid.whole_anchors(candidate)
+            if made is not None:
+                state.verify_anchors.put(key, made)
+                state.metrics.verify_anchors.labels("made").inc()
+        candidates.append(candidate)
+        anchors.append(made)
+    metric = preset.units == "metric"
+    fitness = rigid.verified_fitness(descriptor, candidates, parts_scale, metric, anchors)
     if fitness is None:
         return matches, {}
     order = rigid.verified_order(fitness)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gzip
+import re
 
 import numpy as np
 import pytest
@@ -135,6 +136,16 @@ def test_a_view_sent_as_a_mesh_is_called_one_view(service: Service, gallery):
     assert enrolled["descriptor"]["facing_share"] < 0.6
 
 
+def _verify_anchors(service: Service, outcome: str) -> float:
+    """``shapes_verify_anchors_total{outcome}`` of the API's metrics (0 before any)."""
+    found = re.search(
+        rf'^shapes_verify_anchors_total{{outcome="{outcome}"}} (\S+)$',
+        service.client.get("/metrics").text,
+        re.MULTILINE,
+    )
+    return float(found.group(1)) if found else 0.0
+
+
 def test_a_depth_camera_s_cloud_is_queried_by_its_grid_or_as_seen_from_its_camera(
     service: Service, gallery
 ):
@@ -156,6 +167,16 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_or_as_seen_from_its_camer
     assert [first["name"], second["name"]] == ["quadruped-1", "quadruped-0"]
     assert first["fitness"] > 0.8 and first["fitness"] >= second["fitness"] >= third["fitness"]
     assert "were fitted to it rigidly" in body["partial"]["note"]
+    # The wholes' anchors are kept in memory: asked again, none is made anew, the same fits.
+    made, kept = _verify_anchors(service, "made"), _verify_anchors(service, "kept")
+    again = service.client.post(
+        "/query", files={"file": (DEPTH_SAMPLE.name, data)}, data={"k": "3"}
+    )
+    assert [m["fitness"] for m in again.json()["matches"]] == [
+        m["fitness"] for m in body["matches"]
+    ]
+    assert _verify_anchors(service, "made") == made
+    assert _verify_anchors(service, "kept") >= kept + 3  # the three shown, at least
     table = format_matches(body).splitlines()
     assert "fitness" in table[-4].split() and table[-3].split()[-2] == f"{first['fitness']:.0%}"
     cloud = read_pcd(gzip.decompress(data))[2]  # 56 x 77 pixels, 1,583 on the quadruped
