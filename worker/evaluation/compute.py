@@ -217,7 +217,8 @@ def compute_descriptors(
         meshes=[meshes[i] for i in keep],
         descriptors=[d for d, _ in pairs],
         baselines=[b for _, b in pairs],
-        failures=failures,
+        # in the files' order, not the order their jobs ended in: the report reads the same
+        failures={m.name: failures[m.name] for m in meshes if m.name in failures},
         stats={
             "meshes": len(meshes),
             "from_cache": len(meshes) - len(todo),
