@@ -393,10 +393,10 @@ def whole_anchors(candidate: ShapeDescriptor) -> Anchors | None:
     its kept surface at its own grid): the same for every query, so a caller verifying
     many may keep them (:func:`verified_fitness`'s ``anchors``); None for a candidate that
     is not fitted (a single view itself, or kept without its surface)."""
-    voxel = candidate.surface_voxel
-    if candidate.single_view or not (len(candidate.surface) and candidate.surface_unit):
+    voxel, unit = candidate.surface_voxel, candidate.surface_unit
+    if candidate.single_view or not (len(candidate.surface) and voxel and unit):
         return None
-    return None if voxel is None else stored_anchors(candidate.surface, voxel)
+    return stored_anchors(candidate.surface, voxel)
 
 
 def verified_fitness(
