@@ -357,6 +357,8 @@ def _verified(
     kept. Each candidate's anchors are kept (``state.verify_anchors``) by its stored
     descriptor's content."""
     rigid = _rigid()
+    if rigid.kept_surface(descriptor) is None:  # stored before surfaces were kept
+        return matches, {}
     shortlist = matches[: rigid.VERIFIED]
     preset = gallery.preset
     stored = meshes.descriptors_for(session, [m.id for m in shortlist], preset.name, preset.version)

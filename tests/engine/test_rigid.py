@@ -21,6 +21,7 @@ from worker.engine.rigid import (
     FPFH_BINS,
     agreeing_triples,
     fpfh,
+    kept_surface,
     pair_features,
     ransac,
     rigid_fit,
@@ -253,7 +254,12 @@ def test_a_described_view_is_verified_on_wholes_only():
     kept = [whole_anchors(c) for c in candidates]
     assert kept[-1] is None and all(a is not None for a in kept[:-1])
     np.testing.assert_array_equal(verified_fitness(query, candidates, 1.0, False, kept), fitness)
+    # a descriptor stored before surfaces were kept is neither fitted on nor fitted
     old = dataclasses.replace(wholes[1], surface=np.zeros((0, 6), dtype=np.float16))
+    assert kept_surface(old) is None and kept_surface(wholes[1]) is not None
     assert whole_anchors(old) is None
     assert verified_fitness(query, [wholes[0], old], 1.0, metric=False) is None
+    unkept = dataclasses.replace(query, surface_voxel=None)
+    assert kept_surface(unkept) is None
+    assert verified_fitness(unkept, wholes, 1.0, metric=False) is None
     assert verified_fitness(wholes[0], wholes[1:], 1.0, metric=False) is None  # no view

@@ -388,15 +388,24 @@ def stored_anchors(surface: np.ndarray, voxel: float, factor: float = 1.0) -> An
     return Anchors(points, normals, fpfh(points, normals, FEATURE_VOXELS * ANCHOR_VOXEL))
 
 
+def kept_surface(descriptor: ShapeDescriptor) -> tuple[np.ndarray, float, float] | None:
+    """``descriptor``'s gridded surface, its grid's voxel and unit; None when it was
+    stored without them (before surfaces were kept): such a shape is neither fitted nor
+    fitted on."""
+    voxel, unit = descriptor.surface_voxel, descriptor.surface_unit
+    if not (len(descriptor.surface) and voxel and unit):
+        return None
+    return descriptor.surface, voxel, unit
+
+
 def whole_anchors(candidate: ShapeDescriptor) -> Anchors | None:
     """The anchors a single view is fitted on in ``candidate`` (:func:`stored_anchors` of
     its kept surface at its own grid): the same for every query, so a caller verifying
     many may keep them (:func:`verified_fitness`'s ``anchors``); None for a candidate that
     is not fitted (a single view itself, or kept without its surface)."""
-    voxel, unit = candidate.surface_voxel, candidate.surface_unit
-    if candidate.single_view or not (len(candidate.surface) and voxel and unit):
+    if candidate.single_view or (kept := kept_surface(candidate)) is None:
         return None
-    return stored_anchors(candidate.surface, voxel)
+    return stored_anchors(kept[0], kept[1])
 
 
 def verified_fitness(
@@ -423,11 +432,7 @@ def verified_fitness(
     anchors : each candidate's :func:`whole_anchors` where the caller kept them (None
         where not: made here).
     """
-    kept = [
-        (d.surface, d.surface_voxel, d.surface_unit)
-        for d in (query, *candidates)
-        if len(d.surface) and d.surface_voxel and d.surface_unit
-    ]
+    kept = [k for d in (query, *candidates) if (k := kept_surface(d)) is not None]
     if not query.single_view or len(kept) <= len(candidates):
         return None
     (surface, voxel, unit), held = kept[0], kept[1:]
