@@ -13,8 +13,11 @@ import pytest
 import trimesh
 
 from benchmarks.common import EXAMPLES
-from worker.engine.presets import Preset
+from worker.engine.descriptor import ShapeDescriptor
+from worker.engine.pipeline import describe_mesh
+from worker.engine.presets import DEFAULT_PRESET, Preset, get_preset
 from worker.evaluation.datasets import DATASETS_ENV, shared_dataset
+from worker.evaluation.samples import sample_mesh
 
 #: Fixtures that start real service processes. A test using one is marked ``service``
 #: and ``slow`` here, so ``-m "not slow"`` never waits for an API or a worker.
@@ -99,6 +102,18 @@ def tosca_dir() -> Path:
 def small_preset() -> Preset:
     """The paper's method at 800 vertices, so whole-pipeline tests stay fast."""
     return Preset(name="test-small", version=0, n_vertices=800, n_eigenpairs=100)
+
+
+#: Sample figures a view of ``quadruped`` 3 is fitted on in the rigid verification's
+#: tests: its own figure in another pose, then other figures.
+VERIFIED_WHOLES = (("quadruped", 1), ("biped", 0), ("hand", 0), ("spider", 0))
+
+
+@pytest.fixture(scope="session")
+def verified_wholes() -> list[ShapeDescriptor]:
+    """``VERIFIED_WHOLES`` described by the default preset, as the service enrolls them."""
+    preset = get_preset(DEFAULT_PRESET)
+    return [describe_mesh(sample_mesh(name, pose), preset) for name, pose in VERIFIED_WHOLES]
 
 
 def bent_cylinder(bend: float, sections: int = 60, count: int = 24) -> trimesh.Trimesh:

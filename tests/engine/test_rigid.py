@@ -35,9 +35,6 @@ from worker.engine.surface_points import VIEW_VOXEL
 from worker.evaluation.partial import single_view
 from worker.evaluation.samples import depth_scan, sample_mesh
 
-#: The view's own figure in another pose, then other figures.
-WHOLES = [("quadruped", 1), ("biped", 0), ("hand", 0), ("spider", 0)]
-
 
 def pair_reference(ps, ns, pt, nt):
     """Rusu et al. 2009, eq. (1)-(2), one pair at a time."""
@@ -236,7 +233,7 @@ def test_verified_order_moves_only_the_fitted():
     np.testing.assert_array_equal(verified_order(fitness), [2, 1, 5, 0, 4, 3])
 
 
-def test_a_described_view_is_verified_on_wholes_only():
+def test_a_described_view_is_verified_on_wholes_only(verified_wholes):
     """A view of the quadruped described as the service describes a query: its own figure
     (another pose's mesh) holds most of it, other figures far less; an enrolled view is
     not fitted (NaN), and a descriptor kept before surfaces were is not verified at all."""
@@ -244,7 +241,7 @@ def test_a_described_view_is_verified_on_wholes_only():
     seen = single_view(sample_mesh("quadruped", 3), np.array([0.0, 1.0, 0.0]))
     query = describe_mesh(seen, preset)
     assert query.single_view and query.surface_voxel == VIEW_VOXEL
-    wholes = [describe_mesh(sample_mesh(n, p), preset) for n, p in WHOLES]
+    wholes = verified_wholes
     enrolled_view = describe_mesh(single_view(sample_mesh("quadruped", 1), np.ones(3)), preset)
     candidates = [*wholes, enrolled_view]
     fitness = verified_fitness(query, candidates, 1.0, metric=False)

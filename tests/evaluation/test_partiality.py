@@ -28,8 +28,6 @@ from worker.evaluation.run import run_partiality
 from worker.evaluation.samples import sample_mesh
 from worker.evaluation.shapedna import BASELINE
 
-VERIFIED_WHOLES = [("quadruped", 1), ("biped", 0), ("hand", 0), ("spider", 0)]
-
 
 def test_the_partiality_command_s_help_names_every_variant(capsys, monkeypatch):
     """Typed out (the command starts without the engine's dependencies), so checked."""
@@ -127,12 +125,12 @@ def test_in_metric_units_each_whole_is_compared_at_the_scale_the_sizes_give():
 
 @pytest.mark.slow  # describes 6 meshes and a cut copy of each
 @pytest.mark.parametrize("jobs", [1, 2])
-def test_views_best_are_ranked_by_fitness_as_each_query_alone_ranks_them(jobs):
+def test_views_best_are_ranked_by_fitness_as_each_query_alone_ranks_them(jobs, verified_wholes):
     """The protocol makes each candidate's anchors once for all its queries (in parallel
     or not): the same order as each query verified alone, anchors made anew. The parts'
     order puts the biped first for either view of the quadruped; its own figure holds it."""
     preset = get_preset(DEFAULT_PRESET)
-    wholes = [describe_mesh(sample_mesh(n, p), preset) for n, p in VERIFIED_WHOLES]
+    wholes = verified_wholes
     views = [
         describe_mesh(single_view(sample_mesh("quadruped", 3), np.array(side)), preset)
         for side in ([0.0, 1.0, 0.0], [1.0, 1.0, 1.0])
