@@ -123,7 +123,7 @@ def test_in_metric_units_each_whole_is_compared_at_the_scale_the_sizes_give():
     assert parts_matrix(small, small, preset, themselves=True)[1, 0] == np.inf
 
 
-@pytest.mark.slow  # describes 6 meshes and a cut copy of each
+@pytest.mark.slow  # describes two views, fits each to four wholes twice
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_views_best_are_ranked_by_fitness_as_each_query_alone_ranks_them(jobs, verified_wholes):
     """The protocol makes each candidate's anchors once for all its queries (in parallel
@@ -148,6 +148,7 @@ def test_views_best_are_ranked_by_fitness_as_each_query_alone_ranks_them(jobs, v
         assert np.argmin(ranked[i]) == 0  # the quadruped
 
 
+@pytest.mark.slow  # describes 6 meshes and a cut copy of each
 def test_run_writes_the_report_and_cut_copies_find_their_class(tmp_path):
     labels = tmp_path / "labels.csv"
     labels.write_text(
