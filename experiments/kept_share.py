@@ -29,7 +29,7 @@ from worker.engine.presets import get_preset
 from worker.evaluation import partial
 from worker.evaluation.compute import compute_descriptors
 from worker.evaluation.datasets import DEFAULT_CACHE, pose_set, read_labels, shared_dataset
-from worker.evaluation.partiality import query_matrices, ranked_last
+from worker.evaluation.partiality import query_matrices, ranked_last, ranking_scores
 from worker.evaluation.robustness import PRESET_ROW
 from worker.evaluation.variants import make_variant
 from worker.recognition.metrics import retrieval_scores
@@ -99,7 +99,7 @@ def main() -> None:
         sources = np.array([index[m.name] for m in done.meshes])
         kept = np.array([shares[m.name] for m in done.meshes])
         against = query_matrices(done.descriptors, wholes.descriptors, preset, jobs=args.jobs)
-        own = labels[np.argmin(against[PRESET_ROW], axis=1)] == labels[sources]
+        ranked = against[PRESET_ROW]
         among = query_matrices(
             done.descriptors, done.descriptors, preset, jobs=args.jobs, themselves=True
         )
@@ -108,7 +108,11 @@ def main() -> None:
         for upper in BANDS:
             band = np.flatnonzero((kept >= lower) & (kept < upper + (upper == 1.0)))
             nn = retrieval_scores(ranking, labels[sources], band)["nn"] if len(band) else np.nan
-            hits = own[band].mean() if len(band) else np.nan
+            hits = (
+                ranking_scores(ranked[band], sources[band], labels)["own_class"]
+                if len(band)
+                else np.nan
+            )
             print(
                 f"| {variant} | {lower:.1f}-{upper:.1f} | {len(band)} | {100 * hits:.1f}% | "
                 f"{100 * nn:.1f}% |"
@@ -117,7 +121,7 @@ def main() -> None:
         nn = retrieval_scores(ranking, labels[sources])["nn"]
         print(
             f"| {variant} | all (median {np.median(kept):.3f}) | {len(kept)} | "
-            f"{100 * own.mean():.1f}% | {100 * nn:.1f}% |"
+            f"{100 * ranking_scores(ranked, sources, labels)['own_class']:.1f}% | {100 * nn:.1f}% |"
         )
 
 
