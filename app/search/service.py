@@ -266,7 +266,7 @@ def rank(
     descriptor_source: DescriptorSource,
 ) -> SearchResult:
     # A single view's best are verified (rigidly), however few matches were asked for.
-    asked = max(options.k, _rigid().VERIFIED) if descriptor.single_view else options.k
+    asked = max(options.k, _rigid().FEATURE_POOL) if descriptor.single_view else options.k
     matches, stats = gallery.search(
         descriptor,
         asked,
@@ -351,15 +351,16 @@ def _verified(
     matches: list[Match],
     parts_scale: float,
 ) -> tuple[list[Match], dict[int, float]]:
-    """A single view's ``VERIFIED`` best matches, those fitted most of the view held in
-    place first (:func:`worker.engine.rigid.verified_order`), then the rest, and each
-    fitted match's fitness; the matches as they are when one of them has no surface
-    kept. Each candidate's anchors are kept (``state.verify_anchors``) by its stored
-    descriptor's content."""
+    """A single view's ``FEATURE_POOL`` best matches, those it was fitted on
+    (:func:`worker.engine.rigid.verified_fitness`) in the places they held among them,
+    most of the view held first (:func:`worker.engine.rigid.verified_order`), then the
+    rest, and each fitted match's fitness; the matches as they are when one of them has
+    no surface kept. Each candidate's anchors are kept (``state.verify_anchors``) by its
+    stored descriptor's content."""
     rigid = _rigid()
     if rigid.kept_surface(descriptor) is None:  # stored before surfaces were kept
         return matches, {}
-    shortlist = matches[: rigid.VERIFIED]
+    shortlist = matches[: rigid.FEATURE_POOL]
     preset = gallery.preset
     stored = meshes.descriptors_for(session, [m.id for m in shortlist], preset.name, preset.version)
     if len(stored) < len(shortlist):  # deleted a moment ago
@@ -385,7 +386,7 @@ def _verified(
         return matches, {}
     order = rigid.verified_order(fitness)
     held = {m.id: float(f) for m, f in zip(shortlist, fitness, strict=True) if math.isfinite(f)}
-    return [shortlist[i] for i in order] + matches[rigid.VERIFIED :], held
+    return [shortlist[i] for i in order] + matches[len(shortlist) :], held
 
 
 def _rigid() -> ModuleType:

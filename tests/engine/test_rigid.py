@@ -233,13 +233,19 @@ def test_verified_order_moves_only_the_fitted():
     np.testing.assert_array_equal(verified_order(fitness), [2, 1, 5, 0, 4, 3])
 
 
-def test_a_described_view_is_verified_on_wholes_only(verified_wholes):
-    """A view of the quadruped described as the service describes a query: its own figure
-    (another pose's mesh) holds most of it, other figures far less; an enrolled view is
-    not fitted (NaN), and a descriptor kept before surfaces were is not verified at all."""
-    preset = get_preset(DEFAULT_PRESET)
+@pytest.fixture(scope="module")
+def quadruped_view():
+    """A view of the quadruped described as the service describes a query."""
     seen = single_view(sample_mesh("quadruped", 3), np.array([0.0, 1.0, 0.0]))
-    query = describe_mesh(seen, preset)
+    return describe_mesh(seen, get_preset(DEFAULT_PRESET))
+
+
+def test_a_described_view_is_verified_on_wholes_only(verified_wholes, quadruped_view):
+    """A view of the quadruped: its own figure (another pose's mesh) holds most of it,
+    other figures far less; an enrolled view is not fitted (NaN), and a descriptor kept
+    before surfaces were is not verified at all."""
+    preset = get_preset(DEFAULT_PRESET)
+    query = quadruped_view
     assert query.single_view and query.surface_voxel == VIEW_VOXEL
     wholes = verified_wholes
     enrolled_view = describe_mesh(single_view(sample_mesh("quadruped", 1), np.ones(3)), preset)
@@ -260,3 +266,30 @@ def test_a_described_view_is_verified_on_wholes_only(verified_wholes):
     assert kept_surface(unkept) is None
     assert verified_fitness(unkept, wholes, 1.0, metric=False) is None
     assert verified_fitness(wholes[0], wholes[1:], 1.0, metric=False) is None  # no view
+
+
+def test_past_the_parts_best_a_view_is_fitted_on_the_closest_features(
+    verified_wholes, quadruped_view, monkeypatch
+):
+    """Of a pool beyond the parts' best ``VERIFIED``, the candidates whose features lie
+    closest to the view's are fitted too: with one verified and one picked, the quadruped's
+    figure last in the pool is picked by its features, fitted, and ranked first; the two
+    between are not fitted and keep their places."""
+    quadruped, *others = verified_wholes
+    pool = [*others, quadruped]
+    monkeypatch.setattr(rigid, "VERIFIED", 1)
+    monkeypatch.setattr(rigid, "FEATURE_PICKS", 1)
+    fitness = verified_fitness(quadruped_view, pool, 1.0, metric=False)
+    assert fitness is not None
+    assert np.isnan(fitness[1:-1]).all() and np.isfinite(fitness[[0, -1]]).all()
+    assert fitness[-1] > fitness[0] + 0.15, fitness
+    np.testing.assert_array_equal(verified_order(fitness), [3, 1, 2, 0])
+    # the picks are the features' closest: each candidate's quantile, by the plain sort
+    query = rigid.stored_anchors(quadruped_view.surface, quadruped_view.surface_voxel)
+    closeness = [
+        np.sort(rigid.feature_matches(query, whole_anchors(c))[1])[
+            round(rigid.FEATURE_QUANTILE * (len(query.points) - 1))
+        ]
+        for c in pool
+    ]
+    assert int(np.argmin(closeness)) == len(pool) - 1, closeness

@@ -212,12 +212,21 @@ def umeyama(
     return rotation, t_mean - moved, scale
 
 
-def feature_matches(query: Anchors, candidate: Anchors) -> np.ndarray:
-    """(k, 2) index pairs: each query point and the candidate point of the nearest features.
-    Not only mutual nearest: on a view and a figure those are a few dozen, a handful of
-    them right, too few for the fit to be found reliably."""
-    forward = np.asarray(cKDTree(candidate.features).query(query.features)[1])
-    return np.stack([np.arange(len(forward)), forward], axis=1)
+def feature_matches(query: Anchors, candidate: Anchors) -> tuple[np.ndarray, np.ndarray]:
+    """(k, 2) index pairs: each query point and the candidate point of the nearest features,
+    and (k,) the distances between their features. Not only mutual nearest: on a view and a
+    figure those are a few dozen, a handful of them right, too few for the fit to be found
+    reliably."""
+    distance, forward = cKDTree(candidate.features).query(query.features)
+    pairs = np.stack([np.arange(len(query.features)), np.asarray(forward)], axis=1)
+    return pairs, np.asarray(distance)
+
+
+def feature_distance(distances: np.ndarray) -> float:
+    """How close a candidate's surface comes to a view's, from the distances of the view's
+    features to their nearest in the candidate (:func:`feature_matches`): their
+    ``FEATURE_QUANTILE`` quantile."""
+    return float(np.quantile(distances, FEATURE_QUANTILE))
 
 
 def agreeing_triples(
@@ -342,12 +351,17 @@ def icp(
 
 
 def rigid_fit(
-    query: Anchors, candidate: Anchors, voxel: float, scales: tuple[float, float] = (1.0, 1.0)
+    query: Anchors,
+    candidate: Anchors,
+    voxel: float,
+    scales: tuple[float, float] = (1.0, 1.0),
+    matches: np.ndarray | None = None,
 ) -> RigidFit:
     """Verify ``query`` on ``candidate``, both anchored at ``voxel`` (module docstring):
-    feature matches, RANSAC and point-to-plane ICP within ``scales`` of the query's size,
-    and the fitness."""
-    matches = feature_matches(query, candidate)
+    feature matches (``matches`` where the caller has them from :func:`feature_matches`),
+    RANSAC and point-to-plane ICP within ``scales`` of the query's size, and the fitness."""
+    if matches is None:
+        matches = feature_matches(query, candidate)[0]
     rotation, translation, scale, _ = ransac(
         query.points[matches[:, 0]], candidate.points[matches[:, 1]], INLIER_VOXELS * voxel, scales
     )
@@ -371,6 +385,15 @@ def rigid_fit(
 #: parts hold its own class among their best 10 for 89% of TOSCA + SCAPE's views and 79%
 #: of their range scans, among their best 20 for 93% and 88% (docs/decisions.md).
 VERIFIED = 20
+#: A view's own source lies among the parts' best 20 for only half of those views (its
+#: other poses score alike), among their best 100 for 95%; so of the parts' best
+#: ``FEATURE_POOL``, the ``FEATURE_PICKS`` whose surfaces' features lie closest to the
+#: view's (:func:`feature_distance`) are verified too (docs/decisions.md).
+FEATURE_POOL = 100
+FEATURE_PICKS = 10
+#: :func:`feature_distance`'s quantile: a view shares its surface with part of a whole,
+#: so the closest of its features' distances tell, not their bulk.
+FEATURE_QUANTILE = 0.1
 #: How far from the scale the parts modality chose a fit may move a view (either way):
 #: the parts' scale is measured on a grid, and a view's area measures its object's only
 #: roughly (on TOSCA + SCAPE's views the median over-estimate is 13-16%).
@@ -415,11 +438,16 @@ def verified_fitness(
     metric: bool,
     anchors: Sequence[Anchors | None] | None = None,
 ) -> np.ndarray | None:
-    """(k,) the fitness of a single view on each of its candidates (:func:`rigid_fit` of
-    their kept surfaces), NaN on a candidate that is itself a single view (two views of an
-    object share only what both saw: on TOSCA + SCAPE's views all to all, ranking by it
-    lost a sixth of the nearest neighbours the parts found); or None when the query is no
-    single view or a surface is missing (a descriptor stored before surfaces were kept).
+    """(k,) the fitness of a single view on its candidates (:func:`rigid_fit` on their kept
+    surfaces), NaN on those it is not fitted on; or None when the query is no single view
+    or a surface is missing (a descriptor stored before surfaces were kept).
+
+    The candidates are the parts' best (``FEATURE_POOL`` of them, in their order); the
+    view is fitted on the first ``VERIFIED`` and on the ``FEATURE_PICKS`` of all whose
+    features lie closest to its own (:func:`feature_distance`). Never on a candidate that
+    is itself a single view: two views of an object share only what both saw (on TOSCA +
+    SCAPE's views all to all, ranking by it lost a sixth of the nearest neighbours the
+    parts found).
 
     Parameters
     ----------
@@ -438,8 +466,9 @@ def verified_fitness(
     (surface, voxel, unit), held = kept[0], kept[1:]
     scales = (1.0, 1.0) if metric else (1.0 / SCALE_WINDOW, SCALE_WINDOW)
     placed: dict[float, Anchors] = {}
-    fitness = np.full(len(candidates), np.nan)
     kept_anchors = anchors if anchors is not None else [None] * len(candidates)
+    fits: dict[int, tuple[Anchors, Anchors, np.ndarray]] = {}
+    closeness = np.full(len(candidates), np.inf)
     for i, (candidate, (grid, grid_voxel, grid_unit), fitted) in enumerate(
         zip(candidates, held, kept_anchors, strict=True)
     ):
@@ -449,7 +478,14 @@ def verified_fitness(
         if factor not in placed:
             placed[factor] = stored_anchors(surface, voxel, factor)
         on = fitted if fitted is not None else stored_anchors(grid, grid_voxel)
-        fitness[i] = rigid_fit(placed[factor], on, ANCHOR_VOXEL, scales).fitness
+        matches, distances = feature_matches(placed[factor], on)
+        fits[i] = (placed[factor], on, matches)
+        closeness[i] = feature_distance(distances)
+    closest = np.argsort(closeness, kind="stable")[:FEATURE_PICKS]
+    fitness = np.full(len(candidates), np.nan)
+    for i in sorted(set(range(VERIFIED)) | {int(c) for c in closest}):
+        if i in fits:
+            fitness[i] = rigid_fit(*fits[i][:2], ANCHOR_VOXEL, scales, fits[i][2]).fitness
     return fitness
 
 

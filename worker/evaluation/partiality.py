@@ -47,7 +47,13 @@ from worker.engine.parts import (
     sized_scales,
 )
 from worker.engine.presets import MODALITIES, PARTS, SIZE, Preset
-from worker.engine.rigid import VERIFIED, verified_fitness, verified_order, whole_anchors
+from worker.engine.rigid import (
+    FEATURE_POOL,
+    Anchors,
+    verified_fitness,
+    verified_order,
+    whole_anchors,
+)
 from worker.recognition import metrics
 
 from .compute import single_threaded_blas
@@ -171,20 +177,23 @@ def verified_ranking(
     jobs: int = 1,
     themselves: bool = False,
 ) -> np.ndarray:
-    """``d`` (q, n) with each single view's best ``VERIFIED`` candidates ranked by their
-    rigid fitness (:func:`worker.engine.rigid.verified_fitness`, as the service ranks
-    them): their scores handed out again, the lowest to the candidate holding most of the
-    query. ``scales``: each query's parts scale; ``themselves`` as :func:`parts_matrix`
-    (a query is not its own candidate)."""
+    """``d`` (q, n) with the candidates each single view is fitted on, of its best
+    ``FEATURE_POOL``, ranked by their rigid fitness
+    (:func:`worker.engine.rigid.verified_fitness`, as the service ranks them): their
+    scores handed out again, the lowest to the candidate holding most of the query.
+    ``scales``: each query's parts scale; ``themselves`` as :func:`parts_matrix` (a query
+    is not its own candidate)."""
     out = d.copy()
     tasks = []
     for i, query in enumerate(queries):
         if not query.single_view:
             continue
         order = np.argsort(d[i], kind="stable")
-        shortlist = order[order != i][:VERIFIED] if themselves else order[:VERIFIED]
+        shortlist = order[order != i][:FEATURE_POOL] if themselves else order[:FEATURE_POOL]
         tasks.append((i, shortlist))
-    # A candidate's anchors are the same for every query's fit: made once.
+    # A candidate's anchors are the same for every query's fit: made once, and handed to
+    # each worker once with its share of the queries (a hundred candidates' anchors a
+    # query, about a megabyte each).
     shortlisted = sorted({int(c) for _, shortlist in tasks for c in shortlist})
     parallel = jobs > 1 and len(tasks) > 1
     with (
@@ -195,20 +204,49 @@ def verified_ranking(
         run = map if pool is None else partial(pool.map, chunksize=2)
         anchors = run(whole_anchors, [gallery[c] for c in shortlisted])
         made = dict(zip(shortlisted, anchors, strict=True))
-        fits = list(
-            run(
-                verified_fitness,
-                [queries[i] for i, _ in tasks],
-                [[gallery[c] for c in shortlist] for _, shortlist in tasks],
-                [float(scales[i]) for i, _ in tasks],
-                [preset.units == "metric"] * len(tasks),
-                [[made[c] for c in shortlist] for _, shortlist in tasks],
-            )
+        held = {c: gallery[c] for c in shortlisted}
+        shares = [tasks[start::jobs] for start in range(jobs)] if parallel else [tasks]
+        fits = (pool.map if pool is not None else map)(
+            partial(
+                _verified_share,
+                queries=queries,
+                scales=scales,
+                metric=preset.units == "metric",
+                gallery=held,
+                anchors=made,
+            ),
+            shares,
         )
-    for (i, shortlist), fitness in zip(tasks, fits, strict=True):
-        if fitness is not None:
+        fitted = {i: fitness for share in fits for i, fitness in share}
+    for i, shortlist in tasks:
+        if (fitness := fitted[i]) is not None:
             out[i, shortlist[verified_order(fitness)]] = np.sort(d[i, shortlist], kind="stable")
     return out
+
+
+def _verified_share(
+    tasks: Sequence[tuple[int, np.ndarray]],
+    queries: Sequence[ShapeDescriptor],
+    scales: np.ndarray,
+    metric: bool,
+    gallery: Mapping[int, ShapeDescriptor],
+    anchors: Mapping[int, Anchors | None],
+) -> list[tuple[int, np.ndarray | None]]:
+    """:func:`verified_fitness` of each task's query (its position and its candidates'
+    positions in the gallery) on its candidates, for :func:`verified_ranking`."""
+    return [
+        (
+            i,
+            verified_fitness(
+                queries[i],
+                [gallery[int(c)] for c in shortlist],
+                float(scales[i]),
+                metric,
+                [anchors[int(c)] for c in shortlist],
+            ),
+        )
+        for i, shortlist in tasks
+    ]
 
 
 def query_matrices(
