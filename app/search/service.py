@@ -94,8 +94,9 @@ class PartialQuery:
             # as nearly whole: the parts' scale does not measure what the scan misses.
             seen = "a scanner's point cloud" if self.cloud else "its faces all face one way"
             ranked = (
-                f"the {self.verified} best by the parts that are there were fitted to it "
-                "rigidly and come first by how much of it they hold (fitness)"
+                f"{self.verified} of the best by the parts that are there (and by their "
+                "surfaces' features) were fitted to it rigidly and ranked among themselves "
+                "by how much of it they hold (fitness)"
                 if self.verified
                 else "matches are ranked by the parts that are there"
             )
