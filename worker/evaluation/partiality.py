@@ -206,7 +206,8 @@ def verified_ranking(
         made = dict(zip(shortlisted, anchors, strict=True))
         held = {c: gallery[c] for c in shortlisted}
         shares = [tasks[start::jobs] for start in range(jobs)] if parallel else [tasks]
-        fits = (pool.map if pool is not None else map)(
+        # one share a worker (``run``'s chunks of two would hand both shares to one)
+        fits = (map if pool is None else pool.map)(
             partial(
                 _verified_share,
                 queries=queries,
