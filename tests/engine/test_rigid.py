@@ -31,7 +31,7 @@ from worker.engine.rigid import (
     verified_order,
     whole_anchors,
 )
-from worker.engine.surface_points import VIEW_VOXEL
+from worker.engine.surface_points import ANCHOR_VOXEL, VIEW_VOXEL
 from worker.evaluation.partial import single_view
 from worker.evaluation.samples import depth_scan, sample_mesh
 
@@ -268,6 +268,24 @@ def test_a_described_view_is_verified_on_wholes_only(verified_wholes, quadruped_
     assert verified_fitness(wholes[0], wholes[1:], 1.0, metric=False) is None  # no view
 
 
+@pytest.mark.parametrize(("name", "direction"), [("quadruped", (0, 1, 0)), ("hand", (1, 0, 0))])
+def test_a_view_is_fitted_from_its_unit_over_its_objects(name, direction):
+    """A view's unit (both its sides' area) is a share of its object's that the parts'
+    scale does not see: fitted on its own pose's whole from ``VIEW_UNIT`` of it, within
+    ``SCALE_WINDOW``, the fit holds all of the view at the two units' true ratio."""
+    preset = get_preset(DEFAULT_PRESET)
+    mesh = sample_mesh(name, 3 if name == "quadruped" else 0)
+    view = describe_mesh(single_view(mesh, np.array(direction, dtype=float)), preset)
+    whole = describe_mesh(mesh, preset)
+    ratio = view.surface_unit / whole.surface_unit
+    assert abs(math.log(ratio / rigid.VIEW_UNIT)) < math.log(rigid.SCALE_WINDOW)
+    query = rigid.stored_anchors(view.surface, view.surface_voxel, rigid.VIEW_UNIT)
+    window = (1.0 / rigid.SCALE_WINDOW, rigid.SCALE_WINDOW)
+    fit = rigid_fit(query, whole_anchors(whole), ANCHOR_VOXEL, window)
+    assert fit.fitness > 0.95
+    assert rigid.VIEW_UNIT * fit.scale == pytest.approx(ratio, rel=0.03)
+
+
 def test_past_the_parts_best_a_view_is_fitted_on_the_closest_features(
     verified_wholes, quadruped_view, monkeypatch
 ):
@@ -285,7 +303,9 @@ def test_past_the_parts_best_a_view_is_fitted_on_the_closest_features(
     assert fitness[-1] > fitness[0] + 0.15, fitness
     np.testing.assert_array_equal(verified_order(fitness), [3, 1, 2, 0])
     # the picks are the features' closest: each candidate's quantile, by the plain sort
-    query = rigid.stored_anchors(quadruped_view.surface, quadruped_view.surface_voxel)
+    query = rigid.stored_anchors(
+        quadruped_view.surface, quadruped_view.surface_voxel, rigid.VIEW_UNIT
+    )
     closeness = [
         np.sort(rigid.feature_matches(query, whole_anchors(c))[1])[
             round(rigid.FEATURE_QUANTILE * (len(query.points) - 1))

@@ -394,10 +394,18 @@ FEATURE_PICKS = 10
 #: :func:`feature_distance`'s quantile: a view shares its surface with part of a whole,
 #: so the closest of its features' distances tell, not their bulk.
 FEATURE_QUANTILE = 0.1
-#: How far from the scale the parts modality chose a fit may move a view (either way):
-#: the parts' scale is measured on a grid, and a view's area measures its object's only
-#: roughly (on TOSCA + SCAPE's views the median over-estimate is 13-16%).
-SCALE_WINDOW = 1.5
+#: A single view's unit (the square root of both its sides' area) over its object's: a
+#: view holds about a third of its object's surface, a range grid less (its grazing
+#: triangles dropped as shortcuts), so its two sides under two thirds (``sqrt(2 / 3)`` =
+#: 0.82); the parts' scale, kept near 1 by its prior, does not see it. On TOSCA + SCAPE's
+#: range scans the fits that hold their own source find a median 0.80 (10-90%:
+#: 0.71-0.86) over the parts' scale; of 0.78, 0.83 and 0.88, TOSCA's copies chose 0.78,
+#: and SCAPE's agreed (docs/decisions.md).
+VIEW_UNIT = 0.78
+#: How far from ``VIEW_UNIT`` over the parts' scale a fit may move a view (either way):
+#: a view's share of its object varies; a fit that holds little of the view drifts to the
+#: window's edge, so a wider window lets a wrong one hold more.
+SCALE_WINDOW = 1.25
 
 
 def stored_anchors(surface: np.ndarray, voxel: float, factor: float = 1.0) -> Anchors:
@@ -453,8 +461,8 @@ def verified_fitness(
     ----------
     query, candidates : descriptors with their surfaces.
     parts_scale : the scale ``s`` the parts modality chose for the query; the query's
-        unit is ``1 / s`` of a candidate's in a collection without units, fitted within
-        ``SCALE_WINDOW`` of that.
+        unit is taken as ``VIEW_UNIT / s`` of a candidate's in a collection without units,
+        fitted within ``SCALE_WINDOW`` of that.
     metric : a collection of metric units: the query's unit in each candidate's is the
         ratio of their ``surface_unit``, fitted at exactly that.
     anchors : each candidate's :func:`whole_anchors` where the caller kept them (None
@@ -474,7 +482,7 @@ def verified_fitness(
     ):
         if candidate.single_view:
             continue
-        factor = unit / grid_unit if metric else 1.0 / parts_scale
+        factor = unit / grid_unit if metric else VIEW_UNIT / parts_scale
         if factor not in placed:
             placed[factor] = stored_anchors(surface, voxel, factor)
         on = fitted if fitted is not None else stored_anchors(grid, grid_voxel)
