@@ -269,7 +269,7 @@ def test_a_described_view_is_verified_on_wholes_only(verified_wholes, quadruped_
 
 
 @pytest.mark.parametrize(("name", "direction"), [("quadruped", (0, 1, 0)), ("hand", (1, 0, 0))])
-def test_a_view_is_fitted_from_its_unit_over_its_objects(name, direction):
+def test_a_view_fitted_from_view_unit_finds_its_true_scale(name, direction):
     """A view's unit (both its sides' area) is a share of its object's that the parts'
     scale does not see: fitted on its own pose's whole from ``VIEW_UNIT`` of it, within
     ``SCALE_WINDOW``, the fit holds all of the view at the two units' true ratio."""
