@@ -1,5 +1,5 @@
-"""Rigid verification: point feature histograms and RANSAC's triples against plain loops,
-motions recovered
+"""Rigid verification: point feature histograms, RANSAC's triples and inlier counts against
+plain loops, motions recovered
 from matches with outliers, a depth view of a figure held by its own surface, not by
 another figure's, and a described view verified on the wholes of a shortlist."""
 
@@ -21,6 +21,7 @@ from worker.engine.rigid import (
     FPFH_BINS,
     agreeing_triples,
     fpfh,
+    inlier_counts,
     kept_surface,
     pair_features,
     ransac,
@@ -163,6 +164,26 @@ def test_agreeing_triples_equal_the_plain_loop(scales):
             expected.append(t)
     found = agreeing_triples(picks, ratios, spans_t.astype(np.float32), reach, scales)
     assert 0 < len(expected) < len(picks)
+    assert found.tolist() == expected
+
+
+def test_inlier_counts_equal_the_plain_loop():
+    rng = np.random.default_rng(11)
+    source = rng.uniform(size=(300, 3))
+    rotation = np.stack([random_rotation(rng) for _ in range(40)])
+    translation = rng.normal(scale=0.05, size=(40, 3))
+    scale = rng.uniform(0.8, 1.25, size=40)
+    target = source @ rotation[0].T + rng.normal(scale=0.05, size=(300, 3))
+    inlier = 0.08
+    expected = [
+        sum(
+            float(np.linalg.norm(f * r @ p + t - q)) < inlier
+            for p, q in zip(source, target, strict=True)
+        )
+        for r, t, f in zip(rotation, translation, scale, strict=True)
+    ]
+    found = inlier_counts(source, target, rotation, translation, scale, inlier)
+    assert 0 < max(expected) < len(source)
     assert found.tolist() == expected
 
 

@@ -242,9 +242,14 @@ def agreeing_triples(
     of the target (``spans`` (k, k)) is within ``reach``."""
     k = len(ratios)
     a, b, c = picks.T
-    # the edges (a, c), (b, a), (c, b) as flat indices into the (k, k) tables
+    flat = ratios.ravel()
+    # the edges (a, c), (b, a), (c, b) as flat indices into the (k, k) tables; three
+    # ratios agree when every two do, so the third is looked up only where two agree
+    first, second = flat[a * k + c], flat[b * k + a]
+    two = np.flatnonzero(np.minimum(first, second) >= EDGE_RATIO * np.maximum(first, second))
+    a, b, c = a[two], b[two], c[two]
     edges = np.stack([a * k + c, b * k + a, c * k + b])
-    ratio = ratios.ravel()[edges]
+    ratio = np.stack([first[two], second[two], flat[edges[2]]])
     low, high = ratio.min(axis=0), ratio.max(axis=0)
     implied = ratio[0] + ratio[1] + ratio[2] - low - high  # the median of three
     agree = np.flatnonzero(
@@ -253,8 +258,30 @@ def agreeing_triples(
         & (implied <= scales[1] / EDGE_RATIO)
     )
     # only the few that agree are looked up again
-    far: np.ndarray = agree[(spans.ravel()[edges[:, agree]] > reach).all(axis=0)]
+    far: np.ndarray = two[agree[(spans.ravel()[edges[:, agree]] > reach).all(axis=0)]]
     return far
+
+
+def inlier_counts(
+    source: np.ndarray,
+    target: np.ndarray,
+    rotation: np.ndarray,
+    translation: np.ndarray,
+    scale: np.ndarray,
+    inlier: float,
+) -> np.ndarray:
+    """(h,) how many matches ``source[i] -> target[i]`` ((m, 3) each) each of h motions
+    (``rotation`` (h, 3, 3), ``translation`` (h, 3), ``scale`` (h,)) moves within
+    ``inlier``: every motion's turn of every point in one matrix product."""
+    h, m = len(rotation), len(source)
+    # (m, 3, h): each coordinate of every motion's turn of every point
+    turned = (source @ rotation.transpose(2, 1, 0).reshape(3, 3 * h)).reshape(m, 3, h)
+    squared = np.zeros((m, h))
+    for axis in range(3):
+        off = scale * turned[:, axis] + (translation[:, axis] - target[:, axis, None])
+        squared += off * off
+    counted: np.ndarray = (squared < inlier**2).sum(axis=0)
+    return counted
 
 
 def ransac(
@@ -286,6 +313,7 @@ def ransac(
     spans_t = cdist(target, target).astype(np.float32)
     ratios = spans_t / np.where(spans_s > 0, spans_s, np.float32(np.inf))
     scoring = np.sort(rng.permutation(k)[:SCORING_MATCHES])
+    scoring_source, scoring_target = source[scoring], target[scoring]
     scored = 0
     for _ in range(DRAWS // DRAW_BLOCK):
         picks = rng.integers(0, k, size=(DRAW_BLOCK, 3))
@@ -293,9 +321,9 @@ def ransac(
         for start in range(0, len(valid), HYPOTHESIS_BLOCK):
             drawn = picks[valid[start : start + HYPOTHESIS_BLOCK]]
             rotation, translation, scale = umeyama(source[drawn], target[drawn], scaled)
-            moved = scale[:, None, None] * (source[scoring] @ np.swapaxes(rotation, 1, 2))
-            moved += translation[:, None, :] - target[scoring][None]
-            counts = ((moved * moved).sum(axis=2) < inlier**2).sum(axis=1)
+            counts = inlier_counts(
+                scoring_source, scoring_target, rotation, translation, scale, inlier
+            )
             h = int(np.argmax(counts))
             if counts[h] > best[3]:
                 best = (rotation[h], translation[h], float(scale[h]), int(counts[h]))
