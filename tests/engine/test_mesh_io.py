@@ -18,6 +18,8 @@ from worker.engine.mesh_io import (
     canonical_frame,
     clean_mesh,
     clean_surface,
+    column_cross,
+    column_dot,
     face_areas,
     load_mesh,
     read_mesh,
@@ -336,3 +338,14 @@ def test_a_file_read_as_numbered_keeps_its_vertex_order(sphere):
     assert not np.array_equal(cleaned.vertices, vertices)
     with pytest.raises(errors.UnreadableMeshError):
         read_numbered_mesh(_off(vertices, faces + len(vertices)), "s.off")
+
+
+def test_column_products_are_numpy_s_bitwise():
+    rng = np.random.default_rng(3)
+    u, v = rng.normal(size=(2, 1000, 3)) * np.logspace(-6, 6, 1000)[:, None]
+    assert np.array_equal(column_cross(u.T, v.T), np.cross(u, v).T)
+    assert np.array_equal(column_dot(u.T, v.T), (u * v).sum(axis=1))
+    faces = rng.integers(0, 1000, size=(500, 3))
+    a, b, c = (u[faces[:, k]] for k in range(3))
+    expected = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    assert np.array_equal(face_areas(u, faces), expected)

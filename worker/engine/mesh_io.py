@@ -75,11 +75,22 @@ def face_crosses(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, n
     upload, where ``cross`` and ``norm`` walk strided rows."""
     columns = np.asarray(vertices, dtype=np.float64).T
     corners = np.stack([columns[:, corner] for corner in np.asarray(faces).T])
-    u, v = corners[1] - corners[0], corners[2] - corners[0]
-    cross = np.stack(
+    return corners, column_cross(corners[1] - corners[0], corners[2] - corners[0])
+
+
+def column_cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(3, m) the cross products of (3, m) vectors given coordinate by coordinate, bitwise
+    numpy's ``cross`` of their (m, 3) rows."""
+    return np.stack(
         [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
     )
-    return corners, cross
+
+
+def column_dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(m,) the dot products of (3, m) vectors given coordinate by coordinate, bitwise
+    ``(u * v).sum(axis=1)`` of their (m, 3) rows."""
+    dotted: np.ndarray = u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+    return dotted
 
 
 def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -90,8 +101,7 @@ def face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def cross_areas(cross: np.ndarray) -> np.ndarray:
     """(m,) half the lengths of (3, m) cross products (:func:`face_crosses`)."""
-    x, y, z = cross
-    areas: np.ndarray = 0.5 * np.sqrt(x * x + y * y + z * z)
+    areas: np.ndarray = 0.5 * np.sqrt(column_dot(cross, cross))
     return areas
 
 

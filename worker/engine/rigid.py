@@ -30,6 +30,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist
 
 from .descriptor import ShapeDescriptor
+from .mesh_io import column_cross, column_dot
 from .surface_points import ANCHOR_VOXEL, voxel_points
 from .tol import TOL
 
@@ -103,23 +104,25 @@ def pair_features(
     alpha, phi in [-1, 1] and theta in [-pi, pi], (k,) each; zeros for a pair whose
     line is parallel to its source's normal or of zero length.
     """
-    d = p2 - p1
-    length = np.linalg.norm(d, axis=1)
+    # coordinate by coordinate ((3, k) each): a dot or cross product of (k, 3) rows sums
+    # over a short axis, which numpy does slowly
+    d, n1, n2 = (np.ascontiguousarray(x.T) for x in (p2 - p1, n1, n2))
+    length = np.sqrt(column_dot(d, d))
     length[length == 0] = np.inf
-    d = d / length[:, None]
-    a1, a2 = (n1 * d).sum(axis=1), (n2 * d).sum(axis=1)
+    d = d / length
+    a1, a2 = column_dot(n1, d), column_dot(n2, d)
     swap = np.abs(a1) < np.abs(a2)  # n2 makes the smaller angle with the line
-    u = np.where(swap[:, None], n2, n1)
-    nt = np.where(swap[:, None], n1, n2)
-    d = np.where(swap[:, None], -d, d)
+    u = np.where(swap, n2, n1)
+    nt = np.where(swap, n1, n2)
+    d = np.where(swap, -d, d)
     phi = np.where(swap, -a2, a1)
-    v = np.cross(u, d)
-    v_length = np.linalg.norm(v, axis=1)
+    v = column_cross(u, d)
+    v_length = np.sqrt(column_dot(v, v))
     degenerate = v_length < TOL.parallel_sine
-    v = v / np.where(degenerate, 1.0, v_length)[:, None]
-    w = np.cross(u, v)
-    alpha = (v * nt).sum(axis=1)
-    theta = np.arctan2((w * nt).sum(axis=1), (u * nt).sum(axis=1))
+    v = v / np.where(degenerate, 1.0, v_length)
+    w = column_cross(u, v)
+    alpha = column_dot(v, nt)
+    theta = np.arctan2(column_dot(w, nt), column_dot(u, nt))
     return (
         np.where(degenerate, 0.0, alpha),
         np.where(degenerate, 0.0, phi),
@@ -164,7 +167,8 @@ def fpfh(points: np.ndarray, normals: np.ndarray, radius: float) -> np.ndarray:
     cells = (ends[:, None] * width + np.concatenate([bins, bins])).ravel()
     spfh = np.bincount(cells, minlength=n * width).reshape(n, width).astype(np.float64)
     spfh = _blocks_normalized(spfh)
-    distance = np.linalg.norm(points[i] - points[j], axis=1)
+    offset = (points[j] - points[i]).T
+    distance = np.sqrt(column_dot(offset, offset))
     weight = np.where(distance > 0, 1.0 / np.where(distance > 0, distance, 1.0), 0.0)
     neighbours = sp.coo_matrix(
         (np.concatenate([weight, weight]), (ends, np.concatenate([j, i]))), shape=(n, n)
