@@ -91,6 +91,11 @@ class Settings(QueueSettings):
         description="enrolled shapes' surfaces as a single view's verification fits on them "
         "(0.5-1 MB each), kept in memory",
     )
+    verify_threads: int = Field(
+        default=2,
+        ge=1,
+        description="threads a single view's rigid verification runs on in the API process",
+    )
     query_previews_kept: int = Field(
         default=256,
         ge=1,

@@ -1,6 +1,7 @@
-"""A single view's rigid verification: seconds per query.
+"""A single view's rigid verification: seconds per query, on one thread and on several.
 
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python -m benchmarks.verify [--queries 40]
+        [--threads 2]
 
 The partiality protocol's ``view`` copies of TOSCA (seeded as there, described through
 the evaluation cache: seconds after ``shapes partiality`` has run with it) each verified
@@ -9,9 +10,10 @@ verifies one (:func:`worker.engine.rigid.verified_fitness` on stored descriptors
 candidate's features compared, ``VERIFIED`` and up to ``FEATURE_PICKS`` more fitted): the
 candidates' anchors made anew (the service's first query on them), then kept from an
 earlier query (:func:`worker.engine.rigid.whole_anchors`, as the service keeps them in
-memory), alternating query by query. The table gives, over the first ``--queries``
-copies, the median and 90th percentile seconds of either, in one process, and their
-ratio.
+memory), each on one thread and on ``--threads`` (the service's
+``SHAPES_VERIFY_THREADS``), query by query in one process. The table gives, over the first
+``--queries`` copies, the median and 90th percentile seconds of each, and the median of
+the per-query ratios to one thread made anew.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import time
 
 import numpy as np
 
-from worker.engine.rigid import FEATURE_POOL, verified_fitness, whole_anchors
+from worker.engine.rigid import FEATURE_POOL, Anchors, verified_fitness, whole_anchors
 from worker.evaluation.compute import compute_descriptors
 from worker.evaluation.partiality import parts_matches
 
@@ -31,6 +33,7 @@ from .common import add_evaluation_cache_arguments, evaluated_tosca
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--queries", type=int, default=40)
+    parser.add_argument("--threads", type=int, default=2)
     add_evaluation_cache_arguments(parser)
     args = parser.parse_args()
     preset, wholes = evaluated_tosca(args)
@@ -39,37 +42,43 @@ def main() -> None:
     )
     queries = views.descriptors[: args.queries]
     parts, scales = parts_matches(queries, wholes.descriptors, preset, args.jobs)
-    kept = {}
-    made, reused, fitted = [], [], []
+    kept: dict[int, Anchors | None] = {}
+    runs = [("made anew", 1), ("made anew", args.threads), ("kept", 1), ("kept", args.threads)]
+    seconds: dict[tuple[str, int], list[float]] = {run: [] for run in runs}
+    fitted = []
     for q, query in enumerate(queries):
         shortlist = np.argsort(parts[q], kind="stable")[:FEATURE_POOL]
         candidates = [wholes.descriptors[c] for c in shortlist]
         metric, scale = preset.units == "metric", float(scales[q])
-        start = time.perf_counter()
-        fresh = verified_fitness(query, candidates, scale, metric)
-        made.append(time.perf_counter() - start)
-        for c in shortlist:
-            if c not in kept:
-                kept[c] = whole_anchors(wholes.descriptors[c])
-        anchors = [kept[c] for c in shortlist]
-        start = time.perf_counter()
-        again = verified_fitness(query, candidates, scale, metric, anchors)
-        reused.append(time.perf_counter() - start)
-        if fresh is None or again is None or not np.array_equal(fresh, again, equal_nan=True):
-            raise SystemExit(f"copy {q}: not verified, or kept anchors fitted otherwise")
-        fitted.append(int(np.isfinite(again).sum()))
+        fitnesses = []
+        for anchors, threads in runs:
+            if anchors == "kept":
+                for c in shortlist:
+                    if c not in kept:
+                        kept[c] = whole_anchors(wholes.descriptors[c])
+            given = [kept[c] for c in shortlist] if anchors == "kept" else None
+            start = time.perf_counter()
+            fitness = verified_fitness(query, candidates, scale, metric, given, threads)
+            seconds[anchors, threads].append(time.perf_counter() - start)
+            if fitness is None:
+                raise SystemExit(f"copy {q}: not verified")
+            fitnesses.append(fitness)
+        if not all(np.array_equal(f, fitnesses[0], equal_nan=True) for f in fitnesses):
+            raise SystemExit(f"copy {q}: kept anchors or threads fitted otherwise")
+        fitted.append(int(np.isfinite(fitnesses[0]).sum()))
     print(
         f"{len(queries)} view copies of TOSCA, {len(shortlist)} candidates each "
-        f"(a median {np.median(fitted):.0f} fitted), one thread\n"
+        f"(a median {np.median(fitted):.0f} fitted)\n"
     )
-    print("| candidates' anchors | median s | p90 s |")
-    print("|---|---:|---:|")
-    for name, seconds in (("made anew", made), ("kept", reused)):
-        print(f"| {name} | {np.median(seconds):.3f} | {np.percentile(seconds, 90):.3f} |")
-    print(
-        f"\nkept / made anew, median of per-query ratios: "
-        f"{np.median(np.array(reused) / np.array(made)):.2f}"
-    )
+    first = np.array(seconds[runs[0]])
+    print("| candidates' anchors | threads | median s | p90 s | over made anew, one thread |")
+    print("|---|---:|---:|---:|---:|")
+    for anchors, threads in runs:
+        taken = np.array(seconds[anchors, threads])
+        print(
+            f"| {anchors} | {threads} | {np.median(taken):.3f} | "
+            f"{np.percentile(taken, 90):.3f} | {np.median(taken / first):.2f} |"
+        )
 
 
 if __name__ == "__main__":

@@ -382,7 +382,8 @@ def _verified(
         candidates.append(candidate)
         anchors.append(made)
     metric = preset.units == "metric"
-    fitness = rigid.verified_fitness(descriptor, candidates, parts_scale, metric, anchors)
+    threads = state.settings.verify_threads
+    fitness = rigid.verified_fitness(descriptor, candidates, parts_scale, metric, anchors, threads)
     if fitness is None:
         return matches, {}
     order = rigid.verified_order(fitness)

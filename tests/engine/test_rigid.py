@@ -263,8 +263,8 @@ def quadruped_view():
 
 def test_a_described_view_is_verified_on_wholes_only(verified_wholes, quadruped_view):
     """A view of the quadruped: its own figure (another pose's mesh) holds most of it,
-    other figures far less; an enrolled view is not fitted (NaN), and a descriptor kept
-    before surfaces were is not verified at all."""
+    other figures far less, alike on threads; an enrolled view is not fitted (NaN), and a
+    descriptor kept before surfaces were is not verified at all."""
     preset = get_preset(DEFAULT_PRESET)
     query = quadruped_view
     assert query.single_view and query.surface_voxel == VIEW_VOXEL
@@ -278,6 +278,10 @@ def test_a_described_view_is_verified_on_wholes_only(verified_wholes, quadruped_
     kept = [whole_anchors(c) for c in candidates]
     assert kept[-1] is None and all(a is not None for a in kept[:-1])
     np.testing.assert_array_equal(verified_fitness(query, candidates, 1.0, False, kept), fitness)
+    # and on threads, made anew or kept, exactly as on one
+    for anchors in (None, kept):
+        threaded = verified_fitness(query, candidates, 1.0, False, anchors, threads=3)
+        np.testing.assert_array_equal(threaded, fitness)
     # a descriptor stored before surfaces were kept is neither fitted on nor fitted
     old = dataclasses.replace(wholes[1], surface=np.zeros((0, 6), dtype=np.float16))
     assert kept_surface(old) is None and kept_surface(wholes[1]) is not None

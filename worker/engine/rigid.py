@@ -22,6 +22,7 @@ mesh wound outward and a view wound toward its sensor have them.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -477,6 +478,7 @@ def verified_fitness(
     parts_scale: float,
     metric: bool,
     anchors: Sequence[Anchors | None] | None = None,
+    threads: int = 1,
 ) -> np.ndarray | None:
     """(k,) the fitness of a single view on its candidates (:func:`rigid_fit` on their kept
     surfaces), NaN on those it is not fitted on; or None when the query is no single view
@@ -499,33 +501,45 @@ def verified_fitness(
         ratio of their ``surface_unit``, fitted at exactly that.
     anchors : each candidate's :func:`whole_anchors` where the caller kept them (None
         where not: made here).
+    threads : the candidates' anchors made, their features compared and the chosen
+        fitted on this many threads (each fit is seeded alone: the fitnesses do not
+        depend on it).
     """
     kept = [k for d in (query, *candidates) if (k := kept_surface(d)) is not None]
     if not query.single_view or len(kept) <= len(candidates):
         return None
     (surface, voxel, unit), held = kept[0], kept[1:]
     scales = (1.0, 1.0) if metric else (1.0 / SCALE_WINDOW, SCALE_WINDOW)
-    placed: dict[float, Anchors] = {}
     kept_anchors = anchors if anchors is not None else [None] * len(candidates)
-    fits: dict[int, tuple[Anchors, Anchors, np.ndarray]] = {}
-    closeness = np.full(len(candidates), np.inf)
-    for i, (candidate, (grid, grid_voxel, grid_unit), fitted) in enumerate(
-        zip(candidates, held, kept_anchors, strict=True)
-    ):
-        if candidate.single_view:
-            continue
-        factor = unit / grid_unit if metric else VIEW_UNIT / parts_scale
-        if factor not in placed:
-            placed[factor] = stored_anchors(surface, voxel, factor)
-        on = fitted if fitted is not None else stored_anchors(grid, grid_voxel)
-        matches, distances = feature_matches(placed[factor], on)
-        fits[i] = (placed[factor], on, matches)
-        closeness[i] = feature_distance(distances)
-    closest = np.argsort(closeness, kind="stable")[:FEATURE_PICKS]
+    factors = {
+        i: unit / grid[2] if metric else VIEW_UNIT / parts_scale
+        for i, (candidate, grid) in enumerate(zip(candidates, held, strict=True))
+        if not candidate.single_view
+    }
+
+    def compared(i: int) -> tuple[Anchors, np.ndarray, float]:
+        """The candidate's anchors, the view's matches on them and their closeness."""
+        grid, grid_voxel, _ = held[i]
+        made = kept_anchors[i]
+        on = made if made is not None else stored_anchors(grid, grid_voxel)
+        matches, distances = feature_matches(placed[factors[i]], on)
+        return on, matches, feature_distance(distances)
+
+    def fit(i: int) -> float:
+        on, matches, _ = found[i]
+        return rigid_fit(placed[factors[i]], on, ANCHOR_VOXEL, scales, matches).fitness
+
     fitness = np.full(len(candidates), np.nan)
-    for i in sorted(set(range(VERIFIED)) | {int(c) for c in closest}):
-        if i in fits:
-            fitness[i] = rigid_fit(*fits[i][:2], ANCHOR_VOXEL, scales, fits[i][2]).fitness
+    with ThreadPoolExecutor(threads) as pool:  # numpy and the k-d tree release the GIL
+        distinct = sorted(set(factors.values()))
+        views = pool.map(lambda f: stored_anchors(surface, voxel, f), distinct)
+        placed = dict(zip(distinct, views, strict=True))
+        found = dict(zip(factors, pool.map(compared, factors), strict=True))
+        closeness = np.full(len(candidates), np.inf)
+        closeness[list(found)] = [c for _, _, c in found.values()]
+        closest = np.argsort(closeness, kind="stable")[:FEATURE_PICKS]
+        chosen = sorted((set(range(VERIFIED)) | {int(c) for c in closest}) & set(found))
+        fitness[chosen] = list(pool.map(fit, chosen))
     return fitness
 
 
