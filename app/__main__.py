@@ -153,7 +153,10 @@ def main(argv: list[str] | None = None) -> int:
         settings = Settings(**overrides)
     except ValidationError as refused:  # a setting out of its range: say which, and stop
         for error in refused.errors():
-            log.error("%s", str(error["msg"]).removeprefix("Value error, "))
+            message = str(error["msg"]).removeprefix("Value error, ")
+            if error["loc"]:  # a field's own range (a check across fields names them)
+                message = f"SHAPES_{str(error['loc'][0]).upper()}: {message}"
+            log.error("%s", message)
         return 2
     return serve(settings)
 

@@ -1,8 +1,8 @@
 """The container deployments, checked without a container engine (none runs on these
 machines): both compose files are valid for ``docker-compose config`` (Debian's
 package), every ``SHAPES_*`` variable they set is a setting the service reads, the
-scale-out file shares nothing through a filesystem, and the Dockerfile's install
-steps work in a fresh venv."""
+scale-out file shares nothing through a filesystem, the Dockerfile's install steps work
+in a fresh venv, and a setting out of its range stops ``python -m app`` with its name."""
 
 from __future__ import annotations
 
@@ -88,3 +88,11 @@ def test_the_scale_deployment_shares_nothing_but_its_servers():
         assert not services[name].get("healthcheck", {}).get("disable"), name
     upstream = re.findall(r"server (\S+):8000", (REPO / "deploy" / "nginx.conf").read_text())
     assert upstream == ["api-a", "api-b"]
+
+
+def test_a_setting_out_of_its_range_is_refused_by_its_name(monkeypatch, caplog):
+    from app.__main__ import main
+
+    monkeypatch.setenv("SHAPES_VERIFY_THREADS", "0")
+    assert main([]) == 2
+    assert "SHAPES_VERIFY_THREADS: Input should be greater than or equal to 1" in caplog.text
