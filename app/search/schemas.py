@@ -35,9 +35,10 @@ class MatchOut(BaseModel):
     )
     fitness: float | None = Field(
         None,
-        description="a single view's best matches (the first 10 by the parts): the share of "
-        "the view that lies on this match's surface once fitted to it rigidly (at the "
-        "parts' scale in a collection without units), the order they come in; null for "
+        description="a single view's matches that were fitted to it (the parts' best 20 and "
+        "the 10 of their best 100 whose surfaces' features lie closest to the view's): the "
+        "share of the view that lies on this match's surface once fitted to it rigidly "
+        "(scaled too in a collection without units), the order they come in; null for "
         "other queries and matches",
     )
 
@@ -62,6 +63,12 @@ class PartialOut(BaseModel):
         "its unseen side taken as the mirror image of the side it sees: missing_share is "
         "then that two-sided surface's, which matches as nearly whole, not what the scan "
         "misses",
+    )
+    found: bool = Field(
+        False,
+        description="a single view that a fitted match holds as its own object's surface "
+        "does (a fitness of at least 0.9; on the evaluation's views such a match was of the "
+        "view's class every time); false for other queries",
     )
     note: str = Field(description="the same, as a sentence for the user")
 

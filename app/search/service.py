@@ -86,6 +86,14 @@ class PartialQuery:
     cloud: bool = False
     #: How many of the best matches were verified rigidly (0: none).
     verified: int = 0
+    #: The most any of them holds of the view (its fitness); None when none was fitted.
+    held: float | None = None
+
+    @property
+    def found(self) -> bool:
+        """A fitted match holds the view as its own object's surface does
+        (:data:`worker.engine.rigid.HELD_FITNESS`)."""
+        return self.held is not None and self.held >= _rigid().HELD_FITNESS
 
     @property
     def note(self) -> str:
@@ -93,18 +101,29 @@ class PartialQuery:
             # Described two-sided (its unseen side the image of the seen one), it matches
             # as nearly whole: the parts' scale does not measure what the scan misses.
             seen = "a scanner's point cloud" if self.cloud else "its faces all face one way"
-            ranked = (
-                f"{self.verified} of the best by the parts that are there (and by their "
-                "surfaces' features) were fitted to it rigidly and ranked among themselves "
-                "by how much of it they hold (fitness)"
-                if self.verified
-                else "matches are ranked by the parts that are there"
-            )
-            return (
+            view = (
                 f"One view of its object ({seen}): its unseen side is taken as the mirror "
                 "image of the side it sees, so how much of the object is missing is not "
-                f"measured; {ranked}, so they have no confidence."
+                "measured; "
             )
+            if self.held is None:
+                ranked = "matches are ranked by the parts that are there"
+                return f"{view}{ranked}, so they have no confidence."
+            fitted = (
+                f"{self.verified} of the best by the parts that are there (and by their "
+                "surfaces' features) were fitted to it rigidly and ranked among themselves "
+                f"by how much of it they hold (fitness). The fittest holds {self.held:.1%} of it"
+            )
+            least = f"{_rigid().HELD_FITNESS:.0%}"
+            verdict = (
+                f", at least {least}, as its own object's surface does: on the evaluation's "
+                "views such a match was of the view's class every time."
+                if self.found
+                else f", under the {least} its own object's surface holds: the object may be "
+                "enrolled in another pose only, or not at all, or the view sees too little of "
+                "it; the matches have no confidence."
+            )
+            return view + fitted + verdict
         low, high = (round(100 * v) for v in self.missing_range)
         if high >= 10:
             return (
@@ -297,6 +316,7 @@ def rank(
             single_view=descriptor.single_view,
             cloud=descriptor.input_points is not None,
             verified=len(fitness),
+            held=max(fitness.values(), default=None),
         )
     reference = gallery.reference
     # The calibration is of whole queries' scores; a part's are on another scale.

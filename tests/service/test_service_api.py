@@ -15,6 +15,7 @@ from benchmarks.common import Service
 from worker.engine.mesh_io import load_mesh
 from worker.engine.pipeline import resampled_surface
 from worker.engine.presets import DEFAULT_PRESET, get_preset
+from worker.engine.rigid import HELD_FITNESS
 from worker.engine.scans import read_pcd
 from worker.evaluation.partial import planar_cut, single_view
 from worker.evaluation.samples import (
@@ -167,6 +168,11 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_or_as_seen_from_its_camer
     assert [first["name"], second["name"]] == ["quadruped-1", "quadruped-0"]
     assert first["fitness"] > 0.8 and first["fitness"] >= second["fitness"] >= third["fitness"]
     assert "were fitted to it rigidly" in body["partial"]["note"]
+    # quadruped-1 holds it as the scanned pose's own surface would (its left side is that
+    # pose's): the answer says the view was found, and how much the fittest holds.
+    assert body["partial"]["found"] and first["fitness"] >= HELD_FITNESS
+    note = body["partial"]["note"]
+    assert f"The fittest holds {first['fitness']:.1%} of it, at least 90%" in note
     # The wholes' anchors are kept in memory: asked again, none is made anew, the same fits.
     made, kept = _verify_anchors(service, "made"), _verify_anchors(service, "kept")
     again = service.client.post(
@@ -193,6 +199,18 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_or_as_seen_from_its_camer
     whole = service.query("quadruped-2", k=1).json()
     assert "input_grid" not in whole["query"] and "point cloud" not in format_matches(whole)
     assert whole["matches"][0]["fitness"] is None and "fitness" not in format_matches(whole)
+    # Among other objects only, the fittest holds much less, and the answer says it is not found.
+    assert service.client.post("/collections", json={"name": "others"}).status_code == 201
+    for name in ("biped-0", "spider-0"):
+        uploaded = service.upload(name, collection="others")
+        assert uploaded.status_code == 202, uploaded.text
+        service.wait_mesh(uploaded.json()["id"], collection="others")
+    elsewhere = service.client.post(
+        "/collections/others/query", files={"file": (DEPTH_SAMPLE.name, data)}, data={"k": "2"}
+    ).json()
+    held = max(m["fitness"] for m in elsewhere["matches"])
+    assert not elsewhere["partial"]["found"] and held < HELD_FITNESS
+    assert f"The fittest holds {held:.1%} of it, under the 90%" in elsewhere["partial"]["note"]
     assert service.client.post("/collections", json={"name": "scans"}).status_code == 201
     enrolled = service.client.post(
         "/collections/scans/meshes", files={"file": (DEPTH_SAMPLE.name, data)}
