@@ -268,6 +268,24 @@ def query_matrices(
         is left out without them.
     themselves : the queries are the gallery (:func:`parts_matrix`).
     """
+    out, scales = unverified_matrices(queries, gallery, preset, baselines, jobs, themselves)
+    out[PRESET_ROW] = verified_ranking(
+        out[PRESET_ROW], queries, gallery, scales, preset, jobs, themselves
+    )
+    return out
+
+
+def unverified_matrices(
+    queries: Sequence[ShapeDescriptor],
+    gallery: Sequence[ShapeDescriptor],
+    preset: Preset,
+    baselines: tuple[np.ndarray, np.ndarray] | None = None,
+    jobs: int = 1,
+    themselves: bool = False,
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """:func:`query_matrices` before its single views are verified (the preset's row as
+    the parts and the whole modalities rank), and (q,) the scale the parts chose for each
+    query."""
     flat = [
         {m: np.stack([d.vector(m) for d in side]) for m in MODALITIES}
         for side in (queries, gallery)
@@ -280,9 +298,8 @@ def query_matrices(
     if preset.units == "metric":
         asked, held = (np.stack([d.vector(SIZE) for d in side]) for side in (queries, gallery))
         per[SIZE] = preset_dissimilarity(SIZE, asked, held, preset)
-    fused = weighed_by_partiality(per, query_partiality(queries, preset), preset)
-    out[PRESET_ROW] = verified_ranking(fused, queries, gallery, scales, preset, jobs, themselves)
-    return out
+    out[PRESET_ROW] = weighed_by_partiality(per, query_partiality(queries, preset), preset)
+    return out, scales
 
 
 def collection_matrices(
