@@ -44,7 +44,13 @@ from worker.engine.mesh_io import Mesh
 from worker.engine.pipeline import describe_file
 from worker.engine.presets import DEFAULT_PRESET, MODALITIES, Preset, get_preset
 from worker.evaluation.compute import ComputedSet, compute_descriptors
-from worker.evaluation.datasets import DEFAULT_CACHE, read_labels, shared_dataset
+from worker.evaluation.datasets import (
+    DEFAULT_CACHE,
+    LabeledMesh,
+    pose_set,
+    read_labels,
+    shared_dataset,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 TOSCA = shared_dataset("tosca")
@@ -98,6 +104,12 @@ def evaluated_tosca(args: argparse.Namespace) -> tuple[Preset, ComputedSet]:
     preset = get_preset(args.preset)
     meshes = read_labels(TOSCA / "labels.csv", TOSCA)
     return preset, compute_descriptors(meshes, preset, args.cache, jobs=args.jobs)
+
+
+def partiality_wholes() -> list[LabeledMesh]:
+    """The partiality protocol's 154 wholes: TOSCA's meshes, then SCAPE's poses (one
+    class), as ``shapes partiality --poses`` reads them."""
+    return [*read_labels(TOSCA / "labels.csv", TOSCA), *pose_set(shared_dataset("scape"))]
 
 
 def first_of_each_class() -> list[str]:

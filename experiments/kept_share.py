@@ -21,14 +21,13 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from benchmarks.common import TOSCA
+from benchmarks.common import add_evaluation_cache_arguments, partiality_wholes
 from worker.engine.errors import MeshError
 from worker.engine.mesh_io import Mesh, face_areas, load_mesh
 from worker.engine.pipeline import without_grid_shortcuts
 from worker.engine.presets import get_preset
 from worker.evaluation import partial
 from worker.evaluation.compute import compute_descriptors
-from worker.evaluation.datasets import DEFAULT_CACHE, pose_set, read_labels, shared_dataset
 from worker.evaluation.partiality import query_matrices, ranked_last, ranking_scores
 from worker.evaluation.robustness import PRESET_ROW
 from worker.evaluation.variants import make_variant
@@ -79,12 +78,10 @@ def kept_shares(variant: str, meshes: dict[str, Mesh]) -> dict[str, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--variants", nargs="+", default=["shrec-holes", "view"])
-    parser.add_argument("--preset", default="smeets2010-surface")
-    parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("--cache", default=DEFAULT_CACHE, help="the partiality run's cache")
+    add_evaluation_cache_arguments(parser)  # the partiality run's cache
     args = parser.parse_args()
     preset = get_preset(args.preset)
-    files = [*read_labels(TOSCA / "labels.csv", TOSCA), *pose_set(shared_dataset("scape"))]
+    files = partiality_wholes()
     wholes = compute_descriptors(files, preset, args.cache, jobs=args.jobs, progress=False)
     labels = np.array([m.label for m in wholes.meshes])
     index = {m.name: i for i, m in enumerate(wholes.meshes)}

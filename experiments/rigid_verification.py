@@ -27,13 +27,13 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import trimesh
 
-from benchmarks.common import TOSCA
+from benchmarks.common import partiality_wholes
 from worker.engine.mesh_io import Mesh, load_mesh
 from worker.engine.parts import compared_profiles, part_dissimilarity
 from worker.engine.presets import PARTS, get_preset
 from worker.engine.rigid import Anchors, rigid_fit, surface_anchors
 from worker.evaluation.compute import compute_descriptors, single_threaded_blas
-from worker.evaluation.datasets import DEFAULT_CACHE, pose_set, read_labels, shared_dataset
+from worker.evaluation.datasets import DEFAULT_CACHE
 from worker.evaluation.partiality import query_matrices
 from worker.evaluation.robustness import PRESET_ROW
 from worker.evaluation.variants import make_variant
@@ -89,7 +89,7 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=2)
     args = parser.parse_args()
     preset = get_preset(PRESET)
-    meshes = [*read_labels(TOSCA / "labels.csv", TOSCA), *pose_set(shared_dataset("scape"))]
+    meshes = partiality_wholes()
     cache = DEFAULT_CACHE
     computed = compute_descriptors(meshes, preset, cache, jobs=args.jobs, progress=False)
     labels = np.array([m.label for m in computed.meshes])
