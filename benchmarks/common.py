@@ -112,6 +112,14 @@ def partiality_wholes() -> list[LabeledMesh]:
     return [*read_labels(TOSCA / "labels.csv", TOSCA), *pose_set(shared_dataset("scape"))]
 
 
+def evaluated_partiality_wholes(args: argparse.Namespace) -> tuple[Preset, ComputedSet]:
+    """:func:`partiality_wholes` described under ``args.preset`` through the partiality
+    run's cache (``args.cache``), as :func:`evaluated_tosca` does TOSCA."""
+    preset = get_preset(args.preset)
+    wholes = partiality_wholes()
+    return preset, compute_descriptors(wholes, preset, args.cache, jobs=args.jobs, progress=False)
+
+
 def first_of_each_class() -> list[str]:
     """The first file of every TOSCA class, in the order of ``labels.csv``."""
     firsts: dict[str, str] = {}

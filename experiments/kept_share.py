@@ -21,11 +21,10 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from benchmarks.common import add_evaluation_cache_arguments, partiality_wholes
+from benchmarks.common import add_evaluation_cache_arguments, evaluated_partiality_wholes
 from worker.engine.errors import MeshError
 from worker.engine.mesh_io import Mesh, face_areas, load_mesh
 from worker.engine.pipeline import without_grid_shortcuts
-from worker.engine.presets import get_preset
 from worker.evaluation import partial
 from worker.evaluation.compute import compute_descriptors
 from worker.evaluation.partiality import query_matrices, ranked_last, ranking_scores
@@ -80,9 +79,7 @@ def main() -> None:
     parser.add_argument("--variants", nargs="+", default=["shrec-holes", "view"])
     add_evaluation_cache_arguments(parser)  # the partiality run's cache
     args = parser.parse_args()
-    preset = get_preset(args.preset)
-    files = partiality_wholes()
-    wholes = compute_descriptors(files, preset, args.cache, jobs=args.jobs, progress=False)
+    preset, wholes = evaluated_partiality_wholes(args)
     labels = np.array([m.label for m in wholes.meshes])
     index = {m.name: i for i, m in enumerate(wholes.meshes)}
     meshes = {m.name: load_mesh(m.path) for m in wholes.meshes}

@@ -23,9 +23,8 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from benchmarks.common import add_evaluation_cache_arguments, partiality_wholes
+from benchmarks.common import add_evaluation_cache_arguments, evaluated_partiality_wholes
 from worker.engine.descriptor import ShapeDescriptor
-from worker.engine.presets import get_preset
 from worker.engine.rigid import (
     FEATURE_POOL,
     HELD_FITNESS,
@@ -68,9 +67,7 @@ def main() -> None:
     parser.add_argument("--variants", nargs="+", default=["view", "range"])
     add_evaluation_cache_arguments(parser)  # the partiality run's cache
     args = parser.parse_args()
-    preset = get_preset(args.preset)
-    files = partiality_wholes()
-    wholes = compute_descriptors(files, preset, args.cache, jobs=args.jobs, progress=False)
+    preset, wholes = evaluated_partiality_wholes(args)
     labels = np.array([m.label for m in wholes.meshes])
     index = {m.name: i for i, m in enumerate(wholes.meshes)}
     rows = [
@@ -82,7 +79,7 @@ def main() -> None:
         "left out) | of the view's class |",
         "|---|---:|---:|---:|---:|---:|",
     ]
-    scape = labels == files[-1].label  # SCAPE's poses come last
+    scape = labels == labels[-1]  # SCAPE's poses come last
     wrong = {(c, t): 0 for c in (False, True) for t in THRESHOLDS}
     for variant in args.variants:
         done = compute_descriptors(
