@@ -386,10 +386,11 @@ def add_subcommands(sub: Any) -> None:
         "partiality",
         help="whether partial and scanned copies of the meshes find their whole",
         description="Describe every mesh of labels.csv and partial copies of it (a planar cut "
-        "of 5, 15 and 30%% of the vertices, geodesic holes of 10 and 25%% of the area, a "
+        "of 5, 15 and 30% of the vertices, geodesic holes of 10 and 25% of the area, a "
         "single-view scan, SHREC'17's range scans (also read as a depth camera's organized "
         "cloud) and holes, Gaussian noise of 0.25, 0.5 "
-        "and 1%% of the diagonal), and query the whole meshes with each copy; report per "
+        "and 1% of the diagonal, the single-view scan with depth noise of 0.25 and 0.5%), "
+        "and query the whole meshes with each copy; report per "
         "modality, for the parts modality, the preset's score and ShapeDNA the own class and "
         "own source at rank 1 and the mAP, and all to all among each variant's copies the "
         "NN, tiers, DCG and mAP. With --poses the poses join the gallery as one more class. "
@@ -403,7 +404,7 @@ def add_subcommands(sub: Any) -> None:
         "--variants",
         help="comma-separated subset of the partial copies: cut-5, cut-15, cut-30, holes-10, "
         "holes-25, view, range, range-cloud, view-points, shrec-holes, noise-0.25, noise-0.5, "
-        "noise-1 (default: all)",
+        "noise-1, view-noise-0.25, view-noise-0.5 (default: all)",
     )
     partial.add_argument(
         "--out", help="report directory (default: evaluation-out/partiality/PRESET)"

@@ -92,3 +92,23 @@ def test_view_points_are_the_range_cloud_s_scans_read_without_their_grid(sphere,
         assert shared >= 0.99 * max(grid.n_vertices, points.n_vertices)
         area = face_areas(points.vertices, points.faces).sum()
         assert area == pytest.approx(face_areas(grid.vertices, grid.faces).sum(), rel=0.01)
+
+
+def test_a_noisy_view_is_the_view_moved_along_its_rays(sphere):
+    """``view-noise-s`` draws ``view``'s very views (its seed) and moves each vertex along
+    the viewing direction only, by s% of the whole's diagonal: the faces are the view's,
+    every displacement is parallel to one direction, and its spread is the noise's."""
+    for name in ("sphere.off", "other.off"):
+        view = make_variant(sphere, "view", name)
+        noisy = make_variant(sphere, "view-noise-0.5", name)
+        np.testing.assert_array_equal(noisy.faces, view.faces)
+        moved = noisy.vertices - view.vertices
+        largest = moved[np.argmax(np.linalg.norm(moved, axis=1))]
+        ray = largest / np.linalg.norm(largest)
+        np.testing.assert_allclose(np.abs(moved @ ray), np.linalg.norm(moved, axis=1), atol=1e-9)
+        diagonal = np.linalg.norm(np.ptp(sphere.vertices, axis=0))
+        assert (moved @ ray).std() == pytest.approx(0.005 * diagonal, rel=0.05)
+        # The view faces the scanner: the ray is the direction it was seen along.
+        corners = view.vertices[view.faces]
+        normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        assert abs(np.mean(np.sign(normals @ ray))) > 0.95

@@ -36,6 +36,7 @@ def test_the_partiality_command_s_help_names_every_variant(capsys, monkeypatch):
         build_parser().parse_args(["partiality", "--help"])
     listed = " ".join(capsys.readouterr().out.split())
     assert f"partial copies: {', '.join(PARTIAL_VARIANTS)} (default: all)" in listed
+    assert "30% of the vertices" in listed and "%%" not in listed  # argparse leaves %% there
 
 
 def test_ranking_scores_count_own_class_own_source_and_average_precision():

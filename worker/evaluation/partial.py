@@ -25,7 +25,10 @@ here keeps a part of the surface, its largest connected piece:
   diameter) eroded around some of 70 farthest samples, the rest decimated to a random
   resolution (300 vertices .. as many as the mesh has), in a random similarity transform;
 * ``noise-0.25``, ``noise-0.5``, ``noise-1``: the whole surface, every vertex displaced
-  by Gaussian noise of that percentage of the bounding box's diagonal.
+  by Gaussian noise of that percentage of the bounding box's diagonal;
+* ``view-noise-0.25``, ``view-noise-0.5``: ``view``'s very views (drawn from its seed),
+  every vertex moved along the viewing ray by Gaussian noise of that percentage of the
+  whole's diagonal, as a depth camera errs in depth.
 
 Seeded like the tessellation variants (:func:`.variants.variant_seed`), so a rerun cuts
 the same way.
@@ -115,6 +118,17 @@ def noisy_surface(mesh: Mesh, percent: float, rng: np.random.Generator) -> Mesh:
     bounding box's diagonal."""
     sigma = percent / 100.0 * float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
     return Mesh(mesh.vertices + rng.normal(scale=sigma, size=mesh.vertices.shape), mesh.faces)
+
+
+def noisy_view(mesh: Mesh, percent: float, rng: np.random.Generator) -> Mesh:
+    """:func:`single_view` along a random direction, every vertex then moved along that
+    direction by Gaussian noise of sigma ``percent``% of ``mesh``'s bounding box's
+    diagonal (a depth camera's error lies along its rays)."""
+    direction = random_direction(rng)
+    view = single_view(mesh, direction)
+    sigma = percent / 100.0 * float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    depth = rng.normal(scale=sigma, size=view.n_vertices)
+    return Mesh(view.vertices + depth[:, None] * direction, view.faces)
 
 
 def planar_cut(mesh: Mesh, share: float, direction: np.ndarray) -> Mesh:
@@ -345,7 +359,7 @@ def single_view(mesh: Mesh, direction: np.ndarray) -> Mesh:
 
 #: A variant drawn from another's seed (:func:`.variants.make_variant`): the same scans,
 #: read another way.
-DRAWN_AS = {"view-points": "range-cloud"}
+DRAWN_AS = {"view-points": "range-cloud", "view-noise-0.25": "view", "view-noise-0.5": "view"}
 
 #: name -> how to make it from a mesh and a random generator, in report order.
 PARTIAL_VARIANTS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
@@ -362,4 +376,6 @@ PARTIAL_VARIANTS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
     "noise-0.25": lambda mesh, rng: noisy_surface(mesh, 0.25, rng),
     "noise-0.5": lambda mesh, rng: noisy_surface(mesh, 0.5, rng),
     "noise-1": lambda mesh, rng: noisy_surface(mesh, 1.0, rng),
+    "view-noise-0.25": lambda mesh, rng: noisy_view(mesh, 0.25, rng),
+    "view-noise-0.5": lambda mesh, rng: noisy_view(mesh, 0.5, rng),
 }
