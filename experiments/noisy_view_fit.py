@@ -50,6 +50,7 @@ def main() -> None:
     for index in range(0, TOSCA_WHOLES, args.every):
         whole = wholes.meshes[index]
         source = wholes.descriptors[index]
+        anchors = whole_anchors(source)  # one per whole, for its three copies
         mesh = load_mesh(whole.path)
         copies = {
             "view": make_variant(mesh, "view", whole.name),
@@ -59,7 +60,7 @@ def main() -> None:
         for copy, surface in copies.items():
             described = describe_mesh(surface, preset)
             scale = float(unverified_matrices([described], wholes.descriptors, preset)[1][0])
-            fitness = verified_fitness(described, [source], scale, False, [whole_anchors(source)])
+            fitness = verified_fitness(described, [source], scale, False, [anchors])
             assert fitness is not None  # a single view with its surface
             fits.setdefault(copy, []).append(float(fitness[0]))
             area = float(face_areas(surface.vertices, surface.faces).sum())

@@ -113,10 +113,15 @@ def random_resolution(mesh: Mesh, rng: np.random.Generator) -> int:
     return int(rng.integers(min(SHREC_MIN_VERTICES, mesh.n_vertices), mesh.n_vertices + 1))
 
 
+def _noise_sigma(mesh: Mesh, percent: float) -> float:
+    """``percent``% of ``mesh``'s bounding box's diagonal."""
+    return percent / 100.0 * float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+
+
 def noisy_surface(mesh: Mesh, percent: float, rng: np.random.Generator) -> Mesh:
     """Every vertex displaced by isotropic Gaussian noise of sigma ``percent``% of the
     bounding box's diagonal."""
-    sigma = percent / 100.0 * float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
+    sigma = _noise_sigma(mesh, percent)
     return Mesh(mesh.vertices + rng.normal(scale=sigma, size=mesh.vertices.shape), mesh.faces)
 
 
@@ -126,8 +131,7 @@ def noisy_view(mesh: Mesh, percent: float, rng: np.random.Generator) -> Mesh:
     diagonal (a depth camera's error lies along its rays)."""
     direction = random_direction(rng)
     view = single_view(mesh, direction)
-    sigma = percent / 100.0 * float(np.linalg.norm(np.ptp(mesh.vertices, axis=0)))
-    depth = rng.normal(scale=sigma, size=view.n_vertices)
+    depth = rng.normal(scale=_noise_sigma(mesh, percent), size=view.n_vertices)
     return Mesh(view.vertices + depth[:, None] * direction, view.faces)
 
 
