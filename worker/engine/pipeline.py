@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .descriptor import ONE_VIEW_FACING, ShapeDescriptor
+from .denoise import view_denoised
 from .diffusion import (
     LaplaceBeltrami,
     averaged_mass_eigenpairs,
@@ -261,9 +262,13 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
         parts, reach = parts_descriptor(described, samples, gdm, ops.vertex_areas, preset)
         lap("parts")
     # In the file's frame: the canonical one may be a mirror image, which no rigid motion
-    # undoes. A view is wound toward its sensor; anything else is turned outward.
+    # undoes. A view is wound toward its sensor, and smoothed of its sensor's noise when
+    # it shows any; anything else is turned outward.
     voxel = VIEW_VOXEL if two_sided_view else ANCHOR_VOXEL
-    grid, unit = gridded_surface(scanned.mesh, 2 if two_sided_view else 1, voxel, two_sided_view)
+    if two_sided_view:
+        grid, unit = gridded_surface(view_denoised(scanned.mesh), 2, voxel, True)
+    else:
+        grid, unit = gridded_surface(scanned.mesh, 1, voxel, False)
     lap("surface")
     return ShapeDescriptor(
         preset=preset.name,
