@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .descriptor import ONE_VIEW_FACING, ShapeDescriptor
 from .denoise import view_denoised
+from .descriptor import ONE_VIEW_FACING, ShapeDescriptor
 from .diffusion import (
     LaplaceBeltrami,
     averaged_mass_eigenpairs,
