@@ -1,0 +1,103 @@
+"""Which single views the engine smooths: the roughness of noiseless and noisy views.
+
+    python -m experiments.view_roughness [--every 1] [--jobs 2]
+
+A two-sided view is smoothed before it is gridded for its rigid fit when its roughness
+(:func:`worker.engine.denoise.roughness`) is above :data:`~worker.engine.denoise.ROUGH_VIEW`.
+For every TOSCA and SCAPE file (every ``--every``-th), each single-view copy the
+partiality protocol makes of it (:func:`worker.evaluation.variants.make_variant`, seeded
+as there), measured as the engine measures it (a range scan without its shortcuts,
+:func:`worker.engine.pipeline.without_grid_shortcuts`): per variant, the copies, the
+smallest, median and largest roughness, and how many are smoothed. Then the threshold
+chosen on one collection's copies alone (midway, geometrically, between its roughest
+noiseless and its smoothest noisy view) and the copies of the other it puts on the wrong
+side.
+"""
+
+from __future__ import annotations
+
+import argparse
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.common import TOSCA
+from worker.engine.denoise import ROUGH_VIEW, roughness
+from worker.engine.mesh_io import load_mesh
+from worker.engine.pipeline import without_grid_shortcuts
+from worker.evaluation.datasets import shared_dataset
+from worker.evaluation.variants import make_variant
+
+NOISELESS = ("view", "range", "range-cloud", "view-points")
+NOISY = ("view-noise-0.25", "view-noise-0.5")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--every", type=int, default=1)
+    parser.add_argument("--jobs", type=int, default=1)
+    args = parser.parse_args()
+    collections = {
+        "TOSCA": sorted(TOSCA.glob("*.off.gz"))[:: args.every],
+        "SCAPE": sorted(shared_dataset("scape").glob("*.off.gz"))[:: args.every],
+    }
+    # collection -> variant -> roughness of each copy
+    measured: dict[str, dict[str, list[float]]] = {}
+    with ProcessPoolExecutor(args.jobs) as pool:
+        for collection, files in collections.items():
+            measured[collection] = {v: [] for v in (*NOISELESS, *NOISY)}
+            for copies in pool.map(roughness_of_copies, files):
+                for variant, value in copies.items():
+                    measured[collection][variant].append(value)
+    print(f"| copies | made | smallest | median | largest | smoothed (above {ROUGH_VIEW}) |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for variant in (*NOISELESS, *NOISY):
+        r = np.concatenate([np.array(measured[c][variant]) for c in collections])
+        print(
+            f"| {variant} | {len(r)} | {r.min():.4f} | {np.median(r):.4f} | {r.max():.4f} | "
+            f"{int((r > ROUGH_VIEW).sum())} |"
+        )
+    print()
+    print("| chosen on | threshold | wrong there | wrong on the other |")
+    print("|---|---:|---:|---:|")
+    for chosen, other in (("TOSCA", "SCAPE"), ("SCAPE", "TOSCA")):
+        threshold = fewest_wrong(measured[chosen])
+        print(
+            f"| {chosen} | {threshold:.4f} | {wrong_side(measured[chosen], threshold)} | "
+            f"{wrong_side(measured[other], threshold)} |"
+        )
+
+
+def roughness_of_copies(path: Path) -> dict[str, float]:
+    """Each single-view copy of one file, measured as the engine measures it."""
+    mesh = load_mesh(path)
+    return {
+        variant: roughness(
+            without_grid_shortcuts(make_variant(mesh, variant, path.name)).mesh.vertices
+        )
+        for variant in (*NOISELESS, *NOISY)
+    }
+
+
+def wrong_side(values: dict[str, list[float]], threshold: float) -> int:
+    """Noiseless copies above ``threshold`` and noisy ones at or under it."""
+    wrong = sum(r > threshold for v in NOISELESS for r in values[v])
+    return wrong + sum(r <= threshold for v in NOISY for r in values[v])
+
+
+def fewest_wrong(values: dict[str, list[float]]) -> float:
+    """The threshold with the fewest copies on the wrong side: the geometric middle of the
+    widest gap between two measured roughnesses that leaves fewest."""
+    r = np.unique(np.concatenate([np.array(found) for found in values.values()]))
+    middles = np.sqrt(r[:-1] * r[1:])
+    wrong = np.array([wrong_side(values, t) for t in middles])
+    best = np.flatnonzero(wrong == wrong.min())
+    # Of the ties, the widest run of consecutive gaps, its middle.
+    runs = np.split(best, np.flatnonzero(np.diff(best) > 1) + 1)
+    run = max(runs, key=lambda gaps: r[gaps[-1] + 1] / r[gaps[0]])
+    return float(np.sqrt(r[run[0]] * r[run[-1] + 1]))
+
+
+if __name__ == "__main__":
+    main()
