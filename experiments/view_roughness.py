@@ -9,9 +9,8 @@ partiality protocol makes of it (:func:`worker.evaluation.variants.make_variant`
 as there), measured as the engine measures it (a range scan without its shortcuts,
 :func:`worker.engine.pipeline.without_grid_shortcuts`): per variant, the copies, the
 smallest, median and largest roughness, and how many are smoothed. Then the threshold
-chosen on one collection's copies alone (midway, geometrically, between its roughest
-noiseless and its smoothest noisy view) and the copies of the other it puts on the wrong
-side.
+chosen on one collection's copies alone (the one leaving fewest of them on the wrong
+side, :func:`fewest_wrong`), and how many of the other's it puts on the wrong side.
 """
 
 from __future__ import annotations

@@ -22,11 +22,11 @@ ROUGHNESS_NEIGHBOURS = 24
 #: Vertices :func:`roughness` fits around (seeded); all of a smaller view's.
 ROUGHNESS_SAMPLES = 600
 #: A view is smoothed above this roughness. The partiality protocol's noiseless views and
-#: range scans of TOSCA and SCAPE (300 vertices .. full resolution) have a median 0.009 ..
-#: 0.019, 3 of 616 above (two coarse views of the wolf, 0.063 and 0.074, and a SCAPE range
+#: range scans of TOSCA and SCAPE (300 vertices .. full resolution) have a median 0.010 ..
+#: 0.018, 3 of 616 above (two coarse views of the wolf, 0.063 and 0.074, and a SCAPE range
 #: scan of 638 vertices, 0.052); with depth noise of 0.25% of the object's diagonal a
-#: median 0.077 (SCAPE) .. 0.11 (TOSCA), 2 of 154 under (``python -m
-#: experiments.view_roughness``, docs/decisions.md, "Default v16").
+#: median 0.087, 2 of 154 under (``python -m experiments.view_roughness``,
+#: docs/decisions.md, "Default v16").
 ROUGH_VIEW = 0.05
 #: Steps of Taubin's filter a rough view is smoothed by (:func:`taubin_smoothed`).
 VIEW_SMOOTHING_STEPS = 10
