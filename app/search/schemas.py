@@ -68,7 +68,8 @@ class PartialOut(BaseModel):
         False,
         description="a single view that a fitted match holds as its own object's surface "
         "does (a fitness of at least 0.9; on the evaluation's views such a match was of the "
-        "view's class every time); false for other queries",
+        "view's class every time without depth noise, all but 2 of 249 times with it); false "
+        "for other queries",
     )
     note: str = Field(description="the same, as a sentence for the user")
 

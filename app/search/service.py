@@ -117,7 +117,8 @@ class PartialQuery:
             least = f"{_rigid().HELD_FITNESS:.0%}"
             verdict = (
                 f", at least {least}, as its own object's surface does: on the evaluation's "
-                "views such a match was of the view's class every time."
+                "views such a match was of the view's class every time without depth noise, "
+                "all but 2 of 249 times with it."
                 if self.found
                 else f", under the {least} its own object's surface holds: the object may be "
                 "enrolled in another pose only, or not at all, or the view sees too little of "
