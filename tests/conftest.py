@@ -14,7 +14,6 @@ import trimesh
 
 from benchmarks.common import EXAMPLES
 from worker.engine.descriptor import ShapeDescriptor
-from worker.engine.mesh_io import Mesh
 from worker.engine.pipeline import describe_mesh
 from worker.engine.presets import DEFAULT_PRESET, Preset, get_preset
 from worker.evaluation.datasets import DATASETS_ENV, shared_dataset
@@ -133,15 +132,6 @@ def bent_cylinder(bend: float, sections: int = 60, count: int = 24) -> trimesh.T
     v[:, 0] = radius - r * np.cos(theta)
     v[:, 2] = r * np.sin(theta)
     return trimesh.Trimesh(v, tube.faces)
-
-
-def depth_noise(view: Mesh, of: Mesh, direction: np.ndarray, percent: float) -> Mesh:
-    """``view`` (of the mesh ``of``, seen along ``direction``) with each vertex moved along
-    the ray by Gaussian noise of ``percent``% of ``of``'s diagonal, seeded: a depth camera's
-    error, as the partiality protocol's ``view-noise-*`` copies have it."""
-    sigma = percent / 100 * np.linalg.norm(np.ptp(of.vertices, axis=0))
-    depth = np.random.default_rng(0).normal(scale=sigma, size=view.n_vertices)
-    return Mesh(view.vertices + depth[:, None] * direction, view.faces)
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:

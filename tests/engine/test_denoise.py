@@ -9,7 +9,6 @@ import functools
 import numpy as np
 import pytest
 import trimesh
-from conftest import depth_noise
 
 from worker.engine.denoise import (
     ROUGH_VIEW,
@@ -22,7 +21,7 @@ from worker.engine.denoise import (
     view_denoised,
 )
 from worker.engine.mesh_io import Mesh, face_areas
-from worker.evaluation.partial import single_view
+from worker.evaluation.partial import single_view, with_depth_noise
 from worker.evaluation.samples import sample_mesh
 
 DIRECTION = np.array([0.0, 1.0, 0.0])
@@ -64,7 +63,7 @@ def views(name: str, subdivided: bool) -> tuple[Mesh, Mesh]:
     mesh = sample_mesh(name, 0)
     mesh = fine(mesh) if subdivided else mesh
     view = single_view(mesh, DIRECTION)
-    return view, depth_noise(view, mesh, DIRECTION, 0.25)
+    return view, with_depth_noise(view, mesh, DIRECTION, 0.25, np.random.default_rng(0))
 
 
 def test_roughness_equals_a_plain_fit_on_random_and_real_surfaces():

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 import trimesh
-from conftest import depth_noise, random_rotation
+from conftest import random_rotation
 
 from worker.engine import rigid
 from worker.engine.mesh_io import Mesh
@@ -34,7 +34,7 @@ from worker.engine.rigid import (
     whole_anchors,
 )
 from worker.engine.surface_points import ANCHOR_VOXEL, VIEW_VOXEL
-from worker.evaluation.partial import single_view
+from worker.evaluation.partial import single_view, with_depth_noise
 from worker.evaluation.samples import depth_scan, sample_mesh
 
 
@@ -308,7 +308,7 @@ def test_a_view_with_depth_noise_is_held_as_the_noiseless_view_is():
     candidates = [describe_mesh(mesh, preset), *others]
     direction = np.array([0.0, 1.0, 0.0])
     seen = single_view(mesh, direction)
-    noisy = depth_noise(seen, mesh, direction, 0.5)
+    noisy = with_depth_noise(seen, mesh, direction, 0.5, np.random.default_rng(0))
     clean, query = describe_mesh(seen, preset), describe_mesh(noisy, preset)
     assert query.surface_unit == pytest.approx(clean.surface_unit, rel=0.02)
     for view in (clean, query):

@@ -130,8 +130,15 @@ def noisy_view(mesh: Mesh, percent: float, rng: np.random.Generator) -> Mesh:
     direction by Gaussian noise of sigma ``percent``% of ``mesh``'s bounding box's
     diagonal (a depth camera's error lies along its rays)."""
     direction = random_direction(rng)
-    view = single_view(mesh, direction)
-    depth = rng.normal(scale=_noise_sigma(mesh, percent), size=view.n_vertices)
+    return with_depth_noise(single_view(mesh, direction), mesh, direction, percent, rng)
+
+
+def with_depth_noise(
+    view: Mesh, whole: Mesh, direction: np.ndarray, percent: float, rng: np.random.Generator
+) -> Mesh:
+    """``view`` (of ``whole``, seen along ``direction``) with every vertex moved along the
+    ray by Gaussian noise of sigma ``percent``% of ``whole``'s bounding box's diagonal."""
+    depth = rng.normal(scale=_noise_sigma(whole, percent), size=view.n_vertices)
     return Mesh(view.vertices + depth[:, None] * direction, view.faces)
 
 
