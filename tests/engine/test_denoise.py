@@ -1,6 +1,7 @@
-"""A view's roughness against a plain per-sample fit, the same at any sampling of a smooth
-surface and far above it with a depth camera's noise; Taubin's filter against trimesh's
-and a plain loop; a view smoothed only when it is rough."""
+"""A view's roughness and its noise share against a plain per-sample fit, the roughness the
+same at any sampling of a smooth surface and far above it with a depth camera's noise;
+Taubin's filter against trimesh's and a plain loop; a view smoothed only when it is rough
+with noise, not with a coarse sampling."""
 
 from __future__ import annotations
 
@@ -11,12 +12,16 @@ import pytest
 import trimesh
 
 from worker.engine.denoise import (
+    CUBIC_TERMS,
+    NOISE_LIKE,
+    QUADRIC_TERMS,
     ROUGH_VIEW,
     ROUGHNESS_NEIGHBOURS,
     ROUGHNESS_SAMPLES,
     TAUBIN_GROW,
     TAUBIN_SHRINK,
     roughness,
+    surface_fits,
     taubin_smoothed,
     view_denoised,
 )
@@ -27,23 +32,46 @@ from worker.evaluation.samples import sample_mesh
 DIRECTION = np.array([0.0, 1.0, 0.0])
 
 
-def roughness_reference(vertices: np.ndarray) -> float:
+def fits_reference(vertices: np.ndarray) -> tuple[float, float]:
     """Each sample's neighbours by sorting all distances, their frame by an eigen-
-    decomposition of the covariance, the quadric by ``lstsq``, one sample at a time."""
+    decomposition of the covariance, the quadric and the cubic by ``lstsq``, one sample at
+    a time."""
     points = np.asarray(vertices, dtype=np.float64)
     rng = np.random.default_rng(0)
     centres = rng.choice(len(points), size=min(ROUGHNESS_SAMPLES, len(points)), replace=False)
-    ratios = []
+    k = ROUGHNESS_NEIGHBOURS
+    relative, shares = [], []
     for centre in centres:
         order = np.argsort(np.linalg.norm(points - points[centre], axis=1), kind="stable")
-        near = points[order[:ROUGHNESS_NEIGHBOURS]]
+        near = points[order[:k]]
         near = near - near.mean(axis=0)
         axes = np.linalg.eigh(near.T @ near)[1][:, ::-1]
         x, y, z = (near @ axes).T
-        basis = np.column_stack([x * x, x * y, y * y, x, y, np.ones_like(x)])
-        residual = z - basis @ np.linalg.lstsq(basis, z, rcond=None)[0]
-        ratios.append(np.sqrt(np.mean(residual**2)) / np.sqrt(np.max(x * x + y * y)))
-    return float(np.median(ratios))
+        square = {}
+        for terms in (QUADRIC_TERMS, CUBIC_TERMS):
+            basis = np.column_stack([x**i * y**j for i, j in terms])
+            residual = z - basis @ np.linalg.lstsq(basis, z, rcond=None)[0]
+            square[len(terms)] = float(residual @ residual)
+        quadric, cubic = square[len(QUADRIC_TERMS)], square[len(CUBIC_TERMS)]
+        relative.append(np.sqrt(quadric / k) / np.sqrt(np.max(x * x + y * y)))
+        shares.append(
+            np.sqrt((cubic / (k - len(CUBIC_TERMS))) / (quadric / (k - len(QUADRIC_TERMS))))
+        )
+    return float(np.median(relative)), float(np.median(shares))
+
+
+def bumps(n: int, noise: float) -> Mesh:
+    """A bumpy height field (``sin 2x cos 2y`` over 6 x 6) on an ``n`` x ``n`` grid, each
+    vertex moved in height by Gaussian noise of ``noise`` times the grid's spacing."""
+    u = np.linspace(-3.0, 3.0, n)
+    x, y = (a.ravel() for a in np.meshgrid(u, u))
+    z = 0.5 * np.sin(2 * x) * np.cos(2 * y)
+    z += np.random.default_rng(0).normal(scale=noise * (u[1] - u[0]), size=z.shape)
+    corner = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)).ravel()
+    faces = np.vstack(
+        [np.c_[corner, corner + 1, corner + n], np.c_[corner + 1, corner + n + 1, corner + n]]
+    )
+    return Mesh(np.c_[x, y, z], faces)
 
 
 def fine(mesh: Mesh) -> Mesh:
@@ -66,14 +94,16 @@ def views(name: str, subdivided: bool) -> tuple[Mesh, Mesh]:
     return view, with_depth_noise(view, mesh, DIRECTION, 0.25, np.random.default_rng(0))
 
 
-def test_roughness_equals_a_plain_fit_on_random_and_real_surfaces():
+def test_the_fits_equal_a_plain_fit_on_random_and_real_surfaces():
     rng = np.random.default_rng(1)
     for vertices in (
         rng.normal(size=(300, 3)),
         sample_mesh("quadruped", 0).vertices,
         views("quadruped", False)[1].vertices,
     ):
-        assert roughness(vertices) == pytest.approx(roughness_reference(vertices), rel=1e-9)
+        expected = fits_reference(vertices)
+        assert surface_fits(vertices) == pytest.approx(expected, rel=1e-9)
+        assert roughness(vertices) == surface_fits(vertices)[0]
 
 
 def test_roughness_is_scale_free_and_low_on_a_smooth_surface_at_any_sampling():
@@ -84,6 +114,7 @@ def test_roughness_is_scale_free_and_low_on_a_smooth_surface_at_any_sampling():
     for surface in (sphere, finer):
         assert roughness(np.asarray(surface.vertices)) < ROUGH_VIEW / 5
     assert roughness(np.zeros((6, 3))) == 0.0  # too few for a quadric
+    assert surface_fits(sphere.vertices[:10])[1] == 0.0  # too few for a cubic
 
 
 @pytest.mark.parametrize("name", ["quadruped", "biped", "hand"])
@@ -105,6 +136,25 @@ def test_only_a_rough_view_is_smoothed():
     # The noise crumpled the view; smoothed, its area is the noiseless view's again.
     assert area(noisy) > 1.1 * area(clean)
     assert area(smoothed) == pytest.approx(area(clean), rel=0.03)
+
+
+def test_a_coarse_sampling_of_a_curved_surface_is_rough_but_not_noise():
+    """Bumps on a coarse grid leave a quadric as much residual as noise does on a finer
+    one; the cubic takes most of the first and none of the second, so only the noisy
+    grid is smoothed."""
+    coarse, noisy = bumps(20, 0.0), bumps(40, 0.3)
+    (coarse_rough, coarse_share), (noisy_rough, noisy_share) = map(
+        surface_fits, (coarse.vertices, noisy.vertices)
+    )
+    assert min(coarse_rough, noisy_rough) > ROUGH_VIEW
+    assert coarse_share < NOISE_LIKE / 2 and noisy_share > NOISE_LIKE
+    assert view_denoised(coarse) is coarse
+    smoothed = view_denoised(noisy)
+    assert roughness(smoothed.vertices) < ROUGH_VIEW
+    # what is left of the noise, against the bumps it stood on
+    assert np.abs(smoothed.vertices[:, 2] - bumps(40, 0.0).vertices[:, 2]).mean() < 0.5 * (
+        np.abs(noisy.vertices[:, 2] - bumps(40, 0.0).vertices[:, 2]).mean()
+    )
 
 
 def taubin_reference(mesh: Mesh, steps: int) -> np.ndarray:

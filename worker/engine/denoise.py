@@ -5,7 +5,8 @@ crumples the surface (its area grows, its normals turn) and the view's own objec
 longer holds it in a rigid fit (:mod:`.rigid`). Smoothing every view costs clean scans as
 much as it gives noisy ones (a filter over a vertex's ring acts at the triangulation's
 scale, and a coarse range grid loses its shape), so a view is smoothed only when it is
-rougher than a clean surface is at its own sampling (:func:`roughness`).
+rougher than a clean surface is at its own sampling (:func:`roughness`) and its roughness
+is noise, not a coarse sampling of a curved surface (:func:`surface_fits`).
 """
 
 from __future__ import annotations
@@ -21,13 +22,24 @@ from .topology import edge_keys
 ROUGHNESS_NEIGHBOURS = 24
 #: Vertices :func:`roughness` fits around (seeded); all of a smaller view's.
 ROUGHNESS_SAMPLES = 600
-#: A view is smoothed above this roughness. The partiality protocol's noiseless views and
-#: range scans of TOSCA and SCAPE (300 vertices .. full resolution) have a median 0.010 ..
-#: 0.018, 3 of 616 above (two coarse views of the wolf, 0.063 and 0.074, and a SCAPE range
-#: scan of 638 vertices, 0.052); with depth noise of 0.25% of the object's diagonal a
-#: median 0.087, 2 of 154 under (``python -m experiments.view_roughness``,
-#: docs/decisions.md, "Default v16").
+#: A view is smoothed above this roughness (and :data:`NOISE_LIKE`). The partiality
+#: protocol's noiseless views and range scans of TOSCA and SCAPE (300 vertices .. full
+#: resolution) have a median 0.010 .. 0.018, 3 of 616 above (two coarse views of the wolf,
+#: 0.063 and 0.074, and a SCAPE range scan of 638 vertices, 0.052; none noise-like); with
+#: depth noise of 0.25% of the object's diagonal a median 0.087, 2 of 154 under
+#: (``python -m experiments.view_roughness``, docs/decisions.md, "Default v16").
 ROUGH_VIEW = 0.05
+#: A rough view is smoothed only when a cubic fit leaves more than this share of the
+#: quadric's residual (each per degree of freedom, :func:`surface_fits`): noise's share is
+#: about 1, a smooth surface sampled coarsely leaves less. The protocol's 616 noiseless
+#: views and range scans leave 0.42 .. 0.88, its 308 noisy views 0.90 .. 1.04; chosen on
+#: TOSCA's or SCAPE's alone the threshold is 0.887 / 0.886, none on the wrong side of
+#: either (``python -m experiments.view_roughness``, docs/decisions.md, "Default v17").
+NOISE_LIKE = 0.89
+#: The monomials ``x**i y**j`` of :func:`surface_fits`' height fields: a quadric's (in
+#: the order :func:`roughness` was measured with), and a cubic's.
+QUADRIC_TERMS = ((2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0))
+CUBIC_TERMS = (*QUADRIC_TERMS, (3, 0), (2, 1), (1, 2), (0, 3))
 #: Steps of Taubin's filter a rough view is smoothed by (:func:`taubin_smoothed`).
 VIEW_SMOOTHING_STEPS = 10
 #: Taubin's two factors, shrinking by ``TAUBIN_SHRINK`` and growing back by
@@ -55,21 +67,50 @@ def roughness(vertices: np.ndarray) -> float:
     -------
     The median relative residual; 0 for fewer vertices than a quadric has coefficients.
     """
+    return surface_fits(vertices)[0]
+
+
+def surface_fits(vertices: np.ndarray) -> tuple[float, float]:
+    """:func:`roughness`, and how much of it is noise: around the same samples, a cubic
+    height field's residual over the quadric's, each per degree of freedom left (the
+    median; 1 where the cubic leaves no more than noise's share, as a smooth surface's
+    higher-order error does not). 0 and 0 for too few vertices to fit a cubic with one
+    degree of freedom to spare."""
     points = np.asarray(vertices, dtype=np.float64)
     k = min(ROUGHNESS_NEIGHBOURS, len(points))
-    if k <= 6:
-        return 0.0
+    if k <= len(QUADRIC_TERMS):
+        return 0.0, 0.0
     rng = np.random.default_rng(0)
     centres = rng.choice(len(points), size=min(ROUGHNESS_SAMPLES, len(points)), replace=False)
     neighbours = points[cKDTree(points).query(points[centres], k=k)[1]]
     offsets = neighbours - neighbours.mean(axis=1, keepdims=True)
     axes = np.linalg.svd(offsets, full_matrices=False)[2]  # (m, 3, 3), rows by spread
     x, y, z = np.moveaxis(offsets @ np.swapaxes(axes, 1, 2), 2, 0)
-    basis = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], axis=2)
-    coefficients = np.linalg.pinv(basis) @ z[:, :, None]
-    residual = np.sqrt(np.mean((z - (basis @ coefficients)[:, :, 0]) ** 2, axis=1))
+    tiny = np.finfo(float).tiny
+    quadric = _squared_residuals(x, y, z, QUADRIC_TERMS)
     radius = np.sqrt(np.max(x * x + y * y, axis=1))
-    return float(np.median(residual / np.maximum(radius, np.finfo(float).tiny)))
+    relative = float(np.median(np.sqrt(quadric / k) / np.maximum(radius, tiny)))
+    if k <= len(CUBIC_TERMS):
+        return relative, 0.0
+    cubic = _squared_residuals(x, y, z, CUBIC_TERMS)
+    fitted = quadric > tiny  # a quadric fitting exactly leaves nothing to share
+    if not fitted.any():
+        return relative, 0.0
+    per_freedom = (cubic[fitted] / (k - len(CUBIC_TERMS))) / (
+        quadric[fitted] / (k - len(QUADRIC_TERMS))
+    )
+    return relative, float(np.median(np.sqrt(per_freedom)))
+
+
+def _squared_residuals(
+    x: np.ndarray, y: np.ndarray, z: np.ndarray, terms: tuple[tuple[int, int], ...]
+) -> np.ndarray:
+    """(m,) the sum of squared residuals of the least-squares height field ``z`` over the
+    monomials ``x**i * y**j`` of ``terms`` around each of m samples ((m, k) each)."""
+    basis = np.stack([x**i * y**j for i, j in terms], axis=2)
+    coefficients = np.linalg.pinv(basis) @ z[:, :, None]
+    squares: np.ndarray = np.sum((z - (basis @ coefficients)[:, :, 0]) ** 2, axis=1)
+    return squares
 
 
 def taubin_smoothed(mesh: Mesh, steps: int = VIEW_SMOOTHING_STEPS) -> Mesh:
@@ -94,6 +135,7 @@ def taubin_smoothed(mesh: Mesh, steps: int = VIEW_SMOOTHING_STEPS) -> Mesh:
 
 
 def view_denoised(view: Mesh) -> Mesh:
-    """A single view smoothed of its sensor's noise when it is rough (:data:`ROUGH_VIEW`),
-    else the view itself."""
-    return taubin_smoothed(view) if roughness(view.vertices) > ROUGH_VIEW else view
+    """A single view smoothed of its sensor's noise when it is rough (:data:`ROUGH_VIEW`)
+    and its roughness is noise (:data:`NOISE_LIKE`), else the view itself."""
+    rough, noise = surface_fits(view.vertices)
+    return taubin_smoothed(view) if rough > ROUGH_VIEW and noise > NOISE_LIKE else view

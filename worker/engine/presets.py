@@ -345,7 +345,7 @@ PRESETS: dict[str, Preset] = {
         # Its versions, what each changed and why: docs/decisions.md.
         Preset(
             name="smeets2010-surface",
-            version=16,
+            version=17,
             max_edge=3.0,
             max_hole_perimeter=0.5,
             two_sided_views=True,
