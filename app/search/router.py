@@ -179,6 +179,7 @@ def query_out(result: service.SearchResult) -> QueryOut:
             missing_share=result.partial.missing_share,
             missing_share_range=result.partial.missing_range,
             single_view=result.partial.single_view,
+            smoothed=result.partial.smoothed,
             found=result.partial.found,
             note=result.partial.note,
         ),

@@ -64,6 +64,12 @@ class PartialOut(BaseModel):
         "then that two-sided surface's, which matches as nearly whole, not what the scan "
         "misses",
     )
+    smoothed: bool = Field(
+        False,
+        description="a single view whose surface looked noisy (rough, with a residual a "
+        "cubic fit takes no more of than a quadric's: a sensor's noise, not a coarse "
+        "sampling) and was smoothed before it was fitted; the note says so",
+    )
     found: bool = Field(
         False,
         description="a single view that a fitted match holds as its own object's surface "

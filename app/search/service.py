@@ -84,6 +84,9 @@ class PartialQuery:
     missing_range: tuple[float, float]
     single_view: bool = False
     cloud: bool = False
+    #: Its surface looked noisy and was smoothed before any fit
+    #: (:attr:`ShapeDescriptor.surface_smoothed`).
+    smoothed: bool = False
     #: How many of the best matches were verified rigidly (0: none).
     verified: int = 0
     #: The most any of them holds of the view (its fitness); None when none was fitted.
@@ -106,9 +109,15 @@ class PartialQuery:
                 "image of the side it sees, so how much of the object is missing is not "
                 "measured; "
             )
+            noisy = (
+                " Its surface looked noisy (rough, as a sensor's noise leaves a scan, not as "
+                "a coarse sampling does) and was smoothed before it was fitted."
+                if self.smoothed
+                else ""
+            )
             if self.held is None:
                 ranked = "matches are ranked by the parts that are there"
-                return f"{view}{ranked}, so they have no confidence."
+                return f"{view}{ranked}, so they have no confidence.{noisy}"
             fitted = (
                 f"{self.verified} of the best by the parts that are there (and by their "
                 "surfaces' features) were fitted to it rigidly and ranked among themselves "
@@ -124,7 +133,7 @@ class PartialQuery:
                 "enrolled in another pose only, or not at all, or the view sees too little of "
                 "it; the matches have no confidence."
             )
-            return view + fitted + verdict
+            return view + fitted + verdict + noisy
         low, high = (round(100 * v) for v in self.missing_range)
         if high >= 10:
             return (
@@ -316,6 +325,7 @@ def rank(
             (low, high),
             single_view=descriptor.single_view,
             cloud=descriptor.input_points is not None,
+            smoothed=bool(descriptor.surface_smoothed),
             verified=len(fitness),
             held=max(fitness.values(), default=None),
         )

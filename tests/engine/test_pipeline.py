@@ -198,7 +198,9 @@ def test_the_sec_4_1_preset_keeps_the_scale_and_the_surface_presets_do_not(figur
 
 def test_descriptor_round_trips(figure_descriptor):
     partial = replace(figure_descriptor, kept_area_fraction=0.625)
-    scanned = replace(figure_descriptor, input_points=1583, input_grid=(77, 56))
+    scanned = replace(
+        figure_descriptor, input_points=1583, input_grid=(77, 56), surface_smoothed=True
+    )
     for original in (figure_descriptor, partial, scanned):
         for restored in (
             ShapeDescriptor.from_json(original.to_json()),
@@ -212,12 +214,14 @@ def test_descriptor_round_trips(figure_descriptor):
             assert restored.area == original.area
             assert restored.input_points == original.input_points
             assert restored.input_grid == original.input_grid
+            assert restored.surface_smoothed == original.surface_smoothed
             np.testing.assert_array_equal(restored.vector(SIZE), original.vector(SIZE))
     # A descriptor stored before the kept share was recorded reads as not known.
     old = figure_descriptor.to_json()
     del old["kept_area_fraction"], old["input_points"], old["input_grid"]
+    del old["surface_smoothed"]
     restored = ShapeDescriptor.from_json(old)
-    assert restored.kept_area_fraction is None
+    assert restored.kept_area_fraction is None and restored.surface_smoothed is None
     assert restored.input_points is None and restored.input_grid is None
 
 

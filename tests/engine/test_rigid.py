@@ -310,6 +310,8 @@ def test_a_view_with_depth_noise_is_held_as_the_noiseless_view_is():
     seen = single_view(mesh, direction)
     noisy = with_depth_noise(seen, mesh, direction, 0.5, np.random.default_rng(0))
     clean, query = describe_mesh(seen, preset), describe_mesh(noisy, preset)
+    assert query.surface_smoothed and clean.surface_smoothed is False
+    assert candidates[0].surface_smoothed is False  # a whole is never
     assert query.surface_unit == pytest.approx(clean.surface_unit, rel=0.02)
     for view in (clean, query):
         fitness = verified_fitness(view, candidates, 1.0, metric=False)

@@ -73,6 +73,9 @@ class ShapeDescriptor:
         (:mod:`~worker.engine.rigid`); (0, 6) for a descriptor stored before it was kept.
     surface_unit, surface_voxel : the grid's unit in the file's length unit, and its
         spacing in units; None with no surface.
+    surface_smoothed : whether the grid was made from the view smoothed of a sensor's
+        noise (:func:`~worker.engine.denoise.view_denoised`); False for a surface that is
+        not one view, None for a descriptor stored before this was recorded.
     """
 
     preset: str
@@ -95,6 +98,7 @@ class ShapeDescriptor:
     surface: np.ndarray = field(default_factory=lambda: np.zeros((0, 6), dtype=np.float16))
     surface_unit: float | None = None
     surface_voxel: float | None = None
+    surface_smoothed: bool | None = None
 
     @property
     def single_view(self) -> bool:
@@ -152,6 +156,7 @@ class ShapeDescriptor:
             "facing_share": self.facing_share,
             "surface_unit": self.surface_unit,
             "surface_voxel": self.surface_voxel,
+            "surface_smoothed": self.surface_smoothed,
         }
 
     @classmethod
@@ -195,6 +200,7 @@ class ShapeDescriptor:
             ),
             surface_unit=meta.get("surface_unit"),
             surface_voxel=meta.get("surface_voxel"),
+            surface_smoothed=meta.get("surface_smoothed"),
         )
 
     def to_npz_bytes(self) -> bytes:

@@ -265,10 +265,8 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
     # undoes. A view is wound toward its sensor, and smoothed of its sensor's noise when
     # it shows any; anything else is turned outward.
     voxel = VIEW_VOXEL if two_sided_view else ANCHOR_VOXEL
-    if two_sided_view:
-        grid, unit = gridded_surface(view_denoised(scanned.mesh), 2, voxel, True)
-    else:
-        grid, unit = gridded_surface(scanned.mesh, 1, voxel, False)
+    gridded = view_denoised(scanned.mesh) if two_sided_view else scanned.mesh
+    grid, unit = gridded_surface(gridded, 2 if two_sided_view else 1, voxel, two_sided_view)
     lap("surface")
     return ShapeDescriptor(
         preset=preset.name,
@@ -289,6 +287,7 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
         surface=grid,
         surface_unit=unit,
         surface_voxel=voxel,
+        surface_smoothed=gridded is not scanned.mesh,
     )
 
 
