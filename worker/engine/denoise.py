@@ -74,8 +74,9 @@ def surface_fits(vertices: np.ndarray) -> tuple[float, float]:
     """:func:`roughness`, and how much of it is noise: around the same samples, a cubic
     height field's residual over the quadric's, each per degree of freedom left (the
     median; 1 where the cubic leaves no more than noise's share, as a smooth surface's
-    higher-order error does not). 0 and 0 for too few vertices to fit a cubic with one
-    degree of freedom to spare."""
+    higher-order error does not). Both 0 for too few vertices to fit a quadric; the share
+    0 for too few to fit a cubic with a degree of freedom to spare, or where every quadric
+    fits exactly."""
     points = np.asarray(vertices, dtype=np.float64)
     k = min(ROUGHNESS_NEIGHBOURS, len(points))
     if k <= len(QUADRIC_TERMS):
