@@ -17,7 +17,7 @@ from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.pipeline import describe_mesh
 from worker.engine.presets import DEFAULT_PRESET, Preset, get_preset
 from worker.evaluation.datasets import DATASETS_ENV, shared_dataset
-from worker.evaluation.samples import sample_mesh
+from worker.evaluation.samples import DEPTH_SAMPLE, pcd_bytes, sample_mesh
 
 #: Fixtures that start real service processes. A test using one is marked ``service``
 #: and ``slow`` here, so ``-m "not slow"`` never waits for an API or a worker.
@@ -232,3 +232,21 @@ def e57_scan(points: np.ndarray, viewpoint=(0.0, 0.0, 0.0), *, grid=True, scans=
     from worker.evaluation.samples import e57_bytes
 
     return e57_bytes(points, np.asarray(viewpoint, dtype=np.float64), grid=grid, scans=scans)
+
+
+def noisy_depth_scan(share: float) -> bytes:
+    """The example depth scan (an organized PCD) with a depth camera's noise: each point
+    moved along its ray from the camera by Gaussian noise of ``share`` of the seen
+    points' diagonal."""
+    raw = gzip.decompress((EXAMPLES / DEPTH_SAMPLE).read_bytes())
+    header, _, body = raw.partition(b"DATA ascii\n")
+    fields = {line.split()[0]: line.split()[1:] for line in header.split(b"\n")[1:] if line}
+    width, height = int(fields[b"WIDTH"][0]), int(fields[b"HEIGHT"][0])
+    viewpoint = np.array([float(v) for v in fields[b"VIEWPOINT"][:3]])
+    points = np.loadtxt(io.BytesIO(body)).reshape(height, width, 3)
+    seen = np.isfinite(points).all(axis=2)
+    rays = points[seen] - viewpoint
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    sigma = share * float(np.linalg.norm(np.ptp(points[seen], axis=0)))
+    points[seen] += rays * np.random.default_rng(0).normal(scale=sigma, size=(len(rays), 1))
+    return pcd_bytes(points, viewpoint)

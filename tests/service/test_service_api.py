@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import gzip
-import io
 import re
 
 import numpy as np
 import pytest
 import trimesh
-from conftest import EXAMPLES, e57_scan, example, with_a_far_half_copy
+from conftest import EXAMPLES, e57_scan, example, noisy_depth_scan, with_a_far_half_copy
 
 from app.client import format_matches
 from benchmarks.common import Service
@@ -26,7 +25,6 @@ from worker.evaluation.samples import (
     PARTIAL_SOURCE,
     SAMPLE_VERTICES,
     depth_scan,
-    pcd_bytes,
     sample_mesh,
 )
 
@@ -137,24 +135,6 @@ def test_a_view_sent_as_a_mesh_is_called_one_view(service: Service, gallery):
     assert body["partial"]["note"] in format_matches(body)
     enrolled = service.client.get(f"/meshes/{gallery['quadruped-1']}").json()
     assert enrolled["descriptor"]["facing_share"] < 0.6
-
-
-def noisy_depth_scan(share: float) -> bytes:
-    """The example depth scan (an organized PCD) with a depth camera's noise: each point
-    moved along its ray from the camera by Gaussian noise of ``share`` of the seen
-    points' diagonal."""
-    raw = gzip.decompress((EXAMPLES / DEPTH_SAMPLE).read_bytes())
-    header, _, body = raw.partition(b"DATA ascii\n")
-    fields = {line.split()[0]: line.split()[1:] for line in header.split(b"\n")[1:] if line}
-    width, height = int(fields[b"WIDTH"][0]), int(fields[b"HEIGHT"][0])
-    viewpoint = np.array([float(v) for v in fields[b"VIEWPOINT"][:3]])
-    points = np.loadtxt(io.BytesIO(body)).reshape(height, width, 3)
-    seen = np.isfinite(points).all(axis=2)
-    rays = points[seen] - viewpoint
-    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
-    sigma = share * float(np.linalg.norm(np.ptp(points[seen], axis=0)))
-    points[seen] += rays * np.random.default_rng(0).normal(scale=sigma, size=(len(rays), 1))
-    return pcd_bytes(points, viewpoint)
 
 
 def test_a_noisy_depth_scan_is_smoothed_before_its_fit_and_says_so(service: Service, gallery):

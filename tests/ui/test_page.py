@@ -17,7 +17,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from conftest import example, with_a_far_half_copy
+from conftest import example, noisy_depth_scan, with_a_far_half_copy
 
 from benchmarks.common import EXAMPLES, Service
 from tests.service.conftest import migrated_service, running
@@ -259,6 +259,21 @@ def test_a_depth_camera_s_scan_is_searched_and_drawn_beside_its_match(page):
     )
     page.wait_for_function(f"() => ({DRAWN_PIXELS})('view-compare') > 4000", timeout=60_000)
     shoot(page, "depth")
+
+
+def test_a_noisy_depth_scan_is_said_to_be_smoothed(page, tmp_path):
+    """The example depth scan with a depth camera's noise (0.4% of its diagonal): the
+    answer's note on the page says it looked noisy and was smoothed before its fit."""
+    noisy = tmp_path / "noisy-depth.pcd"
+    noisy.write_bytes(noisy_depth_scan(0.004))
+    search_for(page, noisy)
+    progress = page.locator("#search-progress").inner_text()
+    assert "One view of its object" in progress and "fitted to it rigidly" in progress
+    assert "Its surface looked noisy" in progress and "was smoothed before it was fitted" in (
+        progress
+    )
+    first = page.locator("#search-results .card").first
+    assert first.locator(".label").inner_text() == "quadruped"
 
 
 def test_a_partial_answer_says_what_ranked_it_and_what_was_measured(site):
