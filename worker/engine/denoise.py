@@ -107,10 +107,12 @@ def _squared_residuals(
     x: np.ndarray, y: np.ndarray, z: np.ndarray, terms: tuple[tuple[int, int], ...]
 ) -> np.ndarray:
     """(m,) the sum of squared residuals of the least-squares height field ``z`` over the
-    monomials ``x**i * y**j`` of ``terms`` around each of m samples ((m, k) each)."""
+    monomials ``x**i * y**j`` of ``terms`` around each of m samples ((m, k) each): what
+    the projection on the basis's columns (an orthonormal basis of them, by QR) leaves."""
     basis = np.stack([x**i * y**j for i, j in terms], axis=2)
-    coefficients = np.linalg.pinv(basis) @ z[:, :, None]
-    squares: np.ndarray = np.sum((z - (basis @ coefficients)[:, :, 0]) ** 2, axis=1)
+    q = np.linalg.qr(basis)[0]  # (m, k, len(terms))
+    fitted = q @ (np.swapaxes(q, 1, 2) @ z[:, :, None])
+    squares: np.ndarray = np.sum((z - fitted[:, :, 0]) ** 2, axis=1)
     return squares
 
 
