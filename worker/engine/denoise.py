@@ -1,12 +1,14 @@
-"""A sensor's noise on a single view: how rough the view is, and smoothing it away.
+"""A sensor's noise: how rough a surface is, whether that is noise, and smoothing it away.
 
-A depth camera errs at each sample on its own, along its ray. On a view that noise
-crumples the surface (its area grows, its normals turn) and the view's own object no
-longer holds it in a rigid fit (:mod:`.rigid`). Smoothing every view costs clean scans as
-much as it gives noisy ones (a filter over a vertex's ring acts at the triangulation's
-scale, and a coarse range grid loses its shape), so a view is smoothed only when it is
-rougher than a clean surface is at its own sampling (:func:`roughness`) and its roughness
-is noise, not a coarse sampling of a curved surface (:func:`surface_fits`).
+A scanner errs at each sample on its own. That noise crumples the surface (its area grows,
+its normals turn): a single view's own object no longer holds it in a rigid fit
+(:mod:`.rigid`), and a whole's descriptors move with the area and the geodesics it adds.
+Smoothing every surface costs clean scans as much as it gives noisy ones (a filter over a
+vertex's ring acts at the triangulation's scale, and a coarse range grid loses its shape),
+so a surface is smoothed only when it is rougher than a clean surface is at its own
+sampling (:func:`roughness`) and its roughness is noise, not a coarse sampling of a curved
+surface (:func:`surface_fits`); a surface that is not one view also only when the
+smoothing irons out the area noise adds (:data:`CRUMPLED_KEPT`).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .mesh_io import Mesh
+from .mesh_io import Mesh, face_areas
 from .topology import edge_keys
 
 #: Vertices each local fit of :func:`roughness` takes (the sample and its nearest).
@@ -27,15 +29,24 @@ ROUGHNESS_SAMPLES = 600
 #: resolution) have a median 0.010 .. 0.018, 3 of 616 above (two coarse views of the wolf,
 #: 0.063 and 0.074, and a SCAPE range scan of 638 vertices, 0.052; none noise-like); with
 #: depth noise of 0.25% of the object's diagonal a median 0.087, 2 of 154 under
-#: (``python -m experiments.view_roughness``, docs/decisions.md, "Default v16").
+#: (``python -m experiments.surface_roughness``, docs/decisions.md, "Default v16").
 ROUGH_VIEW = 0.05
 #: A rough view is smoothed only when a cubic fit leaves more than this share of the
 #: quadric's residual (each per degree of freedom, :func:`surface_fits`): noise's share is
 #: about 1, a smooth surface sampled coarsely leaves less. The protocol's 616 noiseless
 #: views and range scans leave 0.42 .. 0.88, its 308 noisy views 0.90 .. 1.04; chosen on
 #: TOSCA's or SCAPE's alone the threshold is 0.887 / 0.886, none on the wrong side of
-#: either (``python -m experiments.view_roughness``, docs/decisions.md, "Default v17").
+#: either (``python -m experiments.surface_roughness``, docs/decisions.md, "Default v17").
 NOISE_LIKE = 0.89
+#: A surface that is not one view (a whole, a cut or holed copy) is smoothed only when
+#: the smoothing leaves it less than this share of its area: noise crumples it at the
+#: scale of its vertices, which Taubin's filter irons out (the partiality protocol's
+#: ``noise-0.25`` .. ``noise-1`` wholes of TOSCA and SCAPE keep 0.09 .. 0.85), while a
+#: coarse noiseless mesh that is rough and noise-like (34 of the tessellation protocol's
+#: ``decimated-20``, 4 of ``decimated-50``, 19 of ``shrec-holes``' fragments) keeps 0.88 ..
+#: 0.99, and the tessellation protocol's slight noise (0.1 of an edge) 0.95 .. 0.98
+#: (``python -m experiments.surface_roughness``, docs/decisions.md, "Default v18").
+CRUMPLED_KEPT = 0.87
 #: The monomials ``x**i y**j`` of :func:`surface_fits`' height fields: a quadric's (in
 #: the order :func:`roughness` was measured with), and a cubic's.
 QUADRIC_TERMS = ((2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0))
@@ -140,5 +151,24 @@ def taubin_smoothed(mesh: Mesh, steps: int = VIEW_SMOOTHING_STEPS) -> Mesh:
 def view_denoised(view: Mesh) -> Mesh:
     """A single view smoothed of its sensor's noise when it is rough (:data:`ROUGH_VIEW`)
     and its roughness is noise (:data:`NOISE_LIKE`), else the view itself."""
-    rough, noise = surface_fits(view.vertices)
-    return taubin_smoothed(view) if rough > ROUGH_VIEW and noise > NOISE_LIKE else view
+    return taubin_smoothed(view) if _rough_with_noise(view) else view
+
+
+def denoised(mesh: Mesh) -> Mesh:
+    """A surface that is not one view smoothed of a sensor's noise when it is rough with
+    noise as :func:`view_denoised` reads a view and the smoothing leaves it less than
+    :data:`CRUMPLED_KEPT` of its area, else the surface itself."""
+    if not _rough_with_noise(mesh):
+        return mesh
+    smoothed = taubin_smoothed(mesh)
+    kept = _area(smoothed) / _area(mesh)
+    return smoothed if kept < CRUMPLED_KEPT else mesh
+
+
+def _rough_with_noise(mesh: Mesh) -> bool:
+    rough, noise = surface_fits(mesh.vertices)
+    return rough > ROUGH_VIEW and noise > NOISE_LIKE
+
+
+def _area(mesh: Mesh) -> float:
+    return float(face_areas(mesh.vertices, mesh.faces).sum())

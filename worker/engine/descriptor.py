@@ -73,9 +73,10 @@ class ShapeDescriptor:
         (:mod:`~worker.engine.rigid`); (0, 6) for a descriptor stored before it was kept.
     surface_unit, surface_voxel : the grid's unit in the file's length unit, and its
         spacing in units; None with no surface.
-    surface_smoothed : whether the grid was made from the view smoothed of a sensor's
-        noise (:func:`~worker.engine.denoise.view_denoised`); False for a surface that is
-        not one view, None for a descriptor stored before this was recorded.
+    surface_smoothed : whether the surface was smoothed of a sensor's noise: a whole, cut
+        or holed surface before it was described (:func:`~worker.engine.denoise.denoised`),
+        a single view before it was gridded (:func:`~worker.engine.denoise.view_denoised`);
+        None for a descriptor stored before this was recorded.
     """
 
     preset: str

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .denoise import view_denoised
+from .denoise import denoised, view_denoised
 from .descriptor import ONE_VIEW_FACING, ShapeDescriptor
 from .diffusion import (
     LaplaceBeltrami,
@@ -206,12 +206,18 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
     # A range scan's shortcuts are no surface. Everything below is in the canonical
     # frame, the file's area scaled to CANONICAL_AREA.
     scanned = CleanedMesh(mesh, 1.0) if resampled else without_grid_shortcuts(mesh)
-    file_area = float(face_areas(scanned.mesh.vertices, scanned.mesh.faces).sum())
     surface = canonical_frame(scanned.mesh)
-    open_loop = longest_open_loop(surface, CANONICAL_AREA)
     facing = facing_share(surface)
-    described = surface if resampled else _resampled(surface, preset, facing)
     two_sided_view = not resampled and _made_two_sided(preset, facing)
+    # Any other surface rough with a sensor's noise is described smoothed of it (a view
+    # is smoothed only where it is gridded, below).
+    smooth = preset.smooth_noise and not (resampled or two_sided_view)
+    source = denoised(scanned.mesh) if smooth else scanned.mesh
+    if source is not scanned.mesh:
+        surface = canonical_frame(source)
+    file_area = float(face_areas(source.vertices, source.faces).sum())
+    open_loop = longest_open_loop(surface, CANONICAL_AREA)
+    described = surface if resampled else _resampled(surface, preset, facing)
     area = described_area(described, two_sided_view) * file_area / CANONICAL_AREA
     lap("resample")
     intrinsic, ops = surface_operators(described.vertices, described.faces)
@@ -263,9 +269,9 @@ def describe_mesh(mesh: Mesh, preset: Preset, *, resampled: bool = False) -> Sha
         lap("parts")
     # In the file's frame: the canonical one may be a mirror image, which no rigid motion
     # undoes. A view is wound toward its sensor, and smoothed of its sensor's noise when
-    # it shows any; anything else is turned outward.
+    # it shows any; anything else (smoothed above) is turned outward.
     voxel = VIEW_VOXEL if two_sided_view else ANCHOR_VOXEL
-    gridded = view_denoised(scanned.mesh) if two_sided_view else scanned.mesh
+    gridded = view_denoised(scanned.mesh) if two_sided_view else source
     grid, unit = gridded_surface(gridded, 2 if two_sided_view else 1, voxel, two_sided_view)
     lap("surface")
     return ShapeDescriptor(

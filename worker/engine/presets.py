@@ -88,6 +88,9 @@ class Preset:
         ``n_vertices`` and glued to its own image along its boundary
         (:func:`worker.engine.holes.two_sided`) before it is described, its unseen side
         taken as the mirror of the side it shows; False: described as it is.
+    smooth_noise : any other surface rough with a scanner's noise is smoothed before it
+        is described (:func:`worker.engine.denoise.denoised`); False: described as it
+        is, as the paper does.
     measure : "vertices", the paper's GDM and DDT as matrices over the vertex set
         (slices divided by their sums); or "surface", both weighted by the lumped
         vertex areas so their modal representations approximate the surface's
@@ -176,6 +179,7 @@ class Preset:
     gdm_samples: int | None = None
     max_hole_perimeter: float | None = None
     two_sided_views: bool = False
+    smooth_noise: bool = False
     measure: Measure = "vertices"
     ddt_elements: DdtElements = "core"
     ddt_mix_times: bool = True
@@ -345,10 +349,11 @@ PRESETS: dict[str, Preset] = {
         # Its versions, what each changed and why: docs/decisions.md.
         Preset(
             name="smeets2010-surface",
-            version=17,
+            version=18,
             max_edge=3.0,
             max_hole_perimeter=0.5,
             two_sided_views=True,
+            smooth_noise=True,
             measure="surface",
             heat_time_factor=12.0,
             gdm_samples=500,
