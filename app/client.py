@@ -67,6 +67,12 @@ TIMEOUT = httpx.Timeout(300.0, connect=10.0)
 #: Below this share of the file's surface described, the answer says the rest was left out
 #: (specks and debris are far smaller; the web page uses the same figure).
 PARTIAL_SURFACE = 0.99
+#: Said of a whole query smoothed of a scanner's noise (a partial query's note says so
+#: itself; the web page says the same).
+SMOOTHED_NOTE = (
+    "Its surface looked noisy (rough, as a sensor's noise leaves a scan, not as a coarse "
+    "sampling does) and was smoothed before it was described."
+)
 
 
 class ClientError(RuntimeError):
@@ -381,6 +387,8 @@ def format_matches(body: dict[str, Any]) -> str:
         )
     if body.get("partial"):
         title += "\n" + body["partial"]["note"]
+    elif facts.get("smoothed"):
+        title += f"\n{SMOOTHED_NOTE}"
     return "\n".join([title, *lines])
 
 

@@ -238,6 +238,7 @@ class JobCollector:
                 input_points=descriptor.input_points,
                 input_grid=None if descriptor.input_grid is None else list(descriptor.input_grid),
                 facing_share=descriptor.facing_share,
+                smoothed=descriptor.surface_smoothed,
             ),
         )
         glb, png = preview_bytes(result, "preview"), preview_bytes(result, "thumbnail")

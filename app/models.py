@@ -156,6 +156,8 @@ class Descriptor(Base):
     input_grid: Mapped[list[int] | None] = mapped_column(JSON)
     # The largest share of the surface facing one way (None: made before it was kept).
     facing_share: Mapped[float | None]
+    # Whether it was smoothed of a scanner's noise (None: made before it was kept).
+    smoothed: Mapped[bool | None]
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
 
     mesh: Mapped[Mesh] = relationship(back_populates="descriptors")

@@ -131,6 +131,7 @@ def mesh_out(mesh: Mesh, descriptor: Descriptor | None, collection: str) -> Mesh
             input_points=descriptor.input_points,
             input_grid=descriptor.input_grid,
             facing_share=descriptor.facing_share,
+            smoothed=descriptor.smoothed,
         ),
         job_id=job.id if job else None,
         created_at=mesh.created_at,

@@ -50,6 +50,13 @@ class DescriptorInfo(BaseModel):
         "view of a scanner (the faces a camera sees); null for descriptors made before it "
         "was recorded",
     )
+    smoothed: bool | None = Field(
+        None,
+        description="whether the surface looked noisy (rough, as a scanner's noise leaves "
+        "it, not as a coarse sampling does) and was smoothed before it was described (a "
+        "single view: before it was fitted); null for descriptors made before it was "
+        "recorded",
+    )
 
 
 class MeshOut(BaseModel):

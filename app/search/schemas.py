@@ -66,9 +66,10 @@ class PartialOut(BaseModel):
     )
     smoothed: bool = Field(
         False,
-        description="a single view whose surface looked noisy (rough, with a residual a "
-        "cubic fit takes no more of than a quadric's: a sensor's noise, not a coarse "
-        "sampling) and was smoothed before it was fitted; the note says so",
+        description="the query's surface looked noisy (rough, with a residual a cubic fit "
+        "takes no more of than a quadric's: a sensor's noise, not a coarse sampling) and was "
+        "smoothed: a single view before it was fitted, any other surface before it was "
+        "described; the note says so",
     )
     found: bool = Field(
         False,
@@ -142,7 +143,7 @@ class QueryOut(BaseModel):
         description="seconds: descriptor stages of the query (if computed), 'search', "
         "'verify' (a single view's rigid verification), 'total'"
     )
-    query: dict[str, int | float | list[int]] = Field(
+    query: dict[str, bool | int | float | list[int]] = Field(
         default_factory=dict,
         description="the query's mesh: input_vertices, input_faces (cleaned), vertices "
         "(described), and kept_area_fraction, the described surface's share of the file's "
@@ -151,7 +152,8 @@ class QueryOut(BaseModel):
         "whole, a cut or a holed copy, near 1 for one view); "
         "for a point cloud also input_points (its points that saw the surface), and for "
         "an organized one (a PCD with a grid or a structured E57 scan) input_grid "
-        "([width, height])",
+        "([width, height]); smoothed (true) when its surface looked noisy and was smoothed "
+        "before it was described (a single view: before it was fitted)",
     )
     partial: PartialOut | None = Field(
         None,

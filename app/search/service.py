@@ -84,8 +84,8 @@ class PartialQuery:
     missing_range: tuple[float, float]
     single_view: bool = False
     cloud: bool = False
-    #: Its surface looked noisy and was smoothed before any fit
-    #: (:attr:`ShapeDescriptor.surface_smoothed`).
+    #: Its surface looked noisy and was smoothed: a single view before its fit, any other
+    #: surface before it was described (:attr:`ShapeDescriptor.surface_smoothed`).
     smoothed: bool = False
     #: How many of the best matches were verified rigidly (0: none).
     verified: int = 0
@@ -109,12 +109,7 @@ class PartialQuery:
                 "image of the side it sees, so how much of the object is missing is not "
                 "measured; "
             )
-            noisy = (
-                " Its surface looked noisy (rough, as a sensor's noise leaves a scan, not as "
-                "a coarse sampling does) and was smoothed before it was fitted."
-                if self.smoothed
-                else ""
-            )
+            noisy = self._noisy("fitted")
             if self.held is None:
                 ranked = "matches are ranked by the parts that are there"
                 return f"{view}{ranked}, so they have no confidence.{noisy}"
@@ -139,12 +134,22 @@ class PartialQuery:
             return (
                 f"Between {low}% and {high}% of the surface seems missing (its parts' best "
                 "match, measured to that resolution); matches are ranked by the parts that are "
-                "there, so they have no confidence."
+                f"there, so they have no confidence.{self._noisy('described')}"
             )
         return (
             "The surface looks open (cut, holed or scanned from one side), with little of it "
             "missing; matches are ranked by the parts that are there, so they have no "
-            "confidence."
+            f"confidence.{self._noisy('described')}"
+        )
+
+    def _noisy(self, before: str) -> str:
+        """The sentence saying the surface was smoothed (before it was ``before``), or
+        nothing."""
+        if not self.smoothed:
+            return ""
+        return (
+            " Its surface looked noisy (rough, as a sensor's noise leaves a scan, not as a "
+            f"coarse sampling does) and was smoothed before it was {before}."
         )
 
 
@@ -263,12 +268,12 @@ def parse_options(
     return options
 
 
-def query_facts(descriptor: ShapeDescriptor) -> dict[str, int | float | list[int]]:
+def query_facts(descriptor: ShapeDescriptor) -> dict[str, bool | int | float | list[int]]:
     """What the answer says of the query's mesh: its size as cleaned and as described,
     (when known) the described part's share of the file's surface area and the share of
-    its surface facing one way, and the points (and grid, when organized) of the point
-    cloud it was."""
-    facts: dict[str, int | float | list[int]] = {
+    its surface facing one way, the points (and grid, when organized) of the point cloud
+    it was, and whether it was smoothed of a scanner's noise."""
+    facts: dict[str, bool | int | float | list[int]] = {
         "input_vertices": descriptor.input_vertices,
         "input_faces": descriptor.input_faces,
         "vertices": descriptor.vertices,
@@ -281,6 +286,8 @@ def query_facts(descriptor: ShapeDescriptor) -> dict[str, int | float | list[int
         facts["input_points"] = descriptor.input_points
     if descriptor.input_grid is not None:
         facts["input_grid"] = list(descriptor.input_grid)
+    if descriptor.surface_smoothed:
+        facts["smoothed"] = True
     return facts
 
 

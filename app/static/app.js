@@ -226,6 +226,11 @@ function pointCloud(facts) {
   return `${points} on a ${width} x ${height} grid, triangulated by it`;
 }
 
+// A whole query smoothed of a scanner's noise (a partial one's note says so itself; as
+// the command line's SMOOTHED_NOTE in app/client.py).
+const SMOOTHED = "Its surface looked noisy (rough, as a sensor's noise leaves a scan, not as "
+  + "a coarse sampling does) and was smoothed before it was described.";
+
 function percent(value) {
   return `${(100 * value).toFixed(value < 0.1 ? 1 : 0)}%`;
 }
@@ -415,7 +420,7 @@ async function search(file) {
         ? ` Only ${percent(result.query.kept_area_fraction)} of the file's surface was described: `
           + "it has other, separate parts, which were left out (the largest connected part is described)."
         : "")
-      + (result.partial ? ` ${result.partial.note}` : "");
+      + (result.partial ? ` ${result.partial.note}` : (result.query.smoothed ? ` ${SMOOTHED}` : ""));
     showResults(result, $("search-results"));
   } catch (err) {
     if (!current()) return;
@@ -537,6 +542,7 @@ async function openDetail(mesh) {
         + (partial(mesh.descriptor.kept_area_fraction)
           ? " (its largest connected part; the file's other, separate parts were left out)"
           : "")
+        + (mesh.descriptor.smoothed ? ", smoothed of a scanner's noise" : "")
       : "-",
     described: mesh.descriptor ? `${mesh.descriptor.timings.total.toFixed(2)} s, ${mesh.descriptor.preset} v${mesh.descriptor.preset_version}` : "-",
     metadata: JSON.stringify(mesh.metadata),

@@ -10,14 +10,14 @@ import pytest
 import trimesh
 from conftest import EXAMPLES, e57_scan, example, noisy_depth_scan, with_a_far_half_copy
 
-from app.client import format_matches
+from app.client import SMOOTHED_NOTE, format_matches
 from benchmarks.common import Service
 from worker.engine.mesh_io import load_mesh
 from worker.engine.pipeline import resampled_surface
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.engine.rigid import HELD_FITNESS
 from worker.engine.scans import read_pcd
-from worker.evaluation.partial import planar_cut, single_view
+from worker.evaluation.partial import noisy_surface, planar_cut, single_view
 from worker.evaluation.samples import (
     DEPTH_DIRECTION,
     DEPTH_PIXELS,
@@ -94,6 +94,25 @@ def test_a_query_of_separate_parts_says_what_was_left_out(service: Service, gall
     assert "learned fusion: spectrum by reweighted euclidean" in format_matches(learned)
 
 
+def test_a_noisy_whole_query_is_smoothed_and_says_so(service: Service, gallery):
+    """Another pose of the quadruped with noise of 1% of its diagonal on every vertex: it
+    is smoothed before it is described, found, and the answer (and the command line's
+    table) says so; an enrolled clean mesh records that it was not smoothed."""
+    mesh = load_mesh(example("quadruped-2"))
+    noisy = noisy_surface(mesh, 1.0, np.random.default_rng(0))
+    data = trimesh.Trimesh(noisy.vertices, noisy.faces, process=False).export(file_type="off")
+    response = service.client.post("/query", files={"file": ("noisy.off", data)}, data={"k": "3"})
+    assert response.status_code == 200, response.text
+    body = response.json()
+    assert body["query"]["smoothed"] is True and body["partial"] is None
+    assert body["matches"][0]["label"] == "quadruped"
+    assert SMOOTHED_NOTE in format_matches(body).splitlines()
+    clean = service.query("quadruped-2", k=2).json()
+    assert "smoothed" not in clean["query"] and SMOOTHED_NOTE not in format_matches(clean)
+    enrolled = service.client.get(f"/meshes/{gallery['quadruped-0']}").json()
+    assert enrolled["descriptor"]["smoothed"] is False
+
+
 def test_a_cut_query_is_ranked_by_its_parts_and_says_so(service: Service, gallery):
     """Another pose of the quadruped with its top 30% cut off: the answer says the query
     looks partial and how much seems missing, ranks with the parts modality (its bar on
@@ -108,6 +127,18 @@ def test_a_cut_query_is_ranked_by_its_parts_and_says_so(service: Service, galler
     assert "ranked by the parts that are there" in body["partial"]["note"]
     assert not body["partial"]["single_view"] and body["query"]["facing_share"] < 0.95
     assert body["matches"][0]["label"] == "quadruped"
+    assert not body["partial"]["smoothed"] and "noisy" not in body["partial"]["note"]
+    # The same cut with noise of 1% of its diagonal: smoothed before it is described.
+    noisy = noisy_surface(part, 1.0, np.random.default_rng(0))
+    data = trimesh.Trimesh(noisy.vertices, noisy.faces, process=False).export(file_type="off")
+    rough = service.client.post("/query", files={"file": ("cut.off", data)}, data={"k": "3"})
+    assert rough.status_code == 200, rough.text
+    partial = rough.json()["partial"]
+    assert partial["smoothed"] and partial["note"].endswith(
+        "Its surface looked noisy (rough, as a sensor's noise leaves a scan, not as a coarse "
+        "sampling does) and was smoothed before it was described."
+    )
+    assert rough.json()["matches"][0]["label"] == "quadruped"
     for m in body["matches"]:  # a cut is not one view: not fitted rigidly
         assert "parts" in m["scores"] and m["confidence"] is None and m["fitness"] is None
     table = format_matches(body)

@@ -16,12 +16,17 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
+import trimesh
 from conftest import example, noisy_depth_scan, with_a_far_half_copy
 
+from app.client import SMOOTHED_NOTE
 from benchmarks.common import EXAMPLES, Service
 from tests.service.conftest import migrated_service, running
+from worker.engine.mesh_io import load_mesh
 from worker.engine.scans import read_pcd
+from worker.evaluation.partial import noisy_surface
 from worker.evaluation.samples import DEPTH_SAMPLE, PARTIAL_SAMPLE
 
 pytestmark = [pytest.mark.slow, pytest.mark.service]
@@ -274,6 +279,19 @@ def test_a_noisy_depth_scan_is_said_to_be_smoothed(page, tmp_path):
     )
     first = page.locator("#search-results .card").first
     assert first.locator(".label").inner_text() == "quadruped"
+
+
+def test_a_noisy_whole_is_said_to_be_smoothed(page, tmp_path):
+    """Another pose of the quadruped with noise of 1% of its diagonal: the page says it
+    looked noisy and was smoothed before it was described, and finds the quadruped."""
+    mesh = load_mesh(EXAMPLES / "quadruped-2.off.gz")
+    noisy = noisy_surface(mesh, 1.0, np.random.default_rng(0))
+    path = tmp_path / "noisy-quadruped.off"
+    trimesh.Trimesh(noisy.vertices, noisy.faces, process=False).export(path)
+    search_for(page, path)
+    progress = page.locator("#search-progress").inner_text()
+    assert progress.endswith(SMOOTHED_NOTE), progress
+    assert page.locator("#search-results .card .label").first.inner_text() == "quadruped"
 
 
 def test_a_partial_answer_says_what_ranked_it_and_what_was_measured(site):
