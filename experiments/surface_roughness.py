@@ -1,20 +1,22 @@
-"""Which surfaces the engine smooths: the roughness and noise share of noiseless and noisy
-single views and wholes.
+"""Which surfaces the engine smooths of a scanner's noise: noiseless and noisy single views,
+wholes and partial copies, measured as the engine measures them.
 
     python -m experiments.surface_roughness [--every 1] [--jobs 2]
 
-A surface is smoothed when its roughness is above :data:`~worker.engine.denoise.ROUGH_VIEW`
-and its noise share above :data:`~worker.engine.denoise.NOISE_LIKE`
-(:func:`worker.engine.denoise.surface_fits`): a two-sided view before it is gridded for its
-rigid fit, any other surface before it is described. For every TOSCA and SCAPE file (every
-``--every``-th): the file itself, and each single-view and noisy copy the partiality
-protocol makes of it (:func:`worker.evaluation.variants.make_variant`, seeded as there),
-measured as the engine measures it (a range scan without its shortcuts,
-:func:`worker.engine.pipeline.without_grid_shortcuts`): per copy kind, the copies, the
-smallest, median and largest of each measure, how many are above its threshold and how
-many are smoothed. Then each measure's threshold chosen on one collection's copies alone
-(the one leaving fewest of them on the wrong side, :func:`fewest_wrong`), and how many of
-the other's it puts on the wrong side.
+A single view is smoothed when its roughness is above
+:data:`~worker.engine.denoise.ROUGH_VIEW` and its noise share above
+:data:`~worker.engine.denoise.NOISE_LIKE` (:func:`worker.engine.denoise.surface_fits`); any
+other surface when it is both and Taubin's filter leaves it less than
+:data:`~worker.engine.denoise.CRUMPLED_KEPT` of its area
+(:func:`worker.engine.denoise.denoised`). For every TOSCA and SCAPE file (every
+``--every``-th): the file itself, and each copy of it the partiality and tessellation
+protocols make (:func:`worker.evaluation.variants.make_variant`, seeded as there; a range
+scan without its shortcuts, :func:`worker.engine.pipeline.without_grid_shortcuts`; a copy
+facing one way, as ``shrec-holes``' smallest fragments may, read as a view). Per copy kind:
+the copies, each measure's smallest, median and largest, how many pass each threshold, and
+how many the engine smooths. Then each threshold chosen on one collection's copies alone
+(:func:`fewest_wrong`) and how many of the other's it puts on the wrong side: roughness and
+noise share on the views, the area kept on the other copies the first two pass.
 """
 
 from __future__ import annotations
@@ -26,16 +28,37 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.common import TOSCA
-from worker.engine.denoise import NOISE_LIKE, ROUGH_VIEW, surface_fits
-from worker.engine.mesh_io import load_mesh
+from worker.engine.denoise import (
+    NOISE_LIKE,
+    ROUGH_VIEW,
+    denoised,
+    surface_fits,
+    taubin_smoothed,
+    view_denoised,
+)
+from worker.engine.descriptor import ONE_VIEW_FACING
+from worker.engine.errors import MeshError
+from worker.engine.holes import facing_share
+from worker.engine.mesh_io import Mesh, face_areas, load_mesh
 from worker.engine.pipeline import without_grid_shortcuts
 from worker.evaluation.datasets import shared_dataset
 from worker.evaluation.variants import make_variant
 
-#: The file itself, and the copies without and with noise.
+#: The file itself.
 WHOLE = "whole"
-NOISELESS = ("view", "range", "range-cloud", "view-points", WHOLE)
-NOISY = ("view-noise-0.25", "view-noise-0.5", "noise-0.25", "noise-0.5", "noise-1")
+#: Single views without and with a depth camera's noise.
+VIEWS = ("view", "range", "range-cloud", "view-points")
+NOISY_VIEWS = ("view-noise-0.25", "view-noise-0.5")
+#: Other surfaces without noise (coarse ones among them) and with a scanner's noise.
+SURFACES = (WHOLE, "cut-30", "holes-25", "shrec-holes", "decimated-50", "decimated-20")
+NOISY_SURFACES = ("noise-0.25", "noise-0.5", "noise-1")
+#: The tessellation protocol's noise of a tenth of an edge: reported, judged neither way.
+SLIGHT = ("noisy",)
+KINDS = (*VIEWS, *NOISY_VIEWS, *SURFACES, *NOISY_SURFACES, *SLIGHT)
+
+#: One copy: (read as a view, roughness, noise share, area kept by smoothing or NaN where
+#: the engine does not weigh it, smoothed by the engine).
+Copy = tuple[bool, float, float, float, bool]
 
 
 def main() -> None:
@@ -47,69 +70,102 @@ def main() -> None:
         "TOSCA": sorted(TOSCA.glob("*.off.gz"))[:: args.every],
         "SCAPE": sorted(shared_dataset("scape").glob("*.off.gz"))[:: args.every],
     }
-    # collection -> variant -> (roughness, noise share) of each copy
-    measured: dict[str, dict[str, list[tuple[float, float]]]] = {}
+    measured: dict[str, dict[str, list[Copy]]] = {}
     with ProcessPoolExecutor(args.jobs) as pool:
         for collection, files in collections.items():
-            measured[collection] = {v: [] for v in (*NOISELESS, *NOISY)}
-            for copies in pool.map(fits_of_copies, files):
-                for variant, fits in copies.items():
-                    measured[collection][variant].append(fits)
+            measured[collection] = {kind: [] for kind in KINDS}
+            for copies in pool.map(copies_of, files):
+                for kind, copy in copies.items():
+                    measured[collection][kind].append(copy)
     print(
-        f"| copies | made | roughness: smallest | median | largest | above {ROUGH_VIEW} | "
-        f"noise share: smallest | median | largest | above {NOISE_LIKE} | smoothed |"
+        f"| copies | made | read as views | roughness: smallest | median | largest | above "
+        f"{ROUGH_VIEW} | noise share: smallest | median | largest | above {NOISE_LIKE} | "
+        f"area kept (both above, not views): smallest | largest | smoothed |"
     )
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for variant in (*NOISELESS, *NOISY):
-        r, share = np.concatenate([np.array(measured[c][variant]) for c in collections]).T
-        rough, noise = r > ROUGH_VIEW, share > NOISE_LIKE
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for kind in KINDS:
+        view, r, share, kept, smoothed = np.array(
+            [c for per in measured.values() for c in per[kind]], dtype=float
+        ).T
+        weighed = kept[np.isfinite(kept)]
+        span = f"{weighed.min():.3f} | {weighed.max():.3f}" if len(weighed) else "- | -"
         print(
-            f"| {variant} | {len(r)} | {r.min():.4f} | {np.median(r):.4f} | {r.max():.4f} | "
-            f"{int(rough.sum())} | {share.min():.3f} | {np.median(share):.3f} | "
-            f"{share.max():.3f} | {int(noise.sum())} | {int((rough & noise).sum())} |"
+            f"| {kind} | {len(r)} | {int(view.sum())} | {r.min():.4f} | {np.median(r):.4f} | "
+            f"{r.max():.4f} | {int((r > ROUGH_VIEW).sum())} | {share.min():.3f} | "
+            f"{np.median(share):.3f} | {share.max():.3f} | {int((share > NOISE_LIKE).sum())} | "
+            f"{span} | {int(smoothed.sum())} |"
         )
     print()
-    print("| measure | chosen on | threshold | wrong there | wrong on the other |")
-    print("|---|---|---:|---:|---:|")
-    for measure, column in (("roughness", 0), ("noise share", 1)):
+    print("| measure | on | chosen on | threshold | wrong there | wrong on the other |")
+    print("|---|---|---|---:|---:|---:|")
+    for measure, column, clean, noisy, above in (
+        ("roughness", 1, VIEWS, NOISY_VIEWS, True),
+        ("noise share", 2, VIEWS, NOISY_VIEWS, True),
+        ("area kept", 3, SURFACES, NOISY_SURFACES, False),
+    ):
         values = {
-            c: {v: [fits[column] for fits in found] for v, found in per.items()}
+            c: {
+                kind: [copy[column] for copy in per[kind] if np.isfinite(copy[column])]
+                for kind in (*clean, *noisy)
+            }
             for c, per in measured.items()
         }
+        on = "views" if clean is VIEWS else "other copies rough and noise-like"
         for chosen, other in (("TOSCA", "SCAPE"), ("SCAPE", "TOSCA")):
-            threshold = fewest_wrong(values[chosen])
+            threshold = fewest_wrong(values[chosen], clean, noisy, above)
             print(
-                f"| {measure} | {chosen} | {threshold:.4f} | "
-                f"{wrong_side(values[chosen], threshold)} | "
-                f"{wrong_side(values[other], threshold)} |"
+                f"| {measure} | {on} | {chosen} | {threshold:.4f} | "
+                f"{wrong_side(values[chosen], clean, noisy, above, threshold)} | "
+                f"{wrong_side(values[other], clean, noisy, above, threshold)} |"
             )
 
 
-def fits_of_copies(path: Path) -> dict[str, tuple[float, float]]:
-    """One file and each copy of it, measured as the engine measures it."""
+def copies_of(path: Path) -> dict[str, Copy]:
+    """One file and each copy of it, measured and smoothed as the engine does."""
     mesh = load_mesh(path)
-    return {
-        variant: surface_fits(
-            mesh.vertices
-            if variant == WHOLE
-            else without_grid_shortcuts(make_variant(mesh, variant, path.name)).mesh.vertices
-        )
-        for variant in (*NOISELESS, *NOISY)
-    }
+    copies: dict[str, Copy] = {}
+    for kind in KINDS:
+        try:
+            copy = mesh if kind == WHOLE else make_variant(mesh, kind, path.name)
+        except MeshError:  # a shrec-holes copy eroded whole
+            continue
+        copies[kind] = measured_copy(without_grid_shortcuts(copy).mesh)
+    return copies
 
 
-def wrong_side(values: dict[str, list[float]], threshold: float) -> int:
-    """Noiseless copies above ``threshold`` and noisy ones at or under it (of one measure)."""
-    wrong = sum(r > threshold for v in NOISELESS for r in values[v])
-    return wrong + sum(r <= threshold for v in NOISY for r in values[v])
+def measured_copy(surface: Mesh) -> Copy:
+    view = facing_share(surface) >= ONE_VIEW_FACING
+    rough, share = surface_fits(surface.vertices)
+    kept = float("nan")
+    if not view and rough > ROUGH_VIEW and share > NOISE_LIKE:
+        area = face_areas(surface.vertices, surface.faces).sum()
+        kept = float(face_areas(taubin_smoothed(surface).vertices, surface.faces).sum() / area)
+    smoothed = (view_denoised if view else denoised)(surface) is not surface
+    return view, rough, share, kept, smoothed
 
 
-def fewest_wrong(values: dict[str, list[float]]) -> float:
+def wrong_side(
+    values: dict[str, list[float]],
+    clean: tuple[str, ...],
+    noisy: tuple[str, ...],
+    above: bool,
+    threshold: float,
+) -> int:
+    """Clean copies that ``threshold`` would smooth and noisy ones it would not (smoothed
+    ``above`` it, or below it)."""
+    sign = 1 if above else -1
+    wrong = sum(sign * (v - threshold) > 0 for kind in clean for v in values[kind])
+    return wrong + sum(sign * (v - threshold) <= 0 for kind in noisy for v in values[kind])
+
+
+def fewest_wrong(
+    values: dict[str, list[float]], clean: tuple[str, ...], noisy: tuple[str, ...], above: bool
+) -> float:
     """The threshold with the fewest copies on the wrong side: the geometric middle of the
     widest gap between two measured values that leaves fewest."""
     r = np.unique(np.concatenate([np.array(found) for found in values.values()]))
     middles = np.sqrt(r[:-1] * r[1:])
-    wrong = np.array([wrong_side(values, t) for t in middles])
+    wrong = np.array([wrong_side(values, clean, noisy, above, t) for t in middles])
     best = np.flatnonzero(wrong == wrong.min())
     # Of the ties, the widest run of consecutive gaps, its middle.
     runs = np.split(best, np.flatnonzero(np.diff(best) > 1) + 1)

@@ -42,16 +42,18 @@ NOISE_LIKE = 0.89
 #: the smoothing leaves it less than this share of its area: noise crumples it at the
 #: scale of its vertices, which Taubin's filter irons out (the partiality protocol's
 #: ``noise-0.25`` .. ``noise-1`` wholes of TOSCA and SCAPE keep 0.09 .. 0.85), while a
-#: coarse noiseless mesh that is rough and noise-like (34 of the tessellation protocol's
-#: ``decimated-20``, 4 of ``decimated-50``, 19 of ``shrec-holes``' fragments) keeps 0.88 ..
-#: 0.99, and the tessellation protocol's slight noise (0.1 of an edge) 0.95 .. 0.98
-#: (``python -m experiments.surface_roughness``, docs/decisions.md, "Default v18").
+#: coarse noiseless mesh read as rough and noise-like (of the tessellation protocol's
+#: decimated files and ``shrec-holes``' fragments) keeps 0.88 .. 0.99, and the tessellation
+#: protocol's slight noise (0.1 of an edge) 0.95 .. 0.98. Chosen on TOSCA's copies alone
+#: 0.867, on SCAPE's 0.833 (three ``noise-0.25`` wolves of TOSCA, keeping 0.84 .. 0.85, then
+#: left as they are) (``python -m experiments.surface_roughness``, docs/decisions.md,
+#: "Default v18").
 CRUMPLED_KEPT = 0.87
 #: The monomials ``x**i y**j`` of :func:`surface_fits`' height fields: a quadric's (in
 #: the order :func:`roughness` was measured with), and a cubic's.
 QUADRIC_TERMS = ((2, 0), (1, 1), (0, 2), (1, 0), (0, 1), (0, 0))
 CUBIC_TERMS = (*QUADRIC_TERMS, (3, 0), (2, 1), (1, 2), (0, 3))
-#: Steps of Taubin's filter a rough view is smoothed by (:func:`taubin_smoothed`).
+#: Steps of Taubin's filter a noisy surface is smoothed by (:func:`taubin_smoothed`).
 VIEW_SMOOTHING_STEPS = 10
 #: Taubin's two factors, shrinking by ``TAUBIN_SHRINK`` and growing back by
 #: ``TAUBIN_GROW`` on alternate steps: equal, so the filter passes no frequency unchanged
