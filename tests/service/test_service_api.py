@@ -128,8 +128,8 @@ def test_a_cut_query_is_ranked_by_its_parts_and_says_so(service: Service, galler
     assert not body["partial"]["single_view"] and body["query"]["facing_share"] < 0.95
     assert body["matches"][0]["label"] == "quadruped"
     assert not body["partial"]["smoothed"] and "noisy" not in body["partial"]["note"]
-    # The same cut with noise of 1% of its diagonal: smoothed before it is described.
-    noisy = noisy_surface(part, 1.0, np.random.default_rng(0))
+    # The same cut with noise of 0.5% of its diagonal: smoothed before it is described.
+    noisy = noisy_surface(part, 0.5, np.random.default_rng(0))
     data = trimesh.Trimesh(noisy.vertices, noisy.faces, process=False).export(file_type="off")
     rough = service.client.post("/query", files={"file": ("cut.off", data)}, data={"k": "3"})
     assert rough.status_code == 200, rough.text
