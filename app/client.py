@@ -64,15 +64,10 @@ MESH_SUFFIXES = (
     ".csv",
 )
 TIMEOUT = httpx.Timeout(300.0, connect=10.0)
-#: Below this share of the file's surface described, the answer says the rest was left out
-#: (specks and debris are far smaller; the web page uses the same figure).
+#: Below this share of an enrolled file's surface described, the import lists it as
+#: described in part (specks and debris are far smaller; the service's notes on a query
+#: and the web page use the same figure).
 PARTIAL_SURFACE = 0.99
-#: Said of a whole query smoothed of a scanner's noise (a partial query's note says so
-#: itself; the web page says the same).
-SMOOTHED_NOTE = (
-    "Its surface looked noisy (rough, as a sensor's noise leaves a scan, not as a coarse "
-    "sampling does) and was smoothed before it was described."
-)
 
 
 class ClientError(RuntimeError):
@@ -367,28 +362,10 @@ def format_matches(body: dict[str, Any]) -> str:
         title += "\nCompared by the collection's learned fusion: " + ", ".join(
             f"{m} by {c}" for m, c in own.items()
         )
-    facts = body.get("query", {})
-    if facts.get("input_grid"):
-        width, height = facts["input_grid"]
-        title += (
-            f"\nThe query is a scanner's point cloud: {facts['input_points']:,} points on "
-            f"a {width} x {height} grid, triangulated by it."
-        )
-    elif facts.get("input_points"):
-        title += (
-            f"\nThe query is a scanner's point cloud: {facts['input_points']:,} points, "
-            "triangulated as one view."
-        )
-    kept = facts.get("kept_area_fraction")
-    if _partial(kept):
-        title += (
-            f"\nOnly {kept:.0%} of the query file's surface was described: it has other, "
-            "separate parts, which were left out (the largest connected part is described)."
-        )
-    if body.get("partial"):
-        title += "\n" + body["partial"]["note"]
-    elif facts.get("smoothed"):
-        title += f"\n{SMOOTHED_NOTE}"
+    # The service's own sentences on the query: the point cloud it was, the part of the file
+    # left out, how partial it looks or that it was smoothed.
+    for note in body.get("notes", []):
+        title += f"\n{note}"
     return "\n".join([title, *lines])
 
 

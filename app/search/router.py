@@ -183,6 +183,7 @@ def query_out(result: service.SearchResult) -> QueryOut:
             found=result.partial.found,
             note=result.partial.note,
         ),
+        notes=result.notes,
         preview=result.preview,
     )
 

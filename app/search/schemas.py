@@ -162,6 +162,13 @@ class QueryOut(BaseModel):
         "whole, and their scores are not on the calibrated scale (no confidence, no "
         "threshold)",
     )
+    notes: list[str] = Field(
+        default_factory=list,
+        description="what the answer says of its query, in sentences for a person (as "
+        "`shapes query` and the web page print them): the point cloud it was, the part of "
+        "the file left out, how partial it looks (the partial note) or, a whole, that its "
+        "surface was smoothed of noise; empty when there is nothing to say",
+    )
     preview: str | None = Field(
         None, description="where the query mesh's 3D preview (GLB) can be fetched"
     )

@@ -145,12 +145,53 @@ class PartialQuery:
     def _noisy(self, before: str) -> str:
         """The sentence saying the surface was smoothed (before it was ``before``), or
         nothing."""
-        if not self.smoothed:
-            return ""
-        return (
-            " Its surface looked noisy (rough, as a sensor's noise leaves a scan, not as a "
-            f"coarse sampling does) and was smoothed before it was {before}."
+        return f" {smoothed_sentence(before)}" if self.smoothed else ""
+
+
+#: Below this share of the file's surface described, the answer says the rest was left out
+#: (specks and debris are far smaller).
+PARTIAL_SURFACE = 0.99
+
+
+def smoothed_sentence(before: str) -> str:
+    """The sentence saying a query's surface was smoothed before it was ``before``."""
+    return (
+        "Its surface looked noisy (rough, as a sensor's noise leaves a scan, not as a coarse "
+        f"sampling does) and was smoothed before it was {before}."
+    )
+
+
+def query_notes(
+    facts: dict[str, bool | int | float | list[int]], partial: PartialQuery | None
+) -> list[str]:
+    """What the answer says of its query (:func:`query_facts`) in sentences for a person,
+    as the command line and the web page print them: the point cloud it was, the part of
+    the file left out, and how partial it looks (:attr:`PartialQuery.note`) or, a whole,
+    that it was smoothed."""
+    notes = []
+    points = facts.get("input_points")
+    grid = facts.get("input_grid")
+    if isinstance(grid, list):
+        width, height = grid
+        notes.append(
+            f"The query is a scanner's point cloud: {points:,} points on a {width} x {height} "
+            "grid, triangulated by it."
         )
+    elif points is not None:
+        notes.append(
+            f"The query is a scanner's point cloud: {points:,} points, triangulated as one view."
+        )
+    kept = facts.get("kept_area_fraction")
+    if isinstance(kept, float) and kept < PARTIAL_SURFACE:
+        notes.append(
+            f"Only {kept:.0%} of the query file's surface was described: it has other, "
+            "separate parts, which were left out (the largest connected part is described)."
+        )
+    if partial is not None:
+        notes.append(partial.note)
+    elif facts.get("smoothed"):
+        notes.append(smoothed_sentence("described"))
+    return notes
 
 
 @dataclass
@@ -162,7 +203,7 @@ class SearchResult:
     gallery_size: int
     matches: list[RankedMatch]
     timings: dict[str, float]
-    query: dict[str, int | float | list[int]] = field(default_factory=dict)
+    query: dict[str, bool | int | float | list[int]] = field(default_factory=dict)
     #: Where the query's descriptor came from: "computed" by a worker now, the
     #: "enrolled" mesh with the same bytes, a "recent" query's, or "stored" (/similar).
     descriptor_source: DescriptorSource = "computed"
@@ -175,6 +216,8 @@ class SearchResult:
     #: The weight each modality's score carried in the fused score (a weight of 0: shown
     #: for information only).
     weights: dict[str, float] = field(default_factory=dict)
+    #: What the answer says of its query, in sentences (:func:`query_notes`).
+    notes: list[str] = field(default_factory=list)
 
     @property
     def fusion(self) -> str:
@@ -368,17 +411,19 @@ def rank(
                 fitness=fitness.get(match.id),
             )
         )
+    facts = query_facts(descriptor)
     return SearchResult(
         options=options,
         collection=gallery.name,
         gallery_size=len(gallery),
         matches=ranked,
         timings={**timings, "search": stats.seconds},
-        query=query_facts(descriptor),
+        query=facts,
         descriptor_source=descriptor_source,
         threshold=threshold,
         partial=partial,
         weights=stats.weights,
+        notes=query_notes(facts, partial),
     )
 
 

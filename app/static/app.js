@@ -209,8 +209,9 @@ function viewers() {
 }
 
 // --------------------------------------------------------------------------- cards
-// Below this share of a file's surface described, say that the rest was left out (as
-// the command line's PARTIAL_SURFACE in app/client.py).
+// Below this share of an enrolled file's surface described, say that the rest was left
+// out (as the command line's PARTIAL_SURFACE in app/client.py and the service's notes on
+// a query).
 const PARTIAL_SURFACE = 0.99;
 
 function partial(kept) {
@@ -225,11 +226,6 @@ function pointCloud(facts) {
   const [width, height] = facts.input_grid;
   return `${points} on a ${width} x ${height} grid, triangulated by it`;
 }
-
-// A whole query smoothed of a scanner's noise (a partial one's note says so itself; as
-// the command line's SMOOTHED_NOTE in app/client.py).
-const SMOOTHED = "Its surface looked noisy (rough, as a sensor's noise leaves a scan, not as "
-  + "a coarse sampling does) and was smoothed before it was described.";
 
 function percent(value) {
   return `${(100 * value).toFixed(value < 0.1 ? 1 : 0)}%`;
@@ -411,16 +407,12 @@ async function search(file) {
     if (!current()) return;
     result.queryName = file.name;
     const how = { computed: "described now", enrolled: "enrolled already", recent: "searched recently" };
-    const cloud = pointCloud(result.query);
+    // The service's own sentences on the query: the point cloud it was, the part of the
+    // file left out, how partial it looks or that it was smoothed.
     progress.textContent = `${file.name}: ${result.matches.length} matches among ${result.gallery_size} `
       + `enrolled (${how[result.descriptor_source] || result.descriptor_source}, `
       + `${((performance.now() - started) / 1000).toFixed(1)} s).`
-      + (cloud ? ` The query is ${cloud}.` : "")
-      + (partial(result.query.kept_area_fraction)
-        ? ` Only ${percent(result.query.kept_area_fraction)} of the file's surface was described: `
-          + "it has other, separate parts, which were left out (the largest connected part is described)."
-        : "")
-      + (result.partial ? ` ${result.partial.note}` : (result.query.smoothed ? ` ${SMOOTHED}` : ""));
+      + (result.notes || []).map((note) => ` ${note}`).join("");
     showResults(result, $("search-results"));
   } catch (err) {
     if (!current()) return;

@@ -10,7 +10,8 @@ import pytest
 import trimesh
 from conftest import EXAMPLES, e57_scan, example, noisy_depth_scan, with_a_far_half_copy
 
-from app.client import SMOOTHED_NOTE, format_matches
+from app.client import format_matches
+from app.search.service import smoothed_sentence
 from benchmarks.common import Service
 from worker.engine.mesh_io import load_mesh
 from worker.engine.pipeline import resampled_surface
@@ -106,9 +107,12 @@ def test_a_noisy_whole_query_is_smoothed_and_says_so(service: Service, gallery):
     body = response.json()
     assert body["query"]["smoothed"] is True and body["partial"] is None
     assert body["matches"][0]["label"] == "quadruped"
-    assert SMOOTHED_NOTE in format_matches(body).splitlines()
+    smoothed = smoothed_sentence("described")
+    assert body["notes"] == [smoothed]
+    assert smoothed in format_matches(body).splitlines()
     clean = service.query("quadruped-2", k=2).json()
-    assert "smoothed" not in clean["query"] and SMOOTHED_NOTE not in format_matches(clean)
+    assert "smoothed" not in clean["query"] and clean["notes"] == []
+    assert smoothed not in format_matches(clean)
     enrolled = service.client.get(f"/meshes/{gallery['quadruped-0']}").json()
     assert enrolled["descriptor"]["smoothed"] is False
 
@@ -246,10 +250,14 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_or_as_seen_from_its_camer
     # One view: described with its unseen side as the mirror image of the seen one.
     assert body["partial"]["single_view"]
     assert body["partial"]["note"].startswith("One view of its object (a scanner's point cloud)")
-    assert (
-        f"scanner's point cloud: {points:,} points on a {width} x {height} grid"
-        in format_matches(body)
+    # The answer's sentences, as the command line prints them: the cloud first, the view
+    # last (between them, the specks of the scene left out).
+    assert body["notes"][0] == (
+        f"The query is a scanner's point cloud: {points:,} points on a {width} x {height} "
+        "grid, triangulated by it."
     )
+    assert body["notes"][-1] == body["partial"]["note"]
+    assert all(note in format_matches(body).splitlines() for note in body["notes"])
     whole = service.query("quadruped-2", k=1).json()
     assert "input_grid" not in whole["query"] and "point cloud" not in format_matches(whole)
     assert whole["matches"][0]["fitness"] is None and "fitness" not in format_matches(whole)

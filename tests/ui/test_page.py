@@ -21,7 +21,7 @@ import pytest
 import trimesh
 from conftest import example, noisy_depth_scan, with_a_far_half_copy
 
-from app.client import SMOOTHED_NOTE
+from app.search.service import smoothed_sentence
 from benchmarks.common import EXAMPLES, Service
 from tests.service.conftest import migrated_service, running
 from worker.engine.mesh_io import load_mesh
@@ -227,7 +227,7 @@ def test_a_search_says_when_part_of_the_file_was_left_out(page, tmp_path):
     path.write_bytes(both)
     search_for(page, path)
     progress = page.locator("#search-progress").inner_text()
-    assert "Only 80% of the file's surface was described" in progress, progress
+    assert "Only 80% of the query file's surface was described" in progress, progress
     assert page.locator("#search-results .card .label").first.inner_text() == "quadruped"
 
 
@@ -290,7 +290,7 @@ def test_a_noisy_whole_is_said_to_be_smoothed(page, tmp_path):
     trimesh.Trimesh(noisy.vertices, noisy.faces, process=False).export(path)
     search_for(page, path)
     progress = page.locator("#search-progress").inner_text()
-    assert progress.endswith(SMOOTHED_NOTE), progress
+    assert progress.endswith(smoothed_sentence("described")), progress
     assert page.locator("#search-results .card .label").first.inner_text() == "quadruped"
 
 
