@@ -109,10 +109,15 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _run_protocol(
-    args: argparse.Namespace, run: Callable[..., dict[str, Any]], name: str, units: str = "any"
+    args: argparse.Namespace,
+    run: Callable[..., dict[str, Any]],
+    name: str,
+    units: str = "any",
+    **options: Any,
 ) -> tuple[dict[str, Any] | None, Path]:
     """Run a variant protocol (``robustness``, ``partiality``) with the command's
-    arguments; the report (None after an error, printed) and its directory."""
+    arguments and the protocol's own ``options``; the report (None after an error,
+    printed) and its directory."""
     from .evaluation.datasets import EvaluationError
 
     preset = with_units(get_preset(args.preset), units)
@@ -133,6 +138,7 @@ def _run_protocol(
             command=shlex.join(["shapes", *args.argv]),
             environment={"git": _git_revision()},
             **({"variants": variants} if variants else {}),
+            **options,
         )
     except (EvaluationError, OSError, RuntimeError) as exc:
         print(f"shapes {name}: {exc}", file=sys.stderr)
@@ -178,7 +184,7 @@ def _robustness(args: argparse.Namespace) -> int:
 def _partiality(args: argparse.Namespace) -> int:
     from .evaluation.run import run_partiality
 
-    report, out = _run_protocol(args, run_partiality, "partiality", args.units)
+    report, out = _run_protocol(args, run_partiality, "partiality", args.units, copies=args.copies)
     if report is None:
         return 2
     titles = report["rows"]
@@ -405,6 +411,13 @@ def add_subcommands(sub: Any) -> None:
         help="comma-separated subset of the partial copies: cut-5, cut-15, cut-30, holes-10, "
         "holes-25, view, range, range-cloud, view-points, shrec-holes, noise-0.25, noise-0.5, "
         "noise-1, view-noise-0.25, view-noise-0.5 (default: all)",
+    )
+    partial.add_argument(
+        "--copies",
+        type=int,
+        default=1,
+        help="copies of each variant drawn from every mesh, each with a seed of its own "
+        "(SHREC'17 shot every model 20 times; default: 1)",
     )
     partial.add_argument(
         "--out", help="report directory (default: evaluation-out/partiality/PRESET)"

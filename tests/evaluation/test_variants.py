@@ -7,7 +7,13 @@ import pytest
 import trimesh
 
 from worker.engine.mesh_io import Mesh, clean_mesh
-from worker.evaluation.variants import LOG10_SCALE_RANGE, NOISE_FRACTION, VARIANTS, make_variant
+from worker.evaluation.variants import (
+    LOG10_SCALE_RANGE,
+    NOISE_FRACTION,
+    VARIANTS,
+    copy_name,
+    make_variant,
+)
 
 
 def _area(mesh: Mesh) -> float:
@@ -79,3 +85,18 @@ def test_remeshing_keeps_a_real_surface_and_its_spectrum(tosca_dir):
     assert made.n_vertices < 0.5 * dog.n_vertices
     assert _area(made) == pytest.approx(_area(dog), rel=0.02)
     np.testing.assert_allclose(spectrum(made), spectrum(dog), rtol=0.04)
+
+
+def test_further_copies_are_drawn_again_and_the_first_is_the_variant(shape):
+    first = make_variant(shape, copy_name("cut-15", 0), "shape.off")
+    np.testing.assert_array_equal(
+        first.vertices, make_variant(shape, "cut-15", "shape.off").vertices
+    )
+    second = make_variant(shape, copy_name("cut-15", 1), "shape.off")
+    again = make_variant(shape, copy_name("cut-15", 1), "shape.off")
+    np.testing.assert_array_equal(second.vertices, again.vertices)
+    assert first.n_vertices != second.n_vertices or not np.allclose(first.vertices, second.vertices)
+    # A variant drawn as another (view-points from range-cloud's scans) keeps that pairing.
+    points = make_variant(shape, copy_name("view-points", 2), "shape.off")
+    cloud = make_variant(shape, copy_name("range-cloud", 2), "shape.off")
+    assert points.n_vertices == cloud.n_vertices

@@ -434,14 +434,16 @@ def render_partiality_markdown(report: Mapping[str, Any]) -> str:
     about = report["variants"]
     variants = list(about)
     poses = f" and the poses of `{report['poses']}` (one more class)" if report["poses"] else ""
+    copies = report.get("copies", 1)
+    drawn = f", each drawn {copies} times with seeds of its own" if copies > 1 else ""
     lines = [
         f"# Partial queries: preset `{preset['name']}` v{preset['version']}",
         "",
         f"Gallery: the {report['wholes']} whole meshes of `{report['dataset']}`{poses}. "
         f"Command: `{report['command'] or '(not recorded)'}`",
         "",
-        "Every mesh's partial copies (" + ", ".join(f"`{v}`" for v in variants) + ") query "
-        "the whole meshes. Per cell: **own class** at rank 1 / **own source** at rank 1 / "
+        "Every mesh's partial copies (" + ", ".join(f"`{v}`" for v in variants) + f"{drawn}) "
+        "query the whole meshes. Per cell: **own class** at rank 1 / **own source** at rank 1 / "
         "**mAP** (the query's class relevant), in %.",
         "",
         *_variant_table(

@@ -42,7 +42,7 @@ from .robustness import (
 from .scoring import modality_dissimilarity
 from .shapedna import BASELINE
 from .size import size_tuning
-from .variants import VARIANTS
+from .variants import VARIANTS, copy_name
 
 
 def run_evaluation(
@@ -382,6 +382,7 @@ def run_partiality(
     poses_dir: str | Path | None = None,
     jobs: int = 1,
     per_class_limit: int | None = None,
+    copies: int = 1,
     command: str = "",
     environment: Mapping[str, str] | None = None,
     progress: bool = True,
@@ -392,7 +393,9 @@ def run_partiality(
     Every mesh of the collection and its partial copies (:mod:`.partial`) are described
     (through the cache); the copies query the whole meshes. With ``poses_dir`` (poses
     of one object, e.g. SCAPE) the poses join the gallery as one more class, and their
-    copies are queries too.
+    copies are queries too. ``copies``: each variant drawn that many times from every
+    mesh (:func:`.variants.copy_name`; SHREC'17 shot every model 20 times), all of them
+    queries, all to all among them.
 
     Returns
     -------
@@ -405,6 +408,8 @@ def run_partiality(
         raise EvaluationError(
             f"unknown partial variants {unknown}; known: {', '.join(PARTIAL_VARIANTS)}"
         )
+    if copies < 1:
+        raise EvaluationError(f"copies must be at least 1, not {copies}")
     meshes = read_labels(labels_csv, dataset_dir, per_class_limit)
     if poses_dir is not None:
         meshes = [*meshes, *pose_set(poses_dir)]
@@ -414,7 +419,7 @@ def run_partiality(
     described = {}
     shapedna = {}
     for variant, sources, done in _variants_of(
-        computed, variants, preset, cache_root, jobs, progress, failures
+        computed, variants, preset, cache_root, jobs, progress, failures, copies
     ):
         described[variant] = (sources, done.descriptors)
         shapedna[variant] = np.stack([b.descriptor for b in done.baselines])
@@ -434,6 +439,7 @@ def run_partiality(
         "preset": preset.to_dict(),
         "rows": partial_row_titles(preset),
         "wholes": len(computed.meshes),
+        "copies": copies,
         **scores,
         "failures": failures,
         "environment": {**environment_info(), **(environment or {})},
@@ -454,18 +460,29 @@ def _variants_of(
     jobs: int,
     progress: bool,
     failures: dict[str, dict[str, str]],
+    copies: int = 1,
 ) -> Iterator[tuple[str, np.ndarray, ComputedSet]]:
     """Each variant of the described meshes, through the cache: its name, the index of
-    each copy's source in ``computed.meshes``, and the copies (the ones that could not
-    be described recorded in ``failures``)."""
+    each copy's source in ``computed.meshes``, and the copies, ``copies`` of every mesh
+    (:func:`.variants.copy_name`; the ones that could not be described recorded in
+    ``failures`` under their copy's name)."""
     index = {m.name: i for i, m in enumerate(computed.meshes)}
     for variant in variants:
-        done = compute_descriptors(
-            computed.meshes, preset, cache_root, jobs=jobs, progress=progress, variant=variant
+        drawn = []
+        for copy in range(copies):
+            name = copy_name(variant, copy)
+            done = compute_descriptors(
+                computed.meshes, preset, cache_root, jobs=jobs, progress=progress, variant=name
+            )
+            for mesh, why in done.failures.items():
+                failures.setdefault(mesh, {})[name] = why
+            drawn.append(done)
+        all_of = ComputedSet(
+            meshes=[m for done in drawn for m in done.meshes],
+            descriptors=[d for done in drawn for d in done.descriptors],
+            baselines=[b for done in drawn for b in done.baselines],
         )
-        for name, why in done.failures.items():
-            failures.setdefault(name, {})[variant] = why
-        yield variant, np.array([index[m.name] for m in done.meshes], dtype=np.int64), done
+        yield variant, np.array([index[m.name] for m in all_of.meshes], dtype=np.int64), all_of
 
 
 def _both_resolutions(

@@ -114,10 +114,23 @@ def variant_seed(name: str, variant: str) -> int:
     return int.from_bytes(hashlib.sha256(f"{name}/{variant}".encode()).digest()[:8], "little")
 
 
+#: Separates a variant's name from the number of one more copy of it (:func:`copy_name`).
+COPY_MARK = "#"
+
+
+def copy_name(variant: str, copy: int) -> str:
+    """The name of copy ``copy`` of a random variant: the variant itself for copy 0, else
+    the variant drawn again from a seed of its own (``range#3``), as SHREC'17 draws
+    twenty range scans of every model."""
+    return variant if copy == 0 else f"{variant}{COPY_MARK}{copy}"
+
+
 def make_variant(mesh: Mesh, variant: str, name: str) -> Mesh:
     """The variant ``variant`` of ``mesh`` (the file called ``name``): one of
     :data:`VARIANTS`, or a partial copy (:data:`.partial.PARTIAL_VARIANTS`), from its
-    seed or the one it is drawn as (:data:`.partial.DRAWN_AS`)."""
-    make = VARIANTS.get(variant) or PARTIAL_VARIANTS[variant]
-    seed = variant_seed(name, DRAWN_AS.get(variant, variant))
+    seed or the one it is drawn as (:data:`.partial.DRAWN_AS`); a further copy of it
+    (:func:`copy_name`) from that seed's copy."""
+    base, mark, copy = variant.partition(COPY_MARK)
+    make = VARIANTS.get(base) or PARTIAL_VARIANTS[base]
+    seed = variant_seed(name, DRAWN_AS.get(base, base) + mark + copy)
     return make(mesh, np.random.default_rng(seed))
