@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from .engine.presets import DEFAULT_PRESET, PRESETS, UNITS, Preset, get_preset, with_units
-from .evaluation.datasets import DEFAULT_CACHE, RESAMPLINGS
+from .evaluation.datasets import DEFAULT_CACHE, RESAMPLINGS, UP_AXES
 from .recognition.fusion import FOLDS
 
 
@@ -184,7 +184,15 @@ def _robustness(args: argparse.Namespace) -> int:
 def _partiality(args: argparse.Namespace) -> int:
     from .evaluation.run import run_partiality
 
-    report, out = _run_protocol(args, run_partiality, "partiality", args.units, copies=args.copies)
+    report, out = _run_protocol(
+        args,
+        run_partiality,
+        "partiality",
+        args.units,
+        copies=args.copies,
+        up=args.up,
+        poses_up=args.poses_up,
+    )
     if report is None:
         return 2
     titles = report["rows"]
@@ -418,6 +426,18 @@ def add_subcommands(sub: Any) -> None:
         default=1,
         help="copies of each variant drawn from every mesh, each with a seed of its own "
         "(SHREC'17 shot every model 20 times; default: 1)",
+    )
+    partial.add_argument(
+        "--up",
+        choices=UP_AXES,
+        default="z",
+        help="the axis the collection's files stand on: the range scans' camera orbits it "
+        "within 25 degrees of the horizon, as SHREC'17's did (default: z, TOSCA's)",
+    )
+    partial.add_argument(
+        "--poses-up",
+        choices=UP_AXES,
+        help="the axis the poses stand on (default: --up; SCAPE's stand on x)",
     )
     partial.add_argument(
         "--out", help="report directory (default: evaluation-out/partiality/PRESET)"

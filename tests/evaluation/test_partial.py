@@ -11,13 +11,15 @@ from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
 from worker.evaluation import partial
 from worker.evaluation.partial import (
     PARTIAL_VARIANTS,
+    RANGE_ELEVATION,
     SHREC_MIN_VERTICES,
     depth_grid,
     grid_mesh,
     grid_points,
     noisy_surface,
+    orbit_direction,
 )
-from worker.evaluation.variants import make_variant
+from worker.evaluation.variants import make_variant, standing_name
 
 
 @pytest.fixture(scope="module")
@@ -26,8 +28,8 @@ def sphere() -> Mesh:
     return clean_mesh(ball.vertices, ball.faces)
 
 
-def _scan(mesh: Mesh, direction: np.ndarray, pitch: float) -> Mesh:
-    return grid_mesh(grid_points(*depth_grid(mesh, direction, pitch), direction, pitch))
+def _scan(mesh: Mesh, direction: np.ndarray, pitch: float, longest: float = np.inf) -> Mesh:
+    return grid_mesh(grid_points(*depth_grid(mesh, direction, pitch), direction, pitch), longest)
 
 
 def test_a_range_scan_samples_the_visible_side_on_a_grid(sphere):
@@ -55,6 +57,48 @@ def test_the_grid_joins_what_occludes_to_what_it_hides():
     depths = np.unique(np.round(scan.vertices[:, 2], 3))
     assert set(depths) == {0.005, 1.005}  # clean_mesh kept the largest piece: both depths
     assert scan.vertices[:, 0].min() < -0.9 and scan.vertices[:, 0].max() > 1.9
+
+
+def test_a_range_scan_leaves_out_shortcuts_as_long_as_it_was_told():
+    # The occluding square's edge joins the far one across a depth jump of 1: kept under
+    # a longest edge of 2, left out under 0.5 (the near square, larger, is what is left).
+    square = trimesh.creation.box(extents=[2.0, 2.0, 0.01])
+    near = trimesh.Trimesh(square.vertices * [1.5, 1.0, 1.0] + [1.0, 0.0, 1.0], square.faces)
+    both = trimesh.util.concatenate([square, near])
+    mesh = Mesh(np.asarray(both.vertices, dtype=float), np.asarray(both.faces, dtype=np.int64))
+    view = np.array([0.0, 0.0, 1.0])
+    joined, parted = _scan(mesh, view, 0.1, longest=2.0), _scan(mesh, view, 0.1, longest=0.5)
+    assert set(np.unique(np.round(joined.vertices[:, 2], 3))) == {0.005, 1.005}
+    assert set(np.unique(np.round(parted.vertices[:, 2], 3))) == {1.005}
+
+
+@pytest.mark.parametrize("up", ["x", "y", "z"])
+def test_the_range_camera_orbits_the_up_axis_near_the_horizon(up):
+    """SHREC'17's camera: any azimuth around the axis the shape stands on, within 25
+    degrees above or below the horizon, never from above or below."""
+    rng = np.random.default_rng(0)
+    directions = np.array([orbit_direction(up, rng) for _ in range(400)])
+    axis = "xyz".index(up)
+    np.testing.assert_allclose(np.linalg.norm(directions, axis=1), 1.0)
+    height = np.abs(directions[:, axis])
+    limit = np.sin(np.radians(RANGE_ELEVATION))
+    assert height.max() <= limit + 1e-12 and height.max() > 0.9 * limit
+    across = np.delete(directions, axis, axis=1)
+    assert len({(a > 0, b > 0) for a, b in across}) == 4  # every side of the shape
+
+
+def test_a_copy_of_a_whole_standing_on_another_axis_is_shot_around_it(sphere, monkeypatch):
+    """``range@x`` is ``range``'s copy (the same seed) shot around x: the camera, seen as
+    the middle of the visible cap, stays near the horizon of the axis asked for."""
+    monkeypatch.setattr(partial, "similarity", lambda mesh, rng: mesh)
+    limit = np.sin(np.radians(RANGE_ELEVATION)) + 0.05  # the cap's middle, not the ray
+    for name in ("sphere.off", "other.off", "third.off"):
+        for up in ("x", "z"):
+            scan = make_variant(sphere, standing_name("range", up), name)
+            seen = scan.vertices.mean(axis=0)
+            assert abs(seen["xyz".index(up)]) / np.linalg.norm(seen) <= limit
+    assert standing_name("range#3", "x") == "range#3@x" and standing_name("range", "z") == "range"
+    assert standing_name("cut-5", "x") == "cut-5"  # the camera shoots only the range copies
 
 
 @pytest.mark.parametrize("variant", ["range", "shrec-holes"])

@@ -21,6 +21,7 @@ from worker.engine.parts import (
 from worker.engine.pipeline import describe_mesh
 from worker.engine.presets import DEFAULT_PRESET, PARTS, SIZE, get_preset, with_units
 from worker.engine.rigid import verified_fitness, verified_order
+from worker.evaluation.datasets import EvaluationError
 from worker.evaluation.partial import PARTIAL_VARIANTS, single_view
 from worker.evaluation.partiality import parts_matrix, ranking_scores, verified_ranking
 from worker.evaluation.robustness import PRESET_ROW
@@ -43,6 +44,18 @@ def test_the_partiality_command_refuses_fewer_than_one_copy(tmp_path, capsys):
     code = main(["partiality", str(EXAMPLES), "--copies", "0", "--cache", str(tmp_path)])
     assert code == 2
     assert "copies must be at least 1, not 0" in capsys.readouterr().err
+
+
+def test_the_protocol_refuses_an_axis_a_collection_cannot_stand_on(tmp_path):
+    with pytest.raises(EvaluationError, match="an up axis is one of x, y, z, not 'w'"):
+        run_partiality(
+            EXAMPLES,
+            EXAMPLES / "labels.csv",
+            get_preset(DEFAULT_PRESET),
+            out_dir=tmp_path,
+            cache_root=tmp_path,
+            up="w",
+        )
 
 
 def test_ranking_scores_count_own_class_own_source_and_average_precision():
@@ -181,6 +194,7 @@ def test_run_writes_the_report_and_cut_copies_find_their_class(tmp_path):
     assert set(report["scores"]) == {"gdm", "ddt", "spectrum", PARTS, PRESET_ROW, BASELINE}
     cut = report["variants"]["cut-15"]
     assert cut["count"] == 12 and cut["looks_partial"] > 0.5 and report["copies"] == 2
+    assert report["up"] == {"dataset": "z", "poses": None}
     assert report["scores"][PARTS]["cut-15"]["own_class"] == 1.0
     assert report["scores"][PRESET_ROW]["cut-15"]["own_class"] == 1.0
     # All to all among the copies: each class has four cuts, two of each whole, cut
@@ -191,3 +205,4 @@ def test_run_writes_the_report_and_cut_copies_find_their_class(tmp_path):
     markdown = (tmp_path / "out" / "partiality.md").read_text()
     assert "| Parts |" in markdown and "`cut-15`" in markdown and "All to all" in markdown
     assert "each drawn 2 times" in markdown
+    assert "range camera" not in markdown  # no copy was shot by it

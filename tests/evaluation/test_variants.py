@@ -99,4 +99,6 @@ def test_further_copies_are_drawn_again_and_the_first_is_the_variant(shape):
     # A variant drawn as another (view-points from range-cloud's scans) keeps that pairing.
     points = make_variant(shape, copy_name("view-points", 2), "shape.off")
     cloud = make_variant(shape, copy_name("range-cloud", 2), "shape.off")
-    assert points.n_vertices == cloud.n_vertices
+    on_grid = {tuple(v) for v in cloud.vertices.tolist()}  # the same similarity moved both
+    shared = sum(tuple(v) in on_grid for v in points.vertices.tolist())
+    assert shared >= 0.99 * max(cloud.n_vertices, points.n_vertices)

@@ -21,6 +21,9 @@ DEFAULT_CACHE = Path.home() / ".cache" / "modalshape" / "evaluate"
 #: How an evaluation resamples its meshes: every one on its own (as the service does), or
 #: once per figure, carried to its poses by vertex id (:mod:`.figures`).
 RESAMPLINGS = ("mesh", "figure")
+#: The coordinate axes a collection's files may stand on (the partiality protocol's
+#: range camera orbits it).
+UP_AXES = ("x", "y", "z")
 
 
 def shared_dataset(name: str) -> Path:

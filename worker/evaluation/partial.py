@@ -12,9 +12,11 @@ here keeps a part of the surface, its largest connected piece:
 * ``view``: a single-view scan, the faces seen from one random direction: facing it and
   not hidden behind another face (orthographic rays through each face's centroid);
 * ``range``: SHREC'17's range scans (Rodola et al., "Deformable shape retrieval with
-  missing parts", 3DOR 2017): an orthographic depth grid shot from a random direction at
-  a random resolution (300 vertices .. as many as the mesh has), triangulated as a grid,
-  so that occlusion edges become shortcuts, in a random similarity transform;
+  missing parts", 3DOR 2017): an orthographic depth grid shot by a camera orbiting the
+  shape's up axis at a random azimuth and elevation (within 25 degrees of the horizon),
+  at a random resolution (300 vertices .. as many as the mesh has), triangulated as a
+  grid, so that occlusion edges become shortcuts (those longer than a random 4 to 33 of
+  the whole's median edges left out), in a random similarity transform;
 * ``range-cloud``: scans drawn as ``range``'s, read as the service reads a depth camera's
   organized cloud (:mod:`worker.engine.scans`): the grid's triangles along a viewing ray
   left out, so occlusion edges stay open;
@@ -48,6 +50,8 @@ from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
 from worker.engine.scans import grid_faces, organized_surface, view_frame, viewed_surface
 from worker.engine.topology import edge_keys
 
+from .datasets import UP_AXES
+
 #: Number of discs the ``holes-*`` variants remove.
 HOLE_COUNT = 5
 #: SHREC'17's holes: the farthest samples hole centres are drawn among, the largest
@@ -55,6 +59,12 @@ HOLE_COUNT = 5
 SHREC_CENTRES = 70
 SHREC_MAX_RADIUS = 0.2
 SHREC_MIN_VERTICES = 300
+#: SHREC'17's range camera (its generating script): it orbits the shape's up axis at
+#: most this many degrees above or below the horizon, and a grid triangle is kept while
+#: its longest edge is under a random whole number in this range (both ends included)
+#: of the whole's median edges.
+RANGE_ELEVATION = 25.0
+RANGE_LONGEST_EDGES = (4, 33)
 #: Similarity transforms scale by 10**u, u uniform in this range.
 LOG10_SCALE_RANGE = (-2.0, 2.0)
 
@@ -78,6 +88,22 @@ def random_direction(rng: np.random.Generator) -> np.ndarray:
     direction = rng.normal(size=3)
     unit: np.ndarray = direction / np.linalg.norm(direction)
     return unit
+
+
+def orbit_direction(up: str, rng: np.random.Generator) -> np.ndarray:
+    """A unit vector (3,) at a uniformly random azimuth around the coordinate axis ``up``
+    (one of :data:`UP_AXES`) and an elevation uniform within ``RANGE_ELEVATION`` degrees
+    of the horizon: where SHREC'17's range camera stands."""
+    azimuth = rng.uniform(0.0, 2.0 * np.pi)
+    elevation = np.radians(rng.uniform(-RANGE_ELEVATION, RANGE_ELEVATION))
+    axis = UP_AXES.index(up)
+    direction = np.empty(3)
+    direction[[(axis + 1) % 3, (axis + 2) % 3, axis]] = (
+        np.cos(elevation) * np.cos(azimuth),
+        np.cos(elevation) * np.sin(azimuth),
+        np.sin(elevation),
+    )
+    return direction
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
@@ -271,19 +297,30 @@ def far_viewpoint(mesh: Mesh, direction: np.ndarray) -> np.ndarray:
     return viewpoint
 
 
-def grid_mesh(points: np.ndarray) -> Mesh:
+def grid_mesh(points: np.ndarray, longest: float = np.inf) -> Mesh:
     """An organized cloud (:func:`grid_points`) triangulated as a grid, as SHREC'17's range
     scans were: two triangles per square of four hit pixels, one per square of three,
-    with no test of the depths (an occlusion edge becomes a shortcut)."""
+    with no test of the depths (an occlusion edge becomes a shortcut), but for triangles
+    with an edge of at least ``longest``."""
     faces = grid_faces(np.isfinite(points).all(axis=2))
-    return clean_mesh(np.nan_to_num(points.reshape(-1, 3)), faces)
+    corners = np.nan_to_num(points.reshape(-1, 3))[faces]
+    sides = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)
+    return clean_mesh(np.nan_to_num(points.reshape(-1, 3)), faces[sides.max(axis=1) < longest])
 
 
-def range_image(mesh: Mesh, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def median_edge(mesh: Mesh) -> float:
+    """The median length of ``mesh``'s triangle sides (an inner edge counted twice)."""
+    corners = mesh.vertices[mesh.faces]
+    return float(np.median(np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)))
+
+
+def range_image(
+    mesh: Mesh, rng: np.random.Generator, up: str = "z"
+) -> tuple[np.ndarray, np.ndarray]:
     """SHREC'17's range scan (module docstring): the organized cloud (:func:`grid_points`)
-    of a depth grid (:func:`depth_grid`) from a random direction with about
-    :func:`random_resolution` pixels hit, and the direction (3,)."""
-    direction = random_direction(rng)
+    of a depth grid (:func:`depth_grid`) seen from :func:`orbit_direction` around ``up``
+    with about :func:`random_resolution` pixels hit, and the direction (3,)."""
+    direction = orbit_direction(up, rng)
     target = random_resolution(mesh, rng)
     extent = np.ptp(mesh.vertices @ view_frame(direction).T, axis=0)
     pitch = float(np.sqrt(extent[0] * extent[1] / target))
@@ -294,29 +331,32 @@ def range_image(mesh: Mesh, rng: np.random.Generator) -> tuple[np.ndarray, np.nd
     return grid_points(image, origin, direction, pitch), direction
 
 
-def range_scan(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+def range_scan(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     """SHREC'17's range scan: :func:`range_image` triangulated with its shortcuts
-    (:func:`grid_mesh`), its largest piece in a random :func:`similarity`."""
-    return similarity(grid_mesh(range_image(mesh, rng)[0]), rng)
+    (:func:`grid_mesh`) shorter than a random number in ``RANGE_LONGEST_EDGES`` of
+    ``mesh``'s median edges, its largest piece in a random :func:`similarity`."""
+    points = range_image(mesh, rng, up)[0]
+    longest = int(rng.integers(RANGE_LONGEST_EDGES[0], RANGE_LONGEST_EDGES[1] + 1))
+    return similarity(grid_mesh(points, longest * median_edge(mesh)), rng)
 
 
-def range_cloud(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+def range_cloud(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     """A scan drawn as :func:`range_scan`'s (from the variant's own seed) read as the
     service reads a depth camera's organized cloud: triangulated without the edges along
     the viewing ray (:func:`worker.engine.scans.organized_surface`, an orthographic
     camera's rays from a viewpoint far along the direction), its largest piece in a random
     similarity."""
-    points, direction = range_image(mesh, rng)
+    points, direction = range_image(mesh, rng, up)
     vertices, faces = organized_surface(points, far_viewpoint(mesh, direction))
     return similarity(clean_mesh(vertices, faces), rng)
 
 
-def view_points(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+def view_points(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     """:func:`range_cloud`'s scan (its generator drawn from that variant's seed) read
     without its grid: the points that saw the surface in a fixed random order, triangulated
     as seen from the camera (:func:`worker.engine.scans.viewed_surface`), the largest
     piece in the same random similarity."""
-    points, direction = range_image(mesh, rng)
+    points, direction = range_image(mesh, rng, up)
     seen = points.reshape(-1, 3)[np.isfinite(points).all(axis=2).ravel()]
     shuffled = seen[np.random.default_rng(0).permutation(len(seen))]
     vertices, faces = viewed_surface(shuffled, far_viewpoint(mesh, direction))
@@ -371,6 +411,14 @@ def single_view(mesh: Mesh, direction: np.ndarray) -> Mesh:
 #: A variant drawn from another's seed (:func:`.variants.make_variant`): the same scans,
 #: read another way.
 DRAWN_AS = {"view-points": "range-cloud", "view-noise-0.25": "view", "view-noise-0.5": "view"}
+
+#: The variants shot by the range camera: made with the axis their whole stands on
+#: (:data:`UP_AXES`; z when not told) as well.
+ORBITING: dict[str, Callable[[Mesh, np.random.Generator, str], Mesh]] = {
+    "range": range_scan,
+    "range-cloud": range_cloud,
+    "view-points": view_points,
+}
 
 #: name -> how to make it from a mesh and a random generator, in report order.
 PARTIAL_VARIANTS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {

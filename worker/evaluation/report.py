@@ -15,6 +15,7 @@ from worker.recognition import metrics
 
 from .cache import engine_fingerprint
 from .compute import ComputedSet, descriptor_vectors
+from .partial import ORBITING, RANGE_ELEVATION
 from .partiality import collection_matrices
 from .robustness import PRESET_ROW
 from .scoring import COLUMNS, dissimilarity_matrices, report_rows, score_dissimilarity
@@ -436,6 +437,15 @@ def render_partiality_markdown(report: Mapping[str, Any]) -> str:
     poses = f" and the poses of `{report['poses']}` (one more class)" if report["poses"] else ""
     copies = report.get("copies", 1)
     drawn = f", each drawn {copies} times with seeds of its own" if copies > 1 else ""
+    up = report.get("up")
+    if up and any(v in ORBITING for v in variants):
+        theirs = (
+            f", the poses' {up['poses']}" if up["poses"] and up["poses"] != up["dataset"] else ""
+        )
+        drawn += (
+            f"; the range camera orbits the axis the files stand on ({up['dataset']}{theirs}) "
+            f"within {RANGE_ELEVATION:g} degrees of the horizon"
+        )
     lines = [
         f"# Partial queries: preset `{preset['name']}` v{preset['version']}",
         "",

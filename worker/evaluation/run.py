@@ -19,7 +19,7 @@ from worker.recognition import metrics
 from worker.recognition.fusion import FOLDS, REPEATS, learn_fusion, tune_fusion
 
 from .compute import ComputedSet, compute_descriptors, descriptor_vectors
-from .datasets import RESAMPLINGS, EvaluationError, LabeledMesh, pose_set, read_labels
+from .datasets import RESAMPLINGS, UP_AXES, EvaluationError, LabeledMesh, pose_set, read_labels
 from .figures import compute_by_figure
 from .learned import LEARNED, learned_row
 from .partial import PARTIAL_VARIANTS
@@ -42,7 +42,7 @@ from .robustness import (
 from .scoring import modality_dissimilarity
 from .shapedna import BASELINE
 from .size import size_tuning
-from .variants import VARIANTS, copy_name
+from .variants import VARIANTS, copy_name, standing_name
 
 
 def run_evaluation(
@@ -383,6 +383,8 @@ def run_partiality(
     jobs: int = 1,
     per_class_limit: int | None = None,
     copies: int = 1,
+    up: str = "z",
+    poses_up: str | None = None,
     command: str = "",
     environment: Mapping[str, str] | None = None,
     progress: bool = True,
@@ -395,7 +397,9 @@ def run_partiality(
     of one object, e.g. SCAPE) the poses join the gallery as one more class, and their
     copies are queries too. ``copies``: each variant drawn that many times from every
     mesh (:func:`.variants.copy_name`; SHREC'17 shot every model 20 times), all of them
-    queries, all to all among them.
+    queries, all to all among them. ``up``: the coordinate axis the collection's files
+    stand on, which the range camera orbits (:data:`.partial.ORBITING`); ``poses_up``
+    the poses' (default ``up``).
 
     Returns
     -------
@@ -410,16 +414,23 @@ def run_partiality(
         )
     if copies < 1:
         raise EvaluationError(f"copies must be at least 1, not {copies}")
+    poses_up = up if poses_up is None else poses_up
+    for axis in (up, poses_up):
+        if axis not in UP_AXES:
+            raise EvaluationError(f"an up axis is one of {', '.join(UP_AXES)}, not {axis!r}")
     meshes = read_labels(labels_csv, dataset_dir, per_class_limit)
+    standing = {m.name: up for m in meshes}
     if poses_dir is not None:
-        meshes = [*meshes, *pose_set(poses_dir)]
+        poses = pose_set(poses_dir)
+        standing |= {m.name: poses_up for m in poses}
+        meshes = [*meshes, *poses]
     start = time.perf_counter()
     computed = compute_descriptors(meshes, preset, cache_root, jobs=jobs, progress=progress)
     failures = {name: {"original": why} for name, why in computed.failures.items()}
     described = {}
     shapedna = {}
     for variant, sources, done in _variants_of(
-        computed, variants, preset, cache_root, jobs, progress, failures, copies
+        computed, variants, preset, cache_root, jobs, progress, failures, copies, standing
     ):
         described[variant] = (sources, done.descriptors)
         shapedna[variant] = np.stack([b.descriptor for b in done.baselines])
@@ -440,6 +451,7 @@ def run_partiality(
         "rows": partial_row_titles(preset),
         "wholes": len(computed.meshes),
         "copies": copies,
+        "up": {"dataset": up, "poses": None if poses_dir is None else poses_up},
         **scores,
         "failures": failures,
         "environment": {**environment_info(), **(environment or {})},
@@ -461,22 +473,31 @@ def _variants_of(
     progress: bool,
     failures: dict[str, dict[str, str]],
     copies: int = 1,
+    standing: Mapping[str, str] | None = None,
 ) -> Iterator[tuple[str, np.ndarray, ComputedSet]]:
     """Each variant of the described meshes, through the cache: its name, the index of
     each copy's source in ``computed.meshes``, and the copies, ``copies`` of every mesh
     (:func:`.variants.copy_name`; the ones that could not be described recorded in
-    ``failures`` under their copy's name)."""
+    ``failures`` under their copy's name). ``standing``: mesh name -> the axis it stands
+    on (:func:`.variants.standing_name`; z for a mesh not in it)."""
     index = {m.name: i for i, m in enumerate(computed.meshes)}
+    axes = {m.name: (standing or {}).get(m.name, "z") for m in computed.meshes}
     for variant in variants:
         drawn = []
         for copy in range(copies):
-            name = copy_name(variant, copy)
-            done = compute_descriptors(
-                computed.meshes, preset, cache_root, jobs=jobs, progress=progress, variant=name
-            )
-            for mesh, why in done.failures.items():
-                failures.setdefault(mesh, {})[name] = why
-            drawn.append(done)
+            for up in sorted(set(axes.values())):
+                name = standing_name(copy_name(variant, copy), up)
+                done = compute_descriptors(
+                    [m for m in computed.meshes if axes[m.name] == up],
+                    preset,
+                    cache_root,
+                    jobs=jobs,
+                    progress=progress,
+                    variant=name,
+                )
+                for mesh, why in done.failures.items():
+                    failures.setdefault(mesh, {})[name] = why
+                drawn.append(done)
         all_of = ComputedSet(
             meshes=[m for done in drawn for m in done.meshes],
             descriptors=[d for done in drawn for d in done.descriptors],

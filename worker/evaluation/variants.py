@@ -20,7 +20,14 @@ import numpy as np
 
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas, tiling_edge
 
-from .partial import DRAWN_AS, LOG10_SCALE_RANGE, PARTIAL_VARIANTS, decimated, random_rotation
+from .partial import (
+    DRAWN_AS,
+    LOG10_SCALE_RANGE,
+    ORBITING,
+    PARTIAL_VARIANTS,
+    decimated,
+    random_rotation,
+)
 
 #: Gaussian vertex noise, as a fraction of the mesh's mean edge length.
 NOISE_FRACTION = 0.1
@@ -125,12 +132,28 @@ def copy_name(variant: str, copy: int) -> str:
     return variant if copy == 0 else f"{variant}{COPY_MARK}{copy}"
 
 
+#: Separates a range camera's variant (:data:`.partial.ORBITING`) from the axis its whole
+#: stands on, when that is not z (:func:`standing_name`).
+UP_MARK = "@"
+
+
+def standing_name(variant: str, up: str) -> str:
+    """The name ``variant`` (or a copy of it) of a whole standing on the axis ``up`` is
+    made and cached by: the variant itself when ``up`` is z or the variant is not shot by
+    the range camera, else the axis after :data:`UP_MARK` (``range#3@x``)."""
+    shot = variant.partition(COPY_MARK)[0] in ORBITING
+    return f"{variant}{UP_MARK}{up}" if shot and up != "z" else variant
+
+
 def make_variant(mesh: Mesh, variant: str, name: str) -> Mesh:
     """The variant ``variant`` of ``mesh`` (the file called ``name``): one of
     :data:`VARIANTS`, or a partial copy (:data:`.partial.PARTIAL_VARIANTS`), from its
     seed or the one it is drawn as (:data:`.partial.DRAWN_AS`); a further copy of it
-    (:func:`copy_name`) from that seed's copy."""
-    base, mark, copy = variant.partition(COPY_MARK)
-    make = VARIANTS.get(base) or PARTIAL_VARIANTS[base]
-    seed = variant_seed(name, DRAWN_AS.get(base, base) + mark + copy)
-    return make(mesh, np.random.default_rng(seed))
+    (:func:`copy_name`) from that seed's copy; a range camera's of a whole standing on
+    another axis than z (:func:`standing_name`) from the same seed, around that axis."""
+    drawn, _, up = variant.partition(UP_MARK)
+    base, mark, copy = drawn.partition(COPY_MARK)
+    rng = np.random.default_rng(variant_seed(name, DRAWN_AS.get(base, base) + mark + copy))
+    if base in ORBITING:
+        return ORBITING[base](mesh, rng, up or "z")
+    return (VARIANTS.get(base) or PARTIAL_VARIANTS[base])(mesh, rng)
