@@ -251,7 +251,7 @@ def test_a_range_scan_written_as_a_mesh_describes_as_its_organized_cloud(small_p
     largest piece, as the same scan read as a depth camera's organized cloud is."""
     mesh = load_mesh(example("quadruped-0"))
     # Seen from the front, along its body (a camera orbiting y): legs hide legs.
-    points, direction = range_image(mesh, np.random.default_rng(2), "y")
+    points, direction, _ = range_image(mesh, np.random.default_rng(2), "y")
     as_mesh = grid_mesh(points)
     cloud = clean_surface(*organized_surface(points, far_viewpoint(mesh, direction)))
     assert as_mesh.n_faces > cloud.mesh.n_faces and cloud.kept_area_fraction < 0.95

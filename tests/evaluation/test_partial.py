@@ -72,6 +72,18 @@ def test_a_range_scan_leaves_out_shortcuts_as_long_as_it_was_told():
     assert set(np.unique(np.round(parted.vertices[:, 2], 3))) == {1.005}
 
 
+def test_a_coarse_range_scan_of_a_fine_whole_keeps_its_grid(sphere, monkeypatch):
+    """100 pixels on a sphere of 10,242 vertices: a pixel is about five median edges
+    wide, so the shortcut rule counts pixels there and the smooth cap keeps its squares
+    (at four median edges every diagonal would go)."""
+    monkeypatch.setattr(partial, "random_resolution", lambda mesh, rng: 100)
+    monkeypatch.setattr(partial, "RANGE_LONGEST_EDGES", (4, 4))
+    for name in ("a.off", "b.off", "c.off"):
+        made = make_variant(sphere, "range", name)
+        assert made.n_vertices == pytest.approx(100, rel=0.15)
+        assert len(boundary_loops(made).perimeter) == 1  # its rim, no square lost inside
+
+
 @pytest.mark.parametrize("up", ["x", "y", "z"])
 def test_the_range_camera_orbits_the_up_axis_near_the_horizon(up):
     """SHREC'17's camera: any azimuth around the axis the shape stands on, within 25

@@ -16,7 +16,8 @@ here keeps a part of the surface, its largest connected piece:
   shape's up axis at a random azimuth and elevation (within 25 degrees of the horizon),
   at a random resolution (300 vertices .. as many as the mesh has), triangulated as a
   grid, so that occlusion edges become shortcuts (those longer than a random 4 to 33 of
-  the whole's median edges left out), in a random similarity transform;
+  the whole's median edges, or of the grid's pixels if wider, left out), in a random
+  similarity transform;
 * ``range-cloud``: scans drawn as ``range``'s, read as the service reads a depth camera's
   organized cloud (:mod:`worker.engine.scans`): the grid's triangles along a viewing ray
   left out, so occlusion edges stay open;
@@ -62,7 +63,7 @@ SHREC_MIN_VERTICES = 300
 #: SHREC'17's range camera (its generating script): it orbits the shape's up axis at
 #: most this many degrees above or below the horizon, and a grid triangle is kept while
 #: its longest edge is under a random whole number in this range (both ends included)
-#: of the whole's median edges.
+#: of the whole's median edges (of the grid's pixels where those are wider).
 RANGE_ELEVATION = 25.0
 RANGE_LONGEST_EDGES = (4, 33)
 #: Similarity transforms scale by 10**u, u uniform in this range.
@@ -316,10 +317,11 @@ def median_edge(mesh: Mesh) -> float:
 
 def range_image(
     mesh: Mesh, rng: np.random.Generator, up: str = "z"
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, float]:
     """SHREC'17's range scan (module docstring): the organized cloud (:func:`grid_points`)
     of a depth grid (:func:`depth_grid`) seen from :func:`orbit_direction` around ``up``
-    with about :func:`random_resolution` pixels hit, and the direction (3,)."""
+    with about :func:`random_resolution` pixels hit, the direction (3,) and the pixels'
+    pitch."""
     direction = orbit_direction(up, rng)
     target = random_resolution(mesh, rng)
     extent = np.ptp(mesh.vertices @ view_frame(direction).T, axis=0)
@@ -328,16 +330,18 @@ def range_image(
     for _ in range(2):  # the silhouette's share of the box decides the pixels hit
         pitch *= float(np.sqrt(max(int(np.count_nonzero(~np.isnan(image))), 1) / target))
         image, origin = depth_grid(mesh, direction, pitch)
-    return grid_points(image, origin, direction, pitch), direction
+    return grid_points(image, origin, direction, pitch), direction, pitch
 
 
 def range_scan(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     """SHREC'17's range scan: :func:`range_image` triangulated with its shortcuts
     (:func:`grid_mesh`) shorter than a random number in ``RANGE_LONGEST_EDGES`` of
-    ``mesh``'s median edges, its largest piece in a random :func:`similarity`."""
-    points = range_image(mesh, rng, up)[0]
+    ``mesh``'s median edges, or of the grid's pixels where those are wider (SHREC's grid
+    and the whole's edges were of a size; a coarse scan of a fine whole would lose every
+    triangle), its largest piece in a random :func:`similarity`."""
+    points, _, pitch = range_image(mesh, rng, up)
     longest = int(rng.integers(RANGE_LONGEST_EDGES[0], RANGE_LONGEST_EDGES[1] + 1))
-    return similarity(grid_mesh(points, longest * median_edge(mesh)), rng)
+    return similarity(grid_mesh(points, longest * max(median_edge(mesh), pitch)), rng)
 
 
 def range_cloud(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
@@ -346,7 +350,7 @@ def range_cloud(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     the viewing ray (:func:`worker.engine.scans.organized_surface`, an orthographic
     camera's rays from a viewpoint far along the direction), its largest piece in a random
     similarity."""
-    points, direction = range_image(mesh, rng, up)
+    points, direction, _ = range_image(mesh, rng, up)
     vertices, faces = organized_surface(points, far_viewpoint(mesh, direction))
     return similarity(clean_mesh(vertices, faces), rng)
 
@@ -356,7 +360,7 @@ def view_points(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     without its grid: the points that saw the surface in a fixed random order, triangulated
     as seen from the camera (:func:`worker.engine.scans.viewed_surface`), the largest
     piece in the same random similarity."""
-    points, direction = range_image(mesh, rng, up)
+    points, direction, _ = range_image(mesh, rng, up)
     seen = points.reshape(-1, 3)[np.isfinite(points).all(axis=2).ravel()]
     shuffled = seen[np.random.default_rng(0).permutation(len(seen))]
     vertices, faces = viewed_surface(shuffled, far_viewpoint(mesh, direction))
