@@ -51,8 +51,6 @@ from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
 from worker.engine.scans import grid_faces, organized_surface, view_frame, viewed_surface
 from worker.engine.topology import edge_keys
 
-from .datasets import UP_AXES
-
 #: Number of discs the ``holes-*`` variants remove.
 HOLE_COUNT = 5
 #: SHREC'17's holes: the farthest samples hole centres are drawn among, the largest
@@ -93,11 +91,11 @@ def random_direction(rng: np.random.Generator) -> np.ndarray:
 
 def orbit_direction(up: str, rng: np.random.Generator) -> np.ndarray:
     """A unit vector (3,) at a uniformly random azimuth around the coordinate axis ``up``
-    (one of :data:`UP_AXES`) and an elevation uniform within ``RANGE_ELEVATION`` degrees
+    (``"x"``, ``"y"`` or ``"z"``) and an elevation uniform within ``RANGE_ELEVATION`` degrees
     of the horizon: where SHREC'17's range camera stands."""
     azimuth = rng.uniform(0.0, 2.0 * np.pi)
     elevation = np.radians(rng.uniform(-RANGE_ELEVATION, RANGE_ELEVATION))
-    axis = UP_AXES.index(up)
+    axis = "xyz".index(up)
     direction = np.empty(3)
     direction[[(axis + 1) % 3, (axis + 2) % 3, axis]] = (
         np.cos(elevation) * np.cos(azimuth),
@@ -417,7 +415,7 @@ def single_view(mesh: Mesh, direction: np.ndarray) -> Mesh:
 DRAWN_AS = {"view-points": "range-cloud", "view-noise-0.25": "view", "view-noise-0.5": "view"}
 
 #: The variants shot by the range camera: made with the axis their whole stands on
-#: (:data:`UP_AXES`; z when not told) as well.
+#: (:data:`.datasets.UP_AXES`; z when not told) as well.
 ORBITING: dict[str, Callable[[Mesh, np.random.Generator, str], Mesh]] = {
     "range": range_scan,
     "range-cloud": range_cloud,
