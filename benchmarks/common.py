@@ -29,6 +29,7 @@ import time
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
+from functools import cache
 from pathlib import Path
 from typing import IO, Any
 
@@ -51,9 +52,15 @@ from worker.evaluation.datasets import (
     read_labels,
     shared_dataset,
 )
+from worker.evaluation.run import described_copies
+from worker.evaluation.variants import standing_name
 
 REPO = Path(__file__).resolve().parents[1]
 TOSCA = shared_dataset("tosca")
+SCAPE = shared_dataset("scape")
+#: The axis SCAPE's poses stand on, which the partiality protocol's range camera orbits
+#: (the documented runs' ``shapes partiality --poses-up x``); TOSCA's files stand on z.
+SCAPE_UP = "x"
 #: The sample collection the repository bundles (``shapes samples`` writes it).
 EXAMPLES = REPO / "examples"
 CACHE = REPO / ".cache" / "tosca-descriptors"
@@ -109,7 +116,28 @@ def evaluated_tosca(args: argparse.Namespace) -> tuple[Preset, ComputedSet]:
 def partiality_wholes() -> list[LabeledMesh]:
     """The partiality protocol's 154 wholes: TOSCA's meshes, then SCAPE's poses (one
     class), as ``shapes partiality --poses`` reads them."""
-    return [*read_labels(TOSCA / "labels.csv", TOSCA), *pose_set(shared_dataset("scape"))]
+    return [*read_labels(TOSCA / "labels.csv", TOSCA), *pose_set(SCAPE)]
+
+
+@cache
+def partiality_standing() -> dict[str, str]:
+    """File name -> the axis it stands on, for the wholes of :func:`partiality_wholes`
+    not on z (SCAPE's poses, on ``SCAPE_UP``)."""
+    return {m.name: SCAPE_UP for m in pose_set(SCAPE)}
+
+
+def drawn_variant(variant: str, name: str) -> str:
+    """The name the partiality protocol draws ``variant`` of the whole ``name`` under
+    (:func:`~worker.evaluation.variants.make_variant`'s): around the axis it stands on."""
+    return standing_name(variant, partiality_standing().get(name, "z"))
+
+
+def partiality_copies(variant: str, preset: Preset, cache: Path, jobs: int) -> ComputedSet:
+    """``variant``'s copies of :func:`partiality_wholes` as the protocol draws them (each
+    around the axis its whole stands on), described through the partiality run's cache."""
+    return described_copies(
+        partiality_wholes(), variant, preset, cache, jobs=jobs, standing=partiality_standing()
+    )
 
 
 def evaluated_partiality_wholes(args: argparse.Namespace) -> tuple[Preset, ComputedSet]:

@@ -21,12 +21,16 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from benchmarks.common import add_evaluation_cache_arguments, evaluated_partiality_wholes
+from benchmarks.common import (
+    add_evaluation_cache_arguments,
+    drawn_variant,
+    evaluated_partiality_wholes,
+    partiality_copies,
+)
 from worker.engine.errors import MeshError
 from worker.engine.mesh_io import Mesh, face_areas, load_mesh
 from worker.engine.pipeline import without_grid_shortcuts
 from worker.evaluation import partial
-from worker.evaluation.compute import compute_descriptors
 from worker.evaluation.partiality import query_matrices, ranked_last, ranking_scores
 from worker.evaluation.robustness import PRESET_ROW
 from worker.evaluation.variants import make_variant
@@ -66,7 +70,7 @@ def kept_shares(variant: str, meshes: dict[str, Mesh]) -> dict[str, float]:
         seen: list[float] = []
         with areas_before_similarity(seen):
             try:
-                copy = make_variant(mesh, variant, name)
+                copy = make_variant(mesh, drawn_variant(variant, name), name)
             except MeshError:  # eroded whole (shrec-holes): left out
                 continue
         whole = float(face_areas(mesh.vertices, mesh.faces).sum())
@@ -87,9 +91,7 @@ def main() -> None:
     print("|---|---|---:|---:|---:|")
     for variant in args.variants:
         shares = kept_shares(variant, meshes)
-        done = compute_descriptors(
-            wholes.meshes, preset, args.cache, jobs=args.jobs, progress=False, variant=variant
-        )
+        done = partiality_copies(variant, preset, args.cache, args.jobs)
         sources = np.array([index[m.name] for m in done.meshes])
         kept = np.array([shares[m.name] for m in done.meshes])
         against = query_matrices(done.descriptors, wholes.descriptors, preset, jobs=args.jobs)

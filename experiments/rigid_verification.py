@@ -27,7 +27,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import trimesh
 
-from benchmarks.common import partiality_wholes
+from benchmarks.common import drawn_variant, partiality_copies, partiality_wholes
 from worker.engine.mesh_io import Mesh, load_mesh
 from worker.engine.parts import compared_profiles, part_dissimilarity
 from worker.engine.presets import PARTS, get_preset
@@ -104,15 +104,13 @@ def main() -> None:
     )
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
     for variant in args.variants:
-        done = compute_descriptors(
-            computed.meshes, preset, cache, jobs=args.jobs, progress=False, variant=variant
-        )
+        done = partiality_copies(variant, preset, cache, args.jobs)
         sources = np.array([index[m.name] for m in done.meshes])
         score = query_matrices(done.descriptors, computed.descriptors, preset, jobs=args.jobs)
         d = score[PRESET_ROW if args.ranking == "preset" else PARTS]
         copies, units, candidates = [], [], []
         for q, (m, desc) in enumerate(zip(done.meshes, done.descriptors, strict=True)):
-            copies.append(make_variant(wholes[sources[q]], variant, m.name))
+            copies.append(make_variant(wholes[sources[q]], drawn_variant(variant, m.name), m.name))
             scale = part_dissimilarity(
                 desc.parts.astype(np.float64), desc.parts_reach, gallery, preset
             ).scale

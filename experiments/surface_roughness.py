@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import TOSCA
+from benchmarks.common import SCAPE, TOSCA, drawn_variant
 from worker.engine.denoise import (
     NOISE_LIKE,
     ROUGH_VIEW,
@@ -41,7 +41,6 @@ from worker.engine.errors import MeshError
 from worker.engine.holes import facing_share
 from worker.engine.mesh_io import Mesh, face_areas, load_mesh
 from worker.engine.pipeline import without_grid_shortcuts
-from worker.evaluation.datasets import shared_dataset
 from worker.evaluation.variants import make_variant
 
 #: The file itself.
@@ -68,7 +67,7 @@ def main() -> None:
     args = parser.parse_args()
     collections = {
         "TOSCA": sorted(TOSCA.glob("*.off.gz"))[:: args.every],
-        "SCAPE": sorted(shared_dataset("scape").glob("*.off.gz"))[:: args.every],
+        "SCAPE": sorted(SCAPE.glob("*.off.gz"))[:: args.every],
     }
     measured: dict[str, dict[str, list[Copy]]] = {}
     with ProcessPoolExecutor(args.jobs) as pool:
@@ -126,7 +125,11 @@ def copies_of(path: Path) -> dict[str, Copy]:
     copies: dict[str, Copy] = {}
     for kind in KINDS:
         try:
-            copy = mesh if kind == WHOLE else make_variant(mesh, kind, path.name)
+            copy = (
+                mesh
+                if kind == WHOLE
+                else make_variant(mesh, drawn_variant(kind, path.name), path.name)
+            )
         except MeshError:  # a shrec-holes copy eroded whole
             continue
         copies[kind] = measured_copy(without_grid_shortcuts(copy).mesh)

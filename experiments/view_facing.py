@@ -18,13 +18,12 @@ import argparse
 
 import numpy as np
 
-from benchmarks.common import TOSCA
+from benchmarks.common import SCAPE, TOSCA, drawn_variant
 from worker.engine.descriptor import ONE_VIEW_FACING
 from worker.engine.errors import MeshError
 from worker.engine.holes import facing_share
 from worker.engine.mesh_io import load_mesh
 from worker.engine.pipeline import without_grid_shortcuts
-from worker.evaluation.datasets import shared_dataset
 from worker.evaluation.partial import PARTIAL_VARIANTS
 from worker.evaluation.variants import make_variant
 
@@ -36,14 +35,14 @@ def main() -> None:
     parser.add_argument("--variants", nargs="+", default=list(PARTIAL_VARIANTS))
     parser.add_argument("--every", type=int, default=1)
     args = parser.parse_args()
-    files = sorted(TOSCA.glob("*.off.gz")) + sorted(shared_dataset("scape").glob("*.off.gz"))
+    files = sorted(TOSCA.glob("*.off.gz")) + sorted(SCAPE.glob("*.off.gz"))
     shares: dict[str, list[float]] = {v: [] for v in (WHOLE, *args.variants)}
     for path in files[:: args.every]:
         mesh = load_mesh(path)
         shares[WHOLE].append(facing_share(mesh))
         for variant in args.variants:
             try:
-                copy = make_variant(mesh, variant, path.name)
+                copy = make_variant(mesh, drawn_variant(variant, path.name), path.name)
             except MeshError:  # eroded whole (shrec-holes): the protocol leaves it out
                 continue
             shares[variant].append(facing_share(without_grid_shortcuts(copy).mesh))

@@ -23,7 +23,11 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from benchmarks.common import add_evaluation_cache_arguments, evaluated_partiality_wholes
+from benchmarks.common import (
+    add_evaluation_cache_arguments,
+    evaluated_partiality_wholes,
+    partiality_copies,
+)
 from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.rigid import (
     FEATURE_POOL,
@@ -32,7 +36,7 @@ from worker.engine.rigid import (
     verified_fitness,
     whole_anchors,
 )
-from worker.evaluation.compute import compute_descriptors, single_threaded_blas
+from worker.evaluation.compute import single_threaded_blas
 from worker.evaluation.partiality import unverified_matrices
 from worker.evaluation.robustness import PRESET_ROW
 
@@ -82,9 +86,7 @@ def main() -> None:
     scape = labels == labels[-1]  # SCAPE's poses come last
     wrong = {(c, t): 0 for c in (False, True) for t in THRESHOLDS}
     for variant in args.variants:
-        done = compute_descriptors(
-            wholes.meshes, preset, args.cache, jobs=args.jobs, progress=False, variant=variant
-        )
+        done = partiality_copies(variant, preset, args.cache, args.jobs)
         views = [i for i, d in enumerate(done.descriptors) if d.single_view]
         ranked, scales = unverified_matrices(
             done.descriptors, wholes.descriptors, preset, jobs=args.jobs

@@ -21,11 +21,12 @@ from worker.engine.parts import (
 from worker.engine.pipeline import describe_mesh
 from worker.engine.presets import DEFAULT_PRESET, PARTS, SIZE, get_preset, with_units
 from worker.engine.rigid import verified_fitness, verified_order
-from worker.evaluation.datasets import EvaluationError
+from worker.evaluation.compute import compute_descriptors
+from worker.evaluation.datasets import EvaluationError, LabeledMesh
 from worker.evaluation.partial import PARTIAL_VARIANTS, single_view
 from worker.evaluation.partiality import parts_matrix, ranking_scores, verified_ranking
 from worker.evaluation.robustness import PRESET_ROW
-from worker.evaluation.run import run_partiality
+from worker.evaluation.run import described_copies, run_partiality
 from worker.evaluation.samples import sample_mesh
 from worker.evaluation.shapedna import BASELINE
 
@@ -206,3 +207,21 @@ def test_run_writes_the_report_and_cut_copies_find_their_class(tmp_path):
     assert "| Parts |" in markdown and "`cut-15`" in markdown and "All to all" in markdown
     assert "each drawn 2 times" in markdown
     assert "range camera" not in markdown  # no copy was shot by it
+
+
+def test_each_whole_s_copies_are_drawn_around_the_axis_it_stands_on(tmp_path):
+    """A collection standing on z beside poses standing on x (TOSCA's and SCAPE's): each
+    whole's range scan is the one its own axis names, not the other's."""
+    wholes = [
+        LabeledMesh(name, "any", EXAMPLES / name) for name in ("biped-0.off.gz", "hand-0.off.gz")
+    ]
+    preset, cache = get_preset(DEFAULT_PRESET), tmp_path / "cache"
+    done = described_copies(wholes, "range", preset, cache, standing={"hand-0.off.gz": "x"})
+    assert [m.name for m in done.meshes] == ["hand-0.off.gz", "biped-0.off.gz"]  # x, then z
+    on_x, on_z = (
+        compute_descriptors([wholes[1]], preset, cache, variant=v) for v in ("range@x", "range")
+    )
+    np.testing.assert_array_equal(
+        done.descriptors[0].vector("gdm"), on_x.descriptors[0].vector("gdm")
+    )
+    assert not np.array_equal(done.descriptors[0].vector("gdm"), on_z.descriptors[0].vector("gdm"))

@@ -464,6 +464,39 @@ def run_partiality(
     return report
 
 
+def described_copies(
+    meshes: Sequence[LabeledMesh],
+    variant: str,
+    preset: Preset,
+    cache_root: str | Path,
+    jobs: int = 1,
+    progress: bool = False,
+    standing: Mapping[str, str] | None = None,
+) -> ComputedSet:
+    """``variant``'s copies of ``meshes`` through the cache, each mesh's drawn around the
+    axis it stands on (``standing``: mesh name -> axis, z for a mesh not in it;
+    :func:`.variants.standing_name`), grouped by that axis; the copies that could not be
+    described in its ``failures`` by their mesh's name."""
+    axes = {m.name: (standing or {}).get(m.name, "z") for m in meshes}
+    drawn = [
+        compute_descriptors(
+            [m for m in meshes if axes[m.name] == up],
+            preset,
+            cache_root,
+            jobs=jobs,
+            progress=progress,
+            variant=standing_name(variant, up),
+        )
+        for up in sorted(set(axes.values()))
+    ]
+    return ComputedSet(
+        meshes=[m for done in drawn for m in done.meshes],
+        descriptors=[d for done in drawn for d in done.descriptors],
+        baselines=[b for done in drawn for b in done.baselines],
+        failures={m: why for done in drawn for m, why in done.failures.items()},
+    )
+
+
 def _variants_of(
     computed: ComputedSet,
     variants: Sequence[str],
@@ -478,26 +511,20 @@ def _variants_of(
     """Each variant of the described meshes, through the cache: its name, the index of
     each copy's source in ``computed.meshes``, and the copies, ``copies`` of every mesh
     (:func:`.variants.copy_name`; the ones that could not be described recorded in
-    ``failures`` under their copy's name). ``standing``: mesh name -> the axis it stands
-    on (:func:`.variants.standing_name`; z for a mesh not in it)."""
+    ``failures`` under their copy's name), each drawn around the axis its mesh stands on
+    (:func:`described_copies`)."""
     index = {m.name: i for i, m in enumerate(computed.meshes)}
-    axes = {m.name: (standing or {}).get(m.name, "z") for m in computed.meshes}
     for variant in variants:
         drawn = []
         for copy in range(copies):
-            for up in sorted(set(axes.values())):
-                name = standing_name(copy_name(variant, copy), up)
-                done = compute_descriptors(
-                    [m for m in computed.meshes if axes[m.name] == up],
-                    preset,
-                    cache_root,
-                    jobs=jobs,
-                    progress=progress,
-                    variant=name,
-                )
-                for mesh, why in done.failures.items():
-                    failures.setdefault(mesh, {})[name] = why
-                drawn.append(done)
+            name = copy_name(variant, copy)
+            done = described_copies(
+                computed.meshes, name, preset, cache_root, jobs, progress, standing
+            )
+            for mesh, why in done.failures.items():
+                up = (standing or {}).get(mesh, "z")
+                failures.setdefault(mesh, {})[standing_name(name, up)] = why
+            drawn.append(done)
         all_of = ComputedSet(
             meshes=[m for done in drawn for m in done.meshes],
             descriptors=[d for done in drawn for d in done.descriptors],
