@@ -162,6 +162,13 @@ class Gallery:
             )
         return self._index
 
+    def _settled(self) -> GalleryIndex:
+        """The index once a change in flight is applied. The collector holds the lock from
+        before its commit until the index has the stored shapes, so a search that starts
+        after a client saw a shape ready finds it; searches do not hold the lock."""
+        with self._lock:
+            return self._ready()
+
     def _publish_size(self) -> None:
         self.metrics.index_size.labels(self.name).set(len(self))
 
@@ -227,7 +234,7 @@ class Gallery:
         UnavailableError
             The index is still loading (``index_loading``).
         """
-        index = self._ready()
+        index = self._settled()
         preset = self.preset
         stats = SearchStats()
         vectors = flat_vectors(descriptor, preset)
@@ -264,7 +271,7 @@ class Gallery:
     ) -> dict[int, tuple[float, dict[str, float]]]:
         """The preset's fused and per-modality dissimilarities of ``descriptor`` to each
         of ``mesh_ids`` that is in the index (the others are left out)."""
-        index = self._ready()
+        index = self._settled()
         preset = self.preset
         with index.lock:
             present = np.array([i for i in mesh_ids if i in index], dtype=np.int64)
