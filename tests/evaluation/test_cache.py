@@ -17,6 +17,7 @@ from worker.evaluation.cache import (
 
 EVAL_PRESET = Preset(name="test-eval-small", version=0, n_vertices=500, n_eigenpairs=100)
 WORKER = Path(worker.__file__).parent
+READ_BYTES = Path.read_bytes
 
 
 def test_cache_namespace_follows_preset_and_version():
@@ -48,17 +49,35 @@ def test_fingerprint_covers_every_engine_module_the_baseline_and_the_variants_on
     assert all(path.is_file() for path in modules.values())
 
 
-def test_fingerprint_changes_with_the_source_of_a_module_imported_indirectly(monkeypatch):
+def _edited_reads(monkeypatch, edits: dict[Path, bytes]) -> None:
+    """Every read of a file in ``edits`` returns its bytes with the edit appended (the
+    edits of an earlier call undone)."""
+
+    def read(path: Path) -> bytes:
+        return READ_BYTES(path) + edits.get(path, b"")
+
+    monkeypatch.setattr(Path, "read_bytes", read)
+
+
+def test_fingerprint_changes_with_the_code_of_a_module_imported_indirectly(monkeypatch):
     before = engine_fingerprint()
     linalg = engine_modules()["worker.engine.linalg"]
-    real = Path.read_bytes
-
-    def edited(path: Path) -> bytes:
-        data = real(path)
-        return data + b"\n# edited\n" if path == linalg else data
-
-    monkeypatch.setattr(Path, "read_bytes", edited)
+    _edited_reads(monkeypatch, {linalg: b"\nEDITED = 1\n"})
     assert engine_fingerprint() != before
+
+
+def test_fingerprint_keeps_through_comments_and_docstrings(monkeypatch):
+    before = engine_fingerprint()
+    modules = engine_modules()
+    prose = b'\n# a comment reworded\ndef helper():\n    """A docstring."""\n    return 1\n'
+    code = b"\ndef helper():\n    return 1\n"
+    _edited_reads(monkeypatch, {modules["worker.engine.denoise"]: prose})
+    with_prose = engine_fingerprint()
+    _edited_reads(monkeypatch, {modules["worker.engine.denoise"]: code})
+    assert engine_fingerprint() == with_prose != before
+    # the same code lower in the file: line numbers are not the code
+    _edited_reads(monkeypatch, {modules["worker.engine.denoise"]: b"\n\n\n" + code})
+    assert engine_fingerprint() == with_prose
 
 
 def test_variant_meshes_depend_on_how_they_are_made_not_on_the_pipeline(monkeypatch):
@@ -67,15 +86,7 @@ def test_variant_meshes_depend_on_how_they_are_made_not_on_the_pipeline(monkeypa
     assert not {"worker.engine.resample", "worker.engine.pipeline"} & set(modules)
     before = variant_mesh_fingerprint()
     resample = engine_modules()["worker.engine.resample"]
-    mesh_io = modules["worker.engine.mesh_io"]
-    real = Path.read_bytes
-    edited_file = resample
-
-    def edited(path: Path) -> bytes:
-        data = real(path)
-        return data + b"\n# edited\n" if path == edited_file else data
-
-    monkeypatch.setattr(Path, "read_bytes", edited)
+    _edited_reads(monkeypatch, {resample: b"\nEDITED = 1\n"})
     assert variant_mesh_fingerprint() == before  # the resampling edited: meshes kept
-    edited_file = mesh_io
+    _edited_reads(monkeypatch, {modules["worker.engine.mesh_io"]: b"\nEDITED = 1\n"})
     assert variant_mesh_fingerprint() != before  # reading and cleaning edited: remade

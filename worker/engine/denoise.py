@@ -26,17 +26,19 @@ ROUGHNESS_NEIGHBOURS = 24
 ROUGHNESS_SAMPLES = 600
 #: A view is smoothed above this roughness (and :data:`NOISE_LIKE`). The partiality
 #: protocol's noiseless views and range scans of TOSCA and SCAPE (300 vertices .. full
-#: resolution) have a median 0.010 .. 0.018, 3 of 616 above (two coarse views of the wolf,
-#: 0.063 and 0.074, and a SCAPE range scan of 638 vertices, 0.052; none noise-like); with
-#: depth noise of 0.25% of the object's diagonal a median 0.087, 2 of 154 under
-#: (``python -m experiments.surface_roughness``, docs/decisions.md, "Default v16").
+#: resolution) have a median 0.010 .. 0.018, 4 of 616 above (two coarse views of the wolf,
+#: 1,523 and 2,236 vertices, up to 0.074, and two SCAPE range scans of 326 and 361
+#: vertices, up to 0.068; none noise-like); with depth noise of 0.25% of the object's
+#: diagonal a median 0.087, 2 of 154 under (``python -m experiments.surface_roughness``,
+#: v18; docs/evaluation.md; chosen in docs/decisions.md, "Default v16").
 ROUGH_VIEW = 0.05
 #: A rough view is smoothed only when a cubic fit leaves more than this share of the
 #: quadric's residual (each per degree of freedom, :func:`surface_fits`): noise's share is
 #: about 1, a smooth surface sampled coarsely leaves less. The protocol's 616 noiseless
-#: views and range scans leave 0.42 .. 0.88, its 308 noisy views 0.90 .. 1.04; chosen on
-#: TOSCA's or SCAPE's alone the threshold is 0.887 / 0.886, none on the wrong side of
-#: either (``python -m experiments.surface_roughness``, docs/decisions.md, "Default v17").
+#: views and range scans leave 0.42 .. 0.84, its 308 noisy views 0.90 .. 1.04; chosen on
+#: TOSCA's or SCAPE's views alone the threshold is 0.868 / 0.899, the latter leaving one
+#: of TOSCA's noisy views (0.897) unsmoothed (``python -m experiments.surface_roughness``,
+#: v18; docs/evaluation.md; chosen in docs/decisions.md, "Default v17").
 NOISE_LIKE = 0.89
 #: A surface that is not one view (a whole, a cut or holed copy) is smoothed only when
 #: the smoothing leaves it less than this share of its area: noise crumples it at the

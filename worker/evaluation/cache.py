@@ -1,6 +1,6 @@
 """The evaluation's on-disk caches: descriptors, keyed by file bytes, preset and engine
-source; and the variant meshes that are slow to make, keyed by file bytes and the
-source that makes them."""
+code; and the variant meshes that are slow to make, keyed by file bytes and the code
+that makes them."""
 
 from __future__ import annotations
 
@@ -87,36 +87,53 @@ def engine_modules() -> dict[str, Path]:
     return worker_modules(FINGERPRINT_ROOTS)
 
 
-def _source_digest(modules: dict[str, Path]) -> str:
+class _WithoutProse(ast.NodeTransformer):
+    """Drops the statements that are a bare string (docstrings): they compute nothing."""
+
+    def visit_Expr(self, node: ast.Expr) -> ast.Expr | None:
+        if isinstance(node.value, ast.Constant) and isinstance(node.value.value, str):
+            return None
+        return node
+
+
+def _code(path: Path) -> bytes:
+    """What a module computes: its syntax tree without comments, docstrings or line
+    numbers (``ast.dump``), so that rewording them keeps a fingerprint. The dump's form
+    follows the Python version: another interpreter describes afresh."""
+    tree = _WithoutProse().visit(ast.parse(path.read_bytes(), filename=str(path)))
+    return ast.dump(tree).encode()
+
+
+def _code_digest(modules: dict[str, Path]) -> str:
     digest = hashlib.sha256()
     for name, path in sorted(modules.items()):
         digest.update(name.encode())
-        digest.update(path.read_bytes())
+        digest.update(_code(path))
     return digest.hexdigest()
 
 
 def engine_fingerprint() -> str:
-    """sha256 of the source of every module of :func:`engine_modules`.
+    """sha256 of the code of every module of :func:`engine_modules` (:func:`_code`).
 
-    Editing the engine (even without a preset version bump) or the baseline never
-    serves stale descriptors, while editing the service, the job runner, the
-    metrics or this harness keeps the cache.
+    Editing the engine's code (even without a preset version bump) or the baseline's
+    never serves stale descriptors, while editing the service, the job runner, the
+    metrics, this harness or any comment or docstring keeps the cache.
     """
-    return _source_digest(engine_modules())
+    return _code_digest(engine_modules())
 
 
 def variant_mesh_fingerprint() -> str:
-    """sha256 of the source a variant mesh is made by: :mod:`.variants` and what it
+    """sha256 of the code a variant mesh is made by: :mod:`.variants` and what it
     imports (reading and cleaning the file), not the descriptor pipeline, so editing
     the resampling or the operators keeps the stored variant meshes."""
-    return _source_digest(worker_modules(["worker.evaluation.variants"]))
+    return _code_digest(worker_modules(["worker.evaluation.variants"]))
 
 
 def cache_namespace(preset: Preset) -> str:
     """Directory name of a preset's cache entries.
 
     ``<name>-v<version>-<digest>``: the digest covers every preset field a
-    descriptor depends on and the engine source (:func:`engine_fingerprint`), so a
+    descriptor depends on and the engine's code (:func:`engine_fingerprint`), so a
     preset edited without a version bump, or an edited pipeline, gets a fresh
     namespace, while a change of how descriptors are compared (dissimilarity,
     fusion, weights) reuses them.
