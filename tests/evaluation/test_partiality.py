@@ -25,6 +25,7 @@ from worker.evaluation.compute import compute_descriptors
 from worker.evaluation.datasets import EvaluationError, LabeledMesh
 from worker.evaluation.partial import PARTIAL_VARIANTS, single_view
 from worker.evaluation.partiality import parts_matrix, ranking_scores, verified_ranking
+from worker.evaluation.report import MISSES_SHOWN, _misses
 from worker.evaluation.robustness import PRESET_ROW
 from worker.evaluation.run import described_copies, run_partiality
 from worker.evaluation.samples import sample_mesh
@@ -201,9 +202,12 @@ def test_run_writes_the_report_and_cut_copies_find_their_class(tmp_path):
     # All to all among the copies: each class has four cuts, two of each whole, cut
     # along other planes.
     among = saved["all_to_all"][PRESET_ROW]["cut-15"]
-    assert set(among) >= {"nn", "first_tier", "second_tier", "dcg", "map"}
+    assert set(among) >= {"nn", "first_tier", "second_tier", "dcg", "map", "misses"}
     assert among["nn"] >= 2 / 3
+    missed = sum(count for to in among["misses"].values() for count in to.values())
+    assert missed == round((1 - among["nn"]) * cut["count"])
     markdown = (tmp_path / "out" / "partiality.md").read_text()
+    assert "Where the preset's NN misses go" in markdown
     assert "| Parts |" in markdown and "`cut-15`" in markdown and "All to all" in markdown
     assert "each drawn 2 times" in markdown
     assert "range camera" not in markdown  # no copy was shot by it
@@ -225,3 +229,12 @@ def test_each_whole_s_copies_are_drawn_around_the_axis_it_stands_on(tmp_path):
         done.descriptors[0].vector("gdm"), on_x.descriptors[0].vector("gdm")
     )
     assert not np.array_equal(done.descriptors[0].vector("gdm"), on_z.descriptors[0].vector("gdm"))
+
+
+def test_partiality_md_lists_the_misses_most_first():
+    misses = {"michael": {"scape": 9, "david": 2}, "victoria": {"scape": 7, "michael": 2}}
+    assert _misses(misses) == "michael -> scape 9, victoria -> scape 7, michael -> david 2, " + (
+        "victoria -> michael 2"
+    )
+    many = {f"c{i}": {"d": 1} for i in range(MISSES_SHOWN + 3)}
+    assert _misses(many).endswith("; 3 more") and _misses({}) == "none"

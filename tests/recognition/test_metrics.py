@@ -242,6 +242,12 @@ def test_nearest_neighbor_rate_case_b():
     assert m.nearest_neighbor_rate(D_B, LABELS_B) == pytest.approx(0.6)
 
 
+def test_nearest_neighbor_misses_case_b():
+    # q3 and q4 (b) retrieve 0 and 1 (a) first; int labels come back as strings
+    assert m.nearest_neighbor_misses(D_B, LABELS_B) == {"b": {"a": 2}}
+    assert m.nearest_neighbor_misses(D_B, [7, 7, 7, 3, 3]) == {"3": {"7": 2}}
+
+
 def test_first_tier_case_b():
     # top C-1: q0 1/2, q1 2/2, q2 1/2, q3 0/1, q4 0/1 -> 2/5
     assert m.first_tier(D_B, LABELS_B) == pytest.approx(0.4)
@@ -341,6 +347,8 @@ def test_retrieval_ties_broken_by_index():
     labels = ["a", "b", "a", "b"]
     assert m.nearest_neighbor_rate(d, labels) == pytest.approx(0.25)
     assert m.mean_average_precision(d, labels) == pytest.approx(7 / 12)
+    # the misses break ties as the rate does: q0 -> 1, q1 -> 0, q3 -> 0
+    assert m.nearest_neighbor_misses(d, labels) == {"a": {"b": 1}, "b": {"a": 2}}
 
 
 def test_integer_and_string_labels_agree():
@@ -360,6 +368,7 @@ ALL_PAIRWISE = [
     m.roc_curve,
     m.equal_error_rate,
     m.nearest_neighbor_rate,
+    m.nearest_neighbor_misses,
     m.first_tier,
     m.second_tier,
     m.e_measure,

@@ -393,16 +393,18 @@ def partiality_scores(
     -------
     {"scores": {row: {variant: {"own_class", "class_mean", "own_source", "map"}}},
     "all_to_all": {row: {variant: {"nn", "first_tier", "second_tier", "dcg", "map",
-    ...}}}, "variants": {variant: {"count", "partiality_median", "looks_partial",
+    ..., "misses"}}}, "variants": {variant: {"count", "partiality_median", "looks_partial",
     "largest_class"}}}; ``looks_partial`` is the share of the variant's copies whose
     partiality is above 0 (weighed by the parts modality), ``largest_class`` the share of
     its copies in their largest class (the own class of a ranking that always answers
-    it). A variant whose copies leave a class with a single copy has no
-    all-to-all scores (nothing relevant to find).
+    it); ``misses`` counts, per class, the copies whose nearest other copy is of each
+    other class (:func:`~worker.recognition.metrics.nearest_neighbor_misses`). A variant
+    whose copies leave a class with a single copy has no all-to-all scores (nothing
+    relevant to find).
     """
     labels_arr = np.asarray([str(x) for x in labels])
     rows: dict[str, dict[str, dict[str, float]]] = {}
-    among: dict[str, dict[str, dict[str, float]]] = {}
+    among: dict[str, dict[str, dict[str, Any]]] = {}
     about: dict[str, dict[str, Any]] = {}
     for name, (sources, copies) in variants.items():
         pair = None if baselines is None else (baselines[1][name], baselines[0])
@@ -416,9 +418,11 @@ def partiality_scores(
             for row, d in each.items():
                 # A copy the parts cannot compare ranks the others by index, as against
                 # the wholes.
-                among.setdefault(row, {})[name] = metrics.retrieval_scores(
-                    ranked_last(d), copy_labels
-                )
+                ranking = ranked_last(d)
+                among.setdefault(row, {})[name] = {
+                    **metrics.retrieval_scores(ranking, copy_labels),
+                    "misses": metrics.nearest_neighbor_misses(ranking, copy_labels),
+                }
         shares = query_partiality(copies, preset)
         about[name] = {
             "count": len(copies),

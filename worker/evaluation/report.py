@@ -429,6 +429,25 @@ def _variant_table(
     return lines
 
 
+#: Class pairs partiality.md lists of each variant's all-to-all misses.
+MISSES_SHOWN = 8
+
+
+def _misses(misses: Mapping[str, Mapping[str, int]]) -> str:
+    """ "a -> b 9, c -> b 7, ..." of :func:`~worker.recognition.metrics.nearest_neighbor_misses`'
+    counts, the largest first (ties by name), at most :data:`MISSES_SHOWN`; "none"."""
+    pairs = sorted(
+        (
+            (-count, asked, answered)
+            for asked, to in misses.items()
+            for answered, count in to.items()
+        )
+    )
+    shown = ", ".join(f"{a} -> {b} {-c}" for c, a, b in pairs[:MISSES_SHOWN])
+    rest = sum(-c for c, _, _ in pairs[MISSES_SHOWN:])
+    return (shown or "none") + (f"; {rest} more" if rest else "")
+
+
 def render_partiality_markdown(report: Mapping[str, Any]) -> str:
     """partiality.md: per row and partial variant, own class, own source and mAP."""
     preset = report["preset"]
@@ -483,6 +502,19 @@ def render_partiality_markdown(report: Mapping[str, Any]) -> str:
                 report["rows"], among, ranked, ("nn", "first_tier", "second_tier", "dcg", "map")
             ),
         ]
+        missed = {
+            v: among[PRESET_ROW][v]["misses"]
+            for v in ranked
+            if "misses" in among.get(PRESET_ROW, {}).get(v, {})
+        }
+        if missed:
+            lines += [
+                "",
+                "Where the preset's NN misses go, a copy's class -> its nearest copy's, most "
+                f"first (at most {MISSES_SHOWN} pairs):",
+                "",
+                *(f"- `{v}`: {_misses(pairs)}" for v, pairs in missed.items()),
+            ]
     lines += [
         "",
         "How partial the copies look (the preset's partiality, 0 a whole, 1 wholly partial): "

@@ -438,6 +438,17 @@ def _ranked_relevance(dissimilarity: ArrayLike, labels: ArrayLike) -> NDArray[np
     ValueError
         On invalid inputs, or if some class has a single object (no relevant items).
     """
+    retrieved, codes = _retrieved(dissimilarity, labels)
+    relevant: NDArray[np.bool_] = codes[retrieved] == codes[:, None]
+    return relevant
+
+
+def _retrieved(
+    dissimilarity: ArrayLike, labels: ArrayLike
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """(n, n - 1) the objects each query retrieves, in order (query excluded, ties
+    broken by lower index first), and (n,) the label codes; raises as
+    :func:`_ranked_relevance`."""
     d, codes = _validate(dissimilarity, labels)
     n = d.shape[0]
     _check_no_singleton(codes, labels)
@@ -445,9 +456,32 @@ def _ranked_relevance(dissimilarity: ArrayLike, labels: ArrayLike) -> NDArray[np
     cols = np.arange(n - 1)[None, :]
     others = cols + (cols >= rows)  # (n, n-1): row i lists j != i in increasing order
     order = np.argsort(d[rows, others], axis=1, kind="stable")  # stable: index breaks ties
-    retrieved = np.take_along_axis(others, order, axis=1)
-    relevant: NDArray[np.bool_] = codes[retrieved] == codes[:, None]
-    return relevant
+    retrieved: NDArray[np.int64] = np.take_along_axis(others, order, axis=1)
+    return retrieved, codes
+
+
+def nearest_neighbor_misses(
+    dissimilarity: ArrayLike, labels: ArrayLike
+) -> dict[str, dict[str, int]]:
+    """Where the nearest-neighbour rate's misses go: for each class, how many of its
+    queries retrieve first an object of each other class (ties by lower index, as for
+    :func:`nearest_neighbor_rate`; classes without a miss left out).
+
+    Parameters and errors as :func:`nearest_neighbor_rate`.
+
+    Returns
+    -------
+    {query's label: {first retrieved object's label: count}}, labels as ``str``.
+    """
+    retrieved, codes = _retrieved(dissimilarity, labels)
+    names = np.asarray(labels).astype(str)
+    first = retrieved[:, 0]
+    misses: dict[str, dict[str, int]] = {}
+    for i in np.flatnonzero(codes[first] != codes):
+        asked, answered = names[i], names[first[i]]
+        misses.setdefault(asked, {})
+        misses[asked][answered] = misses[asked].get(answered, 0) + 1
+    return misses
 
 
 def _nearest_neighbor(relevant: NDArray[np.bool_]) -> float:
