@@ -5,6 +5,7 @@ that makes them."""
 from __future__ import annotations
 
 import ast
+import functools
 import hashlib
 import io
 import json
@@ -42,15 +43,22 @@ def _module_file(name: str) -> Path | None:
     return None
 
 
-def _worker_imports(name: str, path: Path) -> set[str]:
+def _worker_imports(name: str, path: Path) -> frozenset[str]:
     """Names a module's source imports (anywhere in it) that may be ``worker`` modules.
 
     ``from .x import y`` yields both ``<package>.x`` and ``<package>.x.y`` (``y`` may be
     a submodule); names that are not modules are dropped by :func:`_module_file`.
     """
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    return _imports(package, path.read_bytes())
+
+
+@functools.lru_cache(maxsize=256)
+def _imports(package: str, source: bytes) -> frozenset[str]:
+    """:func:`_worker_imports` of a module of ``package`` with this source (parsed once
+    per source: the fingerprint is taken at each use of the cache)."""
     found: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+    for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.ImportFrom):
             if node.level:
                 base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1])
@@ -61,7 +69,7 @@ def _worker_imports(name: str, path: Path) -> set[str]:
             found.update(f"{module}.{alias.name}" for alias in node.names)
         elif isinstance(node, ast.Import):
             found.update(alias.name for alias in node.names)
-    return {m for m in found if m == "worker" or m.startswith("worker.")}
+    return frozenset(m for m in found if m == "worker" or m.startswith("worker."))
 
 
 def worker_modules(roots: Sequence[str]) -> dict[str, Path]:
@@ -96,19 +104,20 @@ class _WithoutProse(ast.NodeTransformer):
         return node
 
 
-def _code(path: Path) -> bytes:
-    """What a module computes: its syntax tree without comments, docstrings or line
-    numbers (``ast.dump``), so that rewording them keeps a fingerprint. The dump's form
-    follows the Python version: another interpreter describes afresh."""
-    tree = _WithoutProse().visit(ast.parse(path.read_bytes(), filename=str(path)))
-    return ast.dump(tree).encode()
+@functools.lru_cache(maxsize=256)
+def _code(source: bytes) -> bytes:
+    """What a module with this source computes: its syntax tree without comments,
+    docstrings or line numbers (``ast.dump``), so that rewording them keeps a fingerprint
+    (parsed once per source). The dump's form follows the Python version: another
+    interpreter describes afresh."""
+    return ast.dump(_WithoutProse().visit(ast.parse(source))).encode()
 
 
 def _code_digest(modules: dict[str, Path]) -> str:
     digest = hashlib.sha256()
     for name, path in sorted(modules.items()):
         digest.update(name.encode())
-        digest.update(_code(path))
+        digest.update(_code(path.read_bytes()))
     return digest.hexdigest()
 
 
