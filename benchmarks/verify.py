@@ -9,7 +9,7 @@ on its ``FEATURE_POOL`` best wholes by the parts (all 83 of TOSCA's), as the ser
 verifies one (:func:`worker.engine.rigid.verified_fitness` on stored descriptors: every
 candidate's features compared, ``VERIFIED`` and up to ``FEATURE_PICKS`` more fitted): the
 candidates' anchors made anew (the service's first query on them), then kept from an
-earlier query (:func:`worker.engine.rigid.whole_anchors`, as the service keeps them in
+earlier query (:func:`worker.engine.rigid.candidate_anchors`, as the service keeps them in
 memory), each on one thread and on ``--threads`` (the service's
 ``SHAPES_VERIFY_THREADS``), query by query in one process. The table gives, over the first
 ``--queries`` copies, the median and 90th percentile seconds of each, and the median of
@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from worker.engine.rigid import FEATURE_POOL, Anchors, verified_fitness, whole_anchors
+from worker.engine.rigid import FEATURE_POOL, Anchors, candidate_anchors, verified_fitness
 from worker.evaluation.compute import compute_descriptors
 from worker.evaluation.partiality import parts_matches
 
@@ -55,7 +55,7 @@ def main() -> None:
             if anchors == "kept":
                 for c in shortlist:
                     if c not in kept:
-                        kept[c] = whole_anchors(wholes.descriptors[c])
+                        kept[c] = candidate_anchors(wholes.descriptors[c])
             given = [kept[c] for c in shortlist] if anchors == "kept" else None
             start = time.perf_counter()
             fitness = verified_fitness(query, candidates, scale, metric, given, threads)

@@ -33,8 +33,8 @@ from worker.engine.rigid import (
     FEATURE_POOL,
     HELD_FITNESS,
     Anchors,
+    candidate_anchors,
     verified_fitness,
-    whole_anchors,
 )
 from worker.evaluation.compute import single_threaded_blas
 from worker.evaluation.partiality import unverified_matrices
@@ -59,7 +59,7 @@ def fitted(task: tuple[ShapeDescriptor, np.ndarray, float]) -> np.ndarray:
     query, pool, scale = task
     for c in pool:
         if int(c) not in _ANCHORS:
-            _ANCHORS[int(c)] = whole_anchors(_GALLERY[int(c)])
+            _ANCHORS[int(c)] = candidate_anchors(_GALLERY[int(c)])
     candidates = [_GALLERY[int(c)] for c in pool]
     fitness = verified_fitness(query, candidates, scale, False, [_ANCHORS[int(c)] for c in pool])
     assert fitness is not None  # every copy here is a single view with its surface

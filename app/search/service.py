@@ -458,7 +458,7 @@ def _verified(
         if made is not None:
             state.metrics.verify_anchors.labels("kept").inc()
         else:
-            made = rigid.whole_anchors(candidate)
+            made = rigid.candidate_anchors(candidate)
             if made is not None:
                 state.verify_anchors.put(key, made)
                 state.metrics.verify_anchors.labels("made").inc()

@@ -21,6 +21,7 @@ from worker.engine.rigid import (
     EDGE_RATIO,
     FPFH_BINS,
     agreeing_triples,
+    candidate_anchors,
     fpfh,
     inlier_counts,
     kept_surface,
@@ -31,7 +32,6 @@ from worker.engine.rigid import (
     umeyama,
     verified_fitness,
     verified_order,
-    whole_anchors,
 )
 from worker.engine.surface_points import ANCHOR_VOXEL, VIEW_VOXEL
 from worker.evaluation.partial import single_view, with_depth_noise
@@ -249,10 +249,15 @@ def test_a_depth_view_is_held_by_its_own_figure_only(factor):
         assert rigid_fit(query, figure_anchors(other, 0, voxel), voxel, scales).fitness < 0.6
 
 
-def test_verified_order_moves_only_the_fitted():
+def test_verified_order_puts_the_held_first_and_moves_only_the_other_fitted():
     fitness = np.array([0.2, np.nan, 0.9, 0.2, np.nan, 0.5])
-    # the fitted keep their four places (0, 2, 3, 5), most held first, ties in order
-    np.testing.assert_array_equal(verified_order(fitness), [2, 1, 5, 0, 4, 3])
+    # the one held (HELD_FITNESS) first; the other fitted keep their three places among
+    # the rest (0, 2, 4 of 0, 1, 3, 4, 5), most held first, ties in order
+    np.testing.assert_array_equal(verified_order(fitness), [2, 5, 1, 0, 4, 3])
+    # held ones ahead of every other, most held first, ties in order
+    fitness = np.array([np.nan, 0.5, 0.95, np.nan, 0.92, 0.95])
+    np.testing.assert_array_equal(verified_order(fitness), [2, 5, 4, 0, 1, 3])
+    np.testing.assert_array_equal(verified_order(np.full(3, np.nan)), [0, 1, 2])
 
 
 @pytest.fixture(scope="module")
@@ -262,10 +267,11 @@ def quadruped_view():
     return describe_mesh(seen, get_preset(DEFAULT_PRESET))
 
 
-def test_a_described_view_is_verified_on_wholes_only(verified_wholes, quadruped_view):
+def test_a_described_view_is_verified_on_its_candidates(verified_wholes, quadruped_view):
     """A view of the quadruped: its own figure (another pose's mesh) holds most of it,
-    other figures far less, alike on threads; an enrolled view is not fitted (NaN), and a
-    descriptor kept before surfaces were is not verified at all."""
+    other figures far less, alike on threads; an enrolled view of another pose seen from
+    elsewhere holds less than ``HELD_FITNESS`` of it (NaN), and a descriptor kept before
+    surfaces were is not verified at all."""
     preset = get_preset(DEFAULT_PRESET)
     query = quadruped_view
     assert query.single_view and query.surface_voxel == VIEW_VOXEL
@@ -276,8 +282,8 @@ def test_a_described_view_is_verified_on_wholes_only(verified_wholes, quadruped_
     assert fitness is not None and np.isnan(fitness[-1])
     assert fitness[0] > 0.8 and fitness[0] > max(fitness[1:-1]) + 0.15, fitness
     # a caller's kept anchors fit exactly as those made anew
-    kept = [whole_anchors(c) for c in candidates]
-    assert kept[-1] is None and all(a is not None for a in kept[:-1])
+    kept = [candidate_anchors(c) for c in candidates]
+    assert all(a is not None for a in kept)
     np.testing.assert_array_equal(verified_fitness(query, candidates, 1.0, False, kept), fitness)
     # and on threads, made anew or kept, exactly as on one
     for anchors in (None, kept):
@@ -286,12 +292,40 @@ def test_a_described_view_is_verified_on_wholes_only(verified_wholes, quadruped_
     # a descriptor stored before surfaces were kept is neither fitted on nor fitted
     old = dataclasses.replace(wholes[1], surface=np.zeros((0, 6), dtype=np.float16))
     assert kept_surface(old) is None and kept_surface(wholes[1]) is not None
-    assert whole_anchors(old) is None
+    assert candidate_anchors(old) is None
     assert verified_fitness(query, [wholes[0], old], 1.0, metric=False) is None
     unkept = dataclasses.replace(query, surface_voxel=None)
     assert kept_surface(unkept) is None
     assert verified_fitness(unkept, wholes, 1.0, metric=False) is None
     assert verified_fitness(wholes[0], wholes[1:], 1.0, metric=False) is None  # no view
+
+
+def test_a_view_of_the_same_object_from_nearby_holds_a_view_and_goes_first(
+    verified_wholes, quadruped_view
+):
+    """Two views share only what both saw: the quadruped's pose seen from 15 to 30 degrees
+    away from the query's direction holds it (at least ``HELD_FITNESS``), and the fittest
+    goes ahead of the wholes; the same direction on another pose, and another figure, hold
+    less and count for nothing (NaN)."""
+    preset = get_preset(DEFAULT_PRESET)
+    turned = [np.radians(d) for d in (30.0, 15.0)]
+    near = [
+        describe_mesh(
+            single_view(sample_mesh("quadruped", 3), np.array([np.sin(a), np.cos(a), 0.0])), preset
+        )
+        for a in turned
+    ]
+    ahead = np.array([0.0, 1.0, 0.0])
+    other = [
+        describe_mesh(single_view(sample_mesh(name, pose), ahead), preset)
+        for name, pose in (("quadruped", 1), ("biped", 0))
+    ]
+    candidates = [*verified_wholes, *other, *near]
+    fitness = verified_fitness(quadruped_view, candidates, 1.0, metric=False)
+    assert fitness is not None
+    assert np.isnan(fitness[-4:-2]).all() and (fitness[-2:] >= rigid.HELD_FITNESS).all()
+    assert fitness[-1] > fitness[-2], fitness  # nearer holds more
+    assert verified_order(fitness)[0] == len(candidates) - 1
 
 
 def test_a_view_with_depth_noise_is_held_as_the_noiseless_view_is():
@@ -334,7 +368,7 @@ def test_a_view_fitted_from_view_unit_finds_its_true_scale(name, quadruped_view)
     assert abs(math.log(ratio / rigid.VIEW_UNIT)) < math.log(rigid.SCALE_WINDOW)
     query = rigid.stored_anchors(view.surface, view.surface_voxel, rigid.VIEW_UNIT)
     window = (1.0 / rigid.SCALE_WINDOW, rigid.SCALE_WINDOW)
-    fit = rigid_fit(query, whole_anchors(whole), ANCHOR_VOXEL, window)
+    fit = rigid_fit(query, candidate_anchors(whole), ANCHOR_VOXEL, window)
     assert fit.fitness > 0.95
     assert rigid.VIEW_UNIT * fit.scale == pytest.approx(ratio, rel=0.03)
 
@@ -360,7 +394,7 @@ def test_past_the_parts_best_a_view_is_fitted_on_the_closest_features(
         quadruped_view.surface, quadruped_view.surface_voxel, rigid.VIEW_UNIT
     )
     closeness = [
-        np.sort(rigid.feature_matches(query, whole_anchors(c))[1])[
+        np.sort(rigid.feature_matches(query, candidate_anchors(c))[1])[
             round(rigid.FEATURE_QUANTILE * (len(query.points) - 1))
         ]
         for c in pool

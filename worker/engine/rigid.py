@@ -468,12 +468,12 @@ def kept_surface(descriptor: ShapeDescriptor) -> tuple[np.ndarray, float, float]
     return descriptor.surface, voxel, unit
 
 
-def whole_anchors(candidate: ShapeDescriptor) -> Anchors | None:
+def candidate_anchors(candidate: ShapeDescriptor) -> Anchors | None:
     """The anchors a single view is fitted on in ``candidate`` (:func:`stored_anchors` of
     its kept surface at its own grid): the same for every query, so a caller verifying
-    many may keep them (:func:`verified_fitness`'s ``anchors``); None for a candidate that
-    is not fitted (a single view itself, or kept without its surface)."""
-    if candidate.single_view or (kept := kept_surface(candidate)) is None:
+    many may keep them (:func:`verified_fitness`'s ``anchors``); None for a candidate kept
+    without its surface (it is not fitted)."""
+    if (kept := kept_surface(candidate)) is None:
         return None
     return stored_anchors(kept[0], kept[1])
 
@@ -492,20 +492,22 @@ def verified_fitness(
 
     The candidates are the parts' best (``FEATURE_POOL`` of them, in their order); the
     view is fitted on the first ``VERIFIED`` and on the ``FEATURE_PICKS`` of all whose
-    features lie closest to its own (:func:`feature_distance`). Never on a candidate that
-    is itself a single view: two views of an object share only what both saw (on TOSCA +
-    SCAPE's views all to all, ranking by it lost a sixth of the nearest neighbours the
-    parts found).
+    features lie closest to its own (:func:`feature_distance`). A candidate that is itself
+    a single view counts only where the fit holds the query (``HELD_FITNESS``; NaN below
+    it): two views of an object share only what both saw, so another pose seen from
+    elsewhere holds little of the query whatever its object (TOSCA's range scans all to
+    all, one of each whole: ranked by every such fit, NN 54.2 -> 47.0%), while a fit that
+    holds it lies on the same object seen from nearby (docs/decisions.md).
 
     Parameters
     ----------
     query, candidates : descriptors with their surfaces.
     parts_scale : the scale ``s`` the parts modality chose for the query; the query's
-        unit is taken as ``VIEW_UNIT / s`` of a candidate's in a collection without units,
-        fitted within ``SCALE_WINDOW`` of that.
+        unit is taken as ``VIEW_UNIT / s`` of a whole's (``1 / s`` of a view's) in a
+        collection without units, fitted within ``SCALE_WINDOW`` of that.
     metric : a collection of metric units: the query's unit in each candidate's is the
         ratio of their ``surface_unit``, fitted at exactly that.
-    anchors : each candidate's :func:`whole_anchors` where the caller kept them (None
+    anchors : each candidate's :func:`candidate_anchors` where the caller kept them (None
         where not: made here).
     threads : the candidates' anchors made, their features compared and the chosen
         fitted on this many threads (each fit is seeded alone: the fitnesses do not
@@ -518,9 +520,8 @@ def verified_fitness(
     scales = (1.0, 1.0) if metric else (1.0 / SCALE_WINDOW, SCALE_WINDOW)
     kept_anchors = anchors if anchors is not None else [None] * len(candidates)
     factors = {
-        i: unit / grid[2] if metric else VIEW_UNIT / parts_scale
+        i: unit / grid[2] if metric else (1.0 if candidate.single_view else VIEW_UNIT) / parts_scale
         for i, (candidate, grid) in enumerate(zip(candidates, held, strict=True))
-        if not candidate.single_view
     }
 
     def compared(i: int) -> tuple[Anchors, np.ndarray, float]:
@@ -546,14 +547,19 @@ def verified_fitness(
         closest = np.argsort(closeness, kind="stable")[:FEATURE_PICKS]
         chosen = sorted((set(range(VERIFIED)) | {int(c) for c in closest}) & set(found))
         fitness[chosen] = list(pool.map(fit, chosen))
+    of_views = np.array([c.single_view for c in candidates], dtype=bool)
+    fitness[of_views & ~(fitness >= HELD_FITNESS)] = np.nan
     return fitness
 
 
 def verified_order(fitness: np.ndarray) -> np.ndarray:
-    """The candidates' positions after verification: those fitted (a finite fitness) take
-    the places they held among themselves, most of the query held first (ties in their
-    order); a candidate not fitted (NaN) keeps its place."""
-    order = np.arange(len(fitness))
-    fitted = np.flatnonzero(np.isfinite(fitness))
-    order[fitted] = fitted[np.argsort(-fitness[fitted], kind="stable")]
-    return order
+    """The candidates' positions after verification: those whose fit holds the query
+    (``HELD_FITNESS``) first, most of it held first; then the others, the fitted (a finite
+    fitness) in the places they held among them, most held first, a candidate not fitted
+    (NaN) keeping its place; ties in their order."""
+    held = np.flatnonzero(np.nan_to_num(fitness, nan=-1.0) >= HELD_FITNESS)
+    held = held[np.argsort(-fitness[held], kind="stable")]
+    rest = np.setdiff1d(np.arange(len(fitness)), held)
+    fitted = np.flatnonzero(np.isfinite(fitness[rest]))
+    rest[fitted] = rest[fitted][np.argsort(-fitness[rest][fitted], kind="stable")]
+    return np.concatenate([held, rest])

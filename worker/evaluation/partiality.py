@@ -50,9 +50,9 @@ from worker.engine.presets import MODALITIES, PARTS, SIZE, Preset
 from worker.engine.rigid import (
     FEATURE_POOL,
     Anchors,
+    candidate_anchors,
     verified_fitness,
     verified_order,
-    whole_anchors,
 )
 from worker.recognition import metrics
 
@@ -202,7 +202,7 @@ def verified_ranking(
         else nullcontext()
     ) as pool:
         run = map if pool is None else partial(pool.map, chunksize=2)
-        anchors = run(whole_anchors, [gallery[c] for c in shortlisted])
+        anchors = run(candidate_anchors, [gallery[c] for c in shortlisted])
         made = dict(zip(shortlisted, anchors, strict=True))
         held = {c: gallery[c] for c in shortlisted}
         shares = [tasks[start::jobs] for start in range(jobs)] if parallel else [tasks]
