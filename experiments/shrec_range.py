@@ -2,7 +2,7 @@
 the others, ranked by the service's partial search.
 
     python -m experiments.shrec_range [--copies 10] [--limit N] [--queries N] [--jobs 2]
-        [--cache CACHE] [--exhaustive]
+        [--cache CACHE] [--search-only] [--exhaustive]
 
 SHREC'17 (Rodolà et al., 3DOR 2017) shot every model 20 times (5 rotations x 4
 elevations) and ranked each of its 882 range scans against all the others. The
@@ -15,7 +15,8 @@ the scans are enrolled in one :class:`app.gallery.index.GalleryIndex` as the ser
 enrolls files, and each scan queries it as the service asks (its own weights, the parts'
 two passes, ``FEATURE_POOL`` answers), itself left out, then is verified on them as the
 service verifies a single view (:func:`worker.engine.rigid.verified_fitness`, each
-candidate's anchors kept). ``--exhaustive`` also ranks them by the protocol's all-to-all
+candidate's anchors kept; ``--search-only`` leaves that out and asks the search for its
+first answer only). ``--exhaustive`` also ranks them by the protocol's all-to-all
 matrices (verified as well), to measure what the index's two passes change.
 
 Printed: the class of the first answer (SHREC'17's NN), and with every scan of the
@@ -68,20 +69,24 @@ def answers(
     anchors: dict[int, Anchors | None],
     left_out: list[int],
     preset: Preset,
-) -> tuple[int, int]:
-    """The first of ``query``'s partial search in ``index`` (``left_out`` excluded), and the
-    first once a single view is verified on the search's ``FEATURE_POOL`` best, as the
-    service verifies it (``anchors``: each candidate's, kept across queries)."""
+    verify: bool,
+) -> tuple[int, int | None]:
+    """The first of ``query``'s partial search in ``index`` (``left_out`` excluded), and
+    with ``verify`` the first once a single view is verified on the search's
+    ``FEATURE_POOL`` best, as the service verifies it (``anchors``: each candidate's, kept
+    across queries)."""
     share = partiality(query.longest_open_loop, query.kept_area_fraction, preset)
     found, scale = index.partial_search(
         flat_vectors(query, preset),
         query.parts.astype(np.float64),
         query.parts_reach,
         query_weights(preset, share),
-        FEATURE_POOL,
+        FEATURE_POOL if verify else 1,
         exclude=left_out,
     )
     ids = [m.id for m in found]
+    if not verify:
+        return ids[0], None
     for c in ids:
         if c not in anchors:
             anchors[c] = candidate_anchors(descriptors[c])
@@ -99,6 +104,9 @@ def main() -> None:
     parser.add_argument("--limit", type=int, help="wholes a class")
     parser.add_argument(
         "--queries", type=int, help="only so many scans query (a seeded draw; all enrolled)"
+    )
+    parser.add_argument(
+        "--search-only", action="store_true", help="no verification (minutes, not hours)"
     )
     parser.add_argument("--exhaustive", action="store_true")
     args = parser.parse_args()
@@ -132,18 +140,23 @@ def main() -> None:
             query = descriptors[i]
             begun = time.perf_counter()
             for left_out in ([i], np.flatnonzero(source == source[i]).tolist()):
-                parts, verified = answers(index, query, descriptors, anchors, left_out, preset)
+                parts, verified = answers(
+                    index, query, descriptors, anchors, left_out, preset, not args.search_only
+                )
                 searched["the service's partial search"].append(parts)
-                searched["then verified, as the service verifies"].append(verified)
+                if verified is not None:
+                    searched["then verified, as the service verifies"].append(verified)
             seconds.append(time.perf_counter() - begun)
     print(
         f"TOSCA, {len(wholes)} wholes x {args.copies} range scans = {n}, {len(asking)} of them "
-        f"queries (described or read in {described:.0f} s; a query's two searches and fits, "
+        f"queries (described or read in {described:.0f} s; a query's searches and fits, "
         f"median {float(np.median(seconds)):.2f} s)"
     )
     print("| ranking | NN | NN among other wholes' scans |")
     print("|---|---:|---:|")
     for name, firsts in searched.items():
+        if not firsts:
+            continue
         first = np.array(firsts).reshape(len(asking), 2)
         nn, other = np.mean(labels[first] == labels[asking, None], axis=0)
         print(f"| {name} | {100 * nn:.1f} | {100 * other:.1f} |")
