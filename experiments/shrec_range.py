@@ -113,10 +113,10 @@ def main() -> None:
     preset = get_preset(args.preset)
     wholes = read_labels(TOSCA / "labels.csv", TOSCA, per_class_limit=args.limit)
     start = time.perf_counter()
+    at = {m.name: i for i, m in enumerate(wholes)}
     sources, descriptors = [], []
     for copy in range(args.copies):
         done = described_copies(wholes, copy_name("range", copy), preset, args.cache, args.jobs)
-        at = {m.name: i for i, m in enumerate(wholes)}
         for mesh, descriptor in zip(done.meshes, done.descriptors, strict=True):
             sources.append(at[mesh.name])
             descriptors.append(descriptor)
