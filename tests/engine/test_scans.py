@@ -283,6 +283,23 @@ def triangles(vertices: np.ndarray, faces: np.ndarray) -> set[tuple[tuple[float,
     return {tuple(sorted(map(tuple, vertices[face].round(9).tolist()))) for face in faces}
 
 
+def point_pairs(first: np.ndarray, second: np.ndarray) -> set[frozenset[tuple[float, ...]]]:
+    """The pairs of points ``first`` and ``second`` (..., 3) hold at the same place, both
+    finite, as sets of their coordinates."""
+    both = np.isfinite(first).all(axis=-1) & np.isfinite(second).all(axis=-1)
+    return {
+        frozenset((tuple(a), tuple(b)))
+        for a, b in zip(first[both].round(9).tolist(), second[both].round(9).tolist(), strict=True)
+    }
+
+
+def grid_steps(grid: np.ndarray) -> set[frozenset[tuple[float, ...]]]:
+    """An organized cloud's (h, w, 3) steps between neighbouring pixels along its rows and
+    columns (:func:`point_pairs`): the same whichever way the grid is turned or
+    mirrored."""
+    return point_pairs(grid[:, :-1], grid[:, 1:]) | point_pairs(grid[:-1], grid[1:])
+
+
 @pytest.mark.parametrize("turned", [False, True])
 def test_a_cloud_without_its_grid_is_triangulated_as_its_grid_is(turned):
     """The two planes' points in random order, from the same viewpoint, make the grid's
@@ -291,7 +308,8 @@ def test_a_cloud_without_its_grid_is_triangulated_as_its_grid_is(turned):
     a circle), so the same area in as many triangles. Each faces the sensor. In the
     camera's frame the points lie on its pixel lattice (:func:`scans.sensor_grid`);
     turned away from it they do not, and the Delaunay triangulation of their image
-    makes the same surface."""
+    makes the same surface: the camera's frame is found from them
+    (:func:`scans.sensor_axes`) and the grid with it."""
     points, _ = two_planes()
     points[5:9, 20:30] = np.nan  # a hole the far plane's grid leaves open
     points[2, 3] = np.nan  # a missing pixel
@@ -325,7 +343,8 @@ def test_a_cloud_without_its_grid_is_triangulated_as_its_grid_is(turned):
 def test_lattice_steps_number_a_sensor_s_columns_and_refuse_other_values():
     """Columns 0.02 apart, each value rounded as float32 or six digits of text would,
     two columns missing: each value's column. Values off a lattice, all equal, or each
-    column's values at two places 0.35 of the pitch apart: none."""
+    column's values at two places 0.35 of the pitch apart: none. Values rounded by more
+    than a hundred-thousandth of their span: their lattice only when told the rounding."""
     rng = np.random.default_rng(0)
     columns = np.concatenate([np.arange(12), [14, 15, 19]])
     steps = rng.choice(columns, 400)
@@ -336,6 +355,13 @@ def test_lattice_steps_number_a_sensor_s_columns_and_refuse_other_values():
     assert scans.lattice_steps(np.full(10, 0.5)) is None
     spread = values + 0.007 * (rng.uniform(size=400) > 0.5)
     assert scans.lattice_steps(spread) is None
+    # 300 columns, each value rounded by up to 2% of the pitch (float32 far from the
+    # frame's origin): their lattice when that rounding is allowed for, the pitch fitted
+    # to all the columns (the least gap between two is 4% off, 12 columns off at the end).
+    steps = rng.integers(0, 300, size=3000)
+    values = 0.02 * steps + rng.uniform(-4e-4, 4e-4, size=3000)
+    assert np.array_equal(scans.lattice_steps(values, rounding=8e-4), steps - steps.min())
+    assert scans.lattice_steps(values) is None
 
 
 @pytest.mark.parametrize("frame", ["camera", "x backwards", "orthographic along y"])
@@ -386,19 +412,83 @@ def test_points_on_a_camera_s_lattice_are_read_by_its_grid(frame):
     assert scans.sensor_grid(voxels, np.zeros(3)) is None
 
 
+@pytest.mark.parametrize(
+    "case", ["pinhole turned about itself", "orthographic turned about itself", "mesh's frame"]
+)
+def test_a_view_s_pixel_lattice_is_found_in_any_frame(case, monkeypatch):
+    """Points of one view written out of their sensor's frame, in another order, as
+    float32: the two planes seen by a pinhole camera at the origin turned about it; the
+    depth example's orthographic grid, its camera far away at the origin, turned about
+    it; the same grid in its mesh's frame, the camera elsewhere. On no lattice in their
+    own frame, they lie on one in a frame found from them (:func:`scans.sensor_axes`,
+    its line of sight the sensor's to 2e-4: float32 rounds points a thousand times their
+    extent from the origin to a hundredth of a pixel), and that lattice is the grid itself (the
+    same steps between the same points, whichever way it is turned): the view is read
+    without a Delaunay triangulation, its every edge a step or a diagonal of the grid,
+    none along the sensor's rays."""
+    turn = random_rotation(np.random.default_rng(4))
+    if case == "pinhole turned about itself":
+        grid, _ = two_planes()
+        grid[5:9, 20:30] = np.nan
+        sight = turn @ [0.0, 0.0, 1.0]
+    else:
+        grid, camera = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), 2000)
+        sight = turn @ np.array(DEPTH_DIRECTION) / np.linalg.norm(DEPTH_DIRECTION)
+        if case == "orthographic turned about itself":
+            grid = grid - camera
+    grid = (grid @ turn.T).astype(np.float32).astype(float)
+    seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()]
+    points = seen[np.random.default_rng(0).permutation(len(seen))]
+    assert scans.sensor_grid(points, np.zeros(3)) is None
+    lattice, frame = next(
+        (found, frame)
+        for found, frame in (
+            (scans.sensor_grid(points, np.zeros(3), frame), frame)
+            for frame, _ in scans.sensor_axes(points, np.zeros(3))
+        )
+        if found is not None
+    )
+    assert min(np.linalg.norm(frame[:, 2] - sight), np.linalg.norm(frame[:, 2] + sight)) < 2e-4
+    assert np.isfinite(lattice).all(axis=2).sum() == len(points)
+    assert grid_steps(lattice) == grid_steps(grid)
+
+    def no_delaunay(*args, **kwargs):
+        raise AssertionError("a Delaunay triangulation")
+
+    monkeypatch.setattr("scipy.spatial.Delaunay", no_delaunay)
+    vertices, faces = scans.one_view(points, np.zeros(3))
+    assert len(vertices) == len(points) and np.unique(faces).size > 0.95 * len(points)
+    edges = point_pairs(vertices[faces], vertices[np.roll(faces, 1, axis=1)])
+    diagonals = point_pairs(grid[:-1, :-1], grid[1:, 1:]) | point_pairs(
+        grid[:-1, 1:], grid[1:, :-1]
+    )
+    assert edges <= grid_steps(grid) | diagonals
+    if case == "pinhole turned about itself":
+        assert unshadowed(vertices, faces, np.zeros(3)).all()
+    else:
+        assert unshadowed(vertices, faces, sight=sight).all()
+
+
 def test_one_view_written_in_another_frame_is_seen_from_where_it_is_thinnest():
-    """The depth example's view written in its mesh's frame and turned (seen from the
-    origin, most of its points hide behind others): read as seen from afar along the
-    direction the points spread least in, the organized cloud's surface (every point on
-    it, the same area to 2%). A whole object's points are still refused with the
-    sentence about the sensor the file gave."""
+    """The depth example's view written in its mesh's frame and turned, each point moved
+    a thousandth of a pixel at random (off any lattice; seen from the origin, most of
+    its points hide behind others): read as seen from afar along the direction the
+    points spread least in, the organized cloud's surface (every point on it, the same
+    area to 0.5%). A whole object's points are still refused with the sentence about the
+    sensor the file gave."""
     grid, _ = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), 2000)
+    pitch = np.nanmedian(np.linalg.norm(np.diff(grid, axis=0), axis=2))
+    grid = grid + np.random.default_rng(1).normal(scale=1e-3 * pitch, size=grid.shape)
     turn = random_rotation(np.random.default_rng(2))
     grid = grid @ turn.T
     sight = turn @ np.array(DEPTH_DIRECTION)
     vertices, faces = organized_surface(grid, scans.thinnest_viewpoint(grid.reshape(-1, 3), sight))
     seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()]
     shuffled = seen[np.random.default_rng(0).permutation(len(seen))]
+    assert all(
+        scans.sensor_grid(shuffled, np.zeros(3), f) is None
+        for f, _ in scans.sensor_axes(shuffled, np.zeros(3))
+    )
     with pytest.raises(PointCloudError, match=r"not one view from the sensor at \(0, 0, 0\)"):
         viewed_surface(shuffled, np.zeros(3))
     read, read_faces = scans.one_view(shuffled, np.zeros(3))
@@ -422,8 +512,9 @@ def test_a_pcd_without_its_grid_is_read_in_its_sensor_s_frame(monkeypatch):
     """A PCD of HEIGHT 1 whose points were moved out of the camera's frame, its VIEWPOINT
     the camera's position and orientation (a quaternion, PCL's ``w x y z``): the lattice
     is found in the camera's frame, the organized cloud's own triangles. With the
-    identity orientation the points lie on no lattice and are triangulated from their
-    image; a VIEWPOINT that is not numbers is refused with a sentence."""
+    identity orientation the points lie on no lattice in the frame given, and the
+    camera's frame is found from them (:func:`scans.sensor_axes`): the same pixels'
+    grid. A VIEWPOINT that is not numbers is refused with a sentence."""
     quarter_turn = np.array([np.cos(np.pi / 4), 0.0, 0.0, np.sin(np.pi / 4)])  # about z
     np.testing.assert_allclose(scans._rotation(2 * quarter_turn) @ [1, 0, 0], [0, 1, 0], atol=1e-12)
     orientation = np.array([0.9, 0.3, -0.2, 0.25])
@@ -436,13 +527,18 @@ def test_a_pcd_without_its_grid_is_read_in_its_sensor_s_frame(monkeypatch):
     seen = moved.reshape(-1, 3)[np.random.default_rng(0).permutation(HEIGHT * WIDTH)]
     found = []
     search = scans.sensor_grid
-    monkeypatch.setattr(scans, "sensor_grid", lambda *a: found.append(search(*a)) or found[-1])
+    monkeypatch.setattr(
+        scans, "sensor_grid", lambda *a, **k: found.append(search(*a, **k)) or found[-1]
+    )
     read, faces, cloud = read_pcd(pcd(seen.reshape(1, -1, 3), "binary", position, orientation))
     assert found[-1] is not None and cloud == Cloud(len(read))
     single = moved.astype(np.float32).astype(float)
     assert triangles(read, faces) == triangles(*organized_surface(single, position))
+    found.clear()
     read, faces, _ = read_pcd(pcd(seen.reshape(1, -1, 3), "binary", position))
-    assert found[-1] is None and len(read) == HEIGHT * WIDTH - 40
+    assert found[0] is None and found[-1] is not None and len(read) == HEIGHT * WIDTH - 40
+    assert grid_steps(found[-1]) == grid_steps(single)
+    assert triangles(read, faces) == triangles(*organized_surface(found[-1], position))
     bad = pcd(seen.reshape(1, -1, 3), viewpoint=position).replace(b"VIEWPOINT 0.5", b"VIEWPOINT x")
     with pytest.raises(UnreadableMeshError, match="VIEWPOINT is not seven numbers"):
         read_mesh(bad, "scan.pcd")

@@ -14,12 +14,13 @@ of points) is read as one view: its points seen from its sensor (the PCD's
 them) each lie on their own ray, so the rays' directions are the pixels a grid would
 have given, and their Delaunay triangulation is the grid's (:func:`viewed_surface`),
 gaps left open as the grid leaves them. In the camera's own frame the pixels are a
-lattice, and the grid itself is found again (:func:`sensor_grid`). A view written in
-another frame is seen from afar along the direction it is thinnest in
-(:func:`one_view`). Points of which some hide behind others as seen from there (a whole
-object's, a scan merged from several views) are refused: their neighbours are not
-known, and guessing them fuses touching sheets (docs/decisions.md, "Point clouds stay
-refused"). So is an E57 scan without indices.
+lattice, and the grid itself is found again (:func:`sensor_grid`); in any other frame the
+camera's is found first, from the steps between neighbouring points
+(:func:`sensor_axes`). A view on no lattice written in another frame is seen from afar
+along the direction it is thinnest in (:func:`one_view`). Points of which some hide
+behind others as seen from there (a whole object's, a scan merged from several views)
+are refused: their neighbours are not known, and guessing them fuses touching sheets
+(docs/decisions.md, "Point clouds stay refused"). So is an E57 scan without indices.
 
 The grid is triangulated as a scanner's software does: two triangles per square of four
 valid pixels, one per square of three (:func:`grid_faces`). Where the surface seen by two
@@ -39,6 +40,7 @@ from __future__ import annotations
 import struct
 import tempfile
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -218,8 +220,10 @@ def viewed_surface(
     distance to its nearest in the image; a missing pixel leaves a hole as the grid
     does), or shadowed (:func:`unshadowed`, an occluding edge along the ray). Points on
     a camera's pixel lattice (:func:`sensor_grid`, the sensor's ``axes`` (3, 3) as
-    columns in the points' frame, theirs by default) are triangulated by that grid
-    instead (:func:`organized_surface`), each triangle facing the sensor.
+    columns in the points' frame, theirs by default, else a frame found from the points,
+    :func:`sensor_axes`) are triangulated by that grid instead
+    (:func:`organized_surface`), each triangle facing the sensor; an orthographic grid is
+    seen along its own line of sight (:func:`_orthographic_sensor`).
 
     Raises
     ------
@@ -234,9 +238,15 @@ def viewed_surface(
     finite = points[np.isfinite(points).all(axis=1)]
     if len(finite) < 3:
         raise PointCloudError(f"The file holds too few points to make a surface. {UPLOAD_A_VIEW}")
-    lattice = sensor_grid(finite, viewpoint, axes)
+    lattice, sensor = sensor_grid(finite, viewpoint, axes), viewpoint
+    for frame, orthographic in [] if lattice is not None else sensor_axes(finite, viewpoint):
+        lattice = sensor_grid(finite, viewpoint, frame, along=(2,))
+        if lattice is not None:
+            if orthographic:
+                sensor = _orthographic_sensor(finite, viewpoint, frame[:, 2])
+            break
     if lattice is not None:
-        return _facing(*organized_surface(lattice, viewpoint), viewpoint)
+        return _facing(*organized_surface(lattice, sensor), sensor)
     where = ", ".join(f"{c:g}" for c in viewpoint)
     rays = finite - viewpoint
     length = np.linalg.norm(rays, axis=1)
@@ -280,6 +290,21 @@ def viewed_surface(
     turn = ax * by - ay * bx
     faces[turn > 0] = faces[turn > 0][:, ::-1]
     return finite, faces
+
+
+def _orthographic_sensor(
+    points: np.ndarray, viewpoint: np.ndarray, sight: np.ndarray
+) -> np.ndarray:
+    """(3,) where an orthographic grid of ``points`` (n, 3) along ``sight`` (3,) is seen
+    from: ``viewpoint`` when every ray from it runs within :data:`ORTHOGRAPHIC_DEGREES`
+    of the sight, else afar along the sight on ``viewpoint``'s side
+    (:func:`thinnest_viewpoint`)."""
+    rays = points - viewpoint
+    along = np.abs(rays @ sight) / np.maximum(np.linalg.norm(rays, axis=1), np.finfo(float).tiny)
+    if along.min() >= np.cos(np.radians(ORTHOGRAPHIC_DEGREES)):
+        return viewpoint
+    side = 1.0 if (viewpoint - points.mean(axis=0)) @ sight >= 0.0 else -1.0
+    return thinnest_viewpoint(points, side * sight)
 
 
 #: :func:`thinnest_viewpoint`: how far from the points, in their extents, a guessed
@@ -332,33 +357,49 @@ def thinnest_viewpoint(points: np.ndarray, direction: np.ndarray | None = None) 
 LATTICE_TOLERANCE = 1e-5
 LATTICE_MIN_PITCH = 10.0
 LATTICE_RESIDUAL = 0.1
+#: How far float32's rounding can spread one pixel's values along a unit direction, per
+#: unit of the points' distance from their frame's origin (half a float32 ulp, 6e-8 of a
+#: coordinate, in each of three coordinates, either way): a view written far from its
+#: frame's origin keeps its pixels that much apart however small its span.
+FLOAT32_SPREAD = 2.1e-7
 #: :func:`sensor_grid`: a lattice of more pixels than this many times the points is not
 #: a sensor's image of them (nor worth its memory: a view fills a good share of its
-#: bounding box).
+#: bounding box); how many of the points (a seeded sample) are tried first (a sample of
+#: a lattice is one, a few columns missing: it refuses most frames in a fraction of the
+#: time all the points take).
 LATTICE_MAX_FILL = 16
+LATTICE_TRIAL = 1024
 
 
-def lattice_steps(values: np.ndarray) -> np.ndarray | None:
+def lattice_steps(values: np.ndarray, rounding: float = 0.0) -> np.ndarray | None:
     """(n,) int, each of ``values`` (n,) as a step of a regular lattice (0 at the least):
     the columns of a sensor's pixels, equally spaced, each holding any number of the
-    values (a pixel's rounding apart), and columns missing between them; None when the
+    values (a pixel's rounding apart: ``LATTICE_TOLERANCE`` of their span, or
+    ``rounding`` where that is more), and columns missing between them; None when the
     values are no such lattice."""
     order = np.argsort(values, kind="stable")
     ordered = values[order]
     span = float(ordered[-1] - ordered[0])
     if not span > 0.0:
         return None
-    starts = np.flatnonzero(np.diff(ordered) > LATTICE_TOLERANCE * span) + 1
+    tolerance = max(LATTICE_TOLERANCE * span, rounding)
+    starts = np.flatnonzero(np.diff(ordered) > tolerance) + 1
     bounds = np.concatenate([[0], starts, [len(ordered)]])
     low, high = ordered[bounds[:-1]], ordered[bounds[1:] - 1]
     centres = 0.5 * (low + high)
     if len(centres) < 2:
         return None
-    pitch = float(np.diff(centres).min())
-    if pitch < LATTICE_MIN_PITCH * LATTICE_TOLERANCE * span:
+    # The pitch: the median gap between neighbouring columns (shorter than 1.5 of the
+    # least: none missing between them), then the least-squares line through each
+    # column's step and centre, so that the pixels' rounding does not add up across
+    # hundreds of columns.
+    gaps = np.diff(centres)
+    pitch = float(np.median(gaps[gaps < 1.5 * gaps.min()]))
+    if pitch < LATTICE_MIN_PITCH * tolerance:
         return None
-    position = (centres - centres[0]) / pitch
-    step = np.round(position)
+    step = np.round((centres - centres[0]) / pitch)
+    pitch, start = (float(c) for c in np.polyfit(step, centres, 1))
+    position = (centres - start) / pitch
     if np.abs(position - step).max() > LATTICE_RESIDUAL or (high - low).max() > (
         LATTICE_RESIDUAL * pitch
     ):
@@ -369,7 +410,10 @@ def lattice_steps(values: np.ndarray) -> np.ndarray | None:
 
 
 def sensor_grid(
-    points: np.ndarray, viewpoint: np.ndarray, axes: np.ndarray | None = None
+    points: np.ndarray,
+    viewpoint: np.ndarray,
+    axes: np.ndarray | None = None,
+    along: tuple[int, ...] = (2, 0, 1),
 ) -> np.ndarray | None:
     """The organized cloud (h, w, 3) (``nan`` where no point is) of ``points`` (n, 3) that
     lie on a camera's pixel lattice, or None.
@@ -378,25 +422,33 @@ def sensor_grid(
     as columns in the points' (by default the points' own: a depth camera writes its
     points in its frame, looking along z) sees them on its image's lattice: a pinhole camera's
     ``(x / z, y / z)`` are equally spaced in each coordinate, an orthographic grid's
-    ``(x, y)`` (:func:`lattice_steps`). Tried along each axis, as a pinhole camera when
-    every point lies on one side of the viewpoint along it, then as an orthographic one;
-    the first lattice on which every point has its own pixel is the grid, and
-    triangulating it needs no Delaunay triangulation.
+    ``(x, y)`` (:func:`lattice_steps`, allowing for float32's rounding of the points as
+    written, :data:`FLOAT32_SPREAD`; ``axes``' columns are unit vectors). Tried looking
+    along each axis in turn (those numbered in ``along``), as a pinhole camera when every
+    point lies on one side of the viewpoint along it, then as an orthographic one (on a
+    sample of the points first, :data:`LATTICE_TRIAL`); the first lattice on which every
+    point has its own pixel is the grid, and triangulating it needs no Delaunay
+    triangulation.
     """
     rays = points - viewpoint
     if axes is not None:
         rays = rays @ axes
-    for axis in (2, 0, 1):
+    rounding = FLOAT32_SPREAD * float(np.linalg.norm(points, axis=1).max())
+    trial = np.random.default_rng(0).permutation(len(points))[:LATTICE_TRIAL]
+    for axis in along:
         across = [k for k in (0, 1, 2) if k != axis]
         depth = rays[:, axis]
-        images = [rays[:, across]]
+        images = [(rays[:, across], rounding)]  # orthographic: the rounding of the points
         if (depth > 0.0).all() or (depth < 0.0).all():
-            images.insert(0, rays[:, across] / depth[:, None])
-        for image in images:
-            rows = lattice_steps(image[:, 1])
-            columns = None if rows is None else lattice_steps(image[:, 0])
-            if rows is None or columns is None:
+            images.insert(0, (rays[:, across] / depth[:, None], 0.0))
+        for image, spread in images:
+            # Most frames hold no lattice: a seeded sample of the points tells first.
+            if _pixels(image[trial], spread) is None:
                 continue
+            pixels = _pixels(image, spread)
+            if pixels is None:
+                continue
+            rows, columns = pixels
             height, width = int(rows.max()) + 1, int(columns.max()) + 1
             if height * width > LATTICE_MAX_FILL * len(points):
                 continue
@@ -407,6 +459,140 @@ def sensor_grid(
             grid[pixel] = points
             return grid.reshape(height, width, 3)
     return None
+
+
+#: :func:`sensor_axes`: the points whose neighbours in a rough image of the view are
+#: looked at (a seeded sample: a frame is a few numbers, which a sample's steps fix to
+#: float64's precision), how many neighbours each, and how near a row's or a column's
+#: direction a step must run in that image to be read as one.
+AXES_SAMPLE = 2000
+AXES_NEIGHBOURS = 4
+AXES_STEP_DEGREES = 15.0
+#: An orthographic grid is seen from the sensor a file gives when every ray from it runs
+#: within this many degrees of the grid's line of sight (a far camera's), and from afar
+#: along that line otherwise (:func:`viewed_surface`).
+ORTHOGRAPHIC_DEGREES = 1.0
+
+
+#: A sensor's steps: the (first, second) indices of pairs of its points.
+Pairs = tuple[np.ndarray, np.ndarray]
+
+
+def sensor_axes(points: np.ndarray, viewpoint: np.ndarray) -> Iterator[tuple[np.ndarray, bool]]:
+    """Frames (3, 3) (unit columns: across the sensor's rows, across its columns, its
+    line of sight) in which ``points`` (n, 3), one view written in any frame, may lie on
+    their sensor's pixel lattice (:func:`sensor_grid`), each with whether it is an
+    orthographic sensor's, made as they are tried: when every point lies in front of
+    ``viewpoint``, a pinhole camera's there and an orthographic grid's from the same
+    steps; then an orthographic grid's from steps read afresh (the points' image from
+    ``viewpoint`` may be none of theirs: a view written in its mesh's frame).
+
+    A pixel's neighbours along its row and its column are the sensor's steps. Two
+    points of one row of a pinhole camera span, with the camera, a plane through the
+    row's direction ``a``: the cross product of their rays is square to ``a``, which is
+    so the direction most nearly square to every row step's cross product (the least
+    singular vector), and the columns' ``b`` likewise; the camera looks along
+    ``n = a x b`` and its image coordinates are ``(ray . (b x n), ray . (a x n)) /
+    (ray . n)``. Two points of one row of an orthographic grid differ by ``i a + z d``
+    (``d`` its line of sight): the rows' steps all lie in the plane of ``a`` and ``d``,
+    the columns' in that of ``b`` and ``d``, so the two planes' normals are the
+    image's coordinates and ``d`` their cross product. Steps are read in a rough image
+    (the points' central projection from ``viewpoint``, then their projection along the
+    direction they spread least in), from the nearest neighbours of a sample of
+    points, as a row's or a column's by their direction about the image's dominant
+    one (four-fold, rows and columns square), each fit refitted twice without the
+    steps that stray from it (a step across a gap that joined two rows). A frame is
+    only a guess: :func:`sensor_grid` keeps it when every point has its own pixel.
+    """
+    if len(points) <= AXES_NEIGHBOURS:
+        return
+    rays = points - viewpoint
+    mean_ray = rays.mean(axis=0)
+    view = view_frame(mean_ray) if np.linalg.norm(mean_ray) > 0.0 else None
+    if view is not None and (rays @ view[2] > 0.0).all():
+        rows, columns = _steps(rays @ view[:2].T / (rays @ view[2])[:, None])
+        a = _least_direction(np.cross(rays[rows[0]], rays[rows[1]]))
+        b = _least_direction(np.cross(rays[columns[0]], rays[columns[1]]))
+        if a is not None and b is not None:
+            sight = np.cross(a, b)
+            frame = _unit_columns(np.cross(b, sight), np.cross(a, sight), sight)
+            if frame is not None:
+                yield frame, False
+        frame = _orthographic_frame(points, rows, columns)
+        if frame is not None:
+            yield frame, True
+    centred = points - points.mean(axis=0)
+    rows, columns = _steps(centred @ np.linalg.svd(centred, full_matrices=False)[2][:2].T)
+    frame = _orthographic_frame(points, rows, columns)
+    if frame is not None:
+        yield frame, True
+
+
+def _orthographic_frame(points: np.ndarray, rows: Pairs, columns: Pairs) -> np.ndarray | None:
+    """:func:`sensor_axes`' orthographic frame of ``points`` (n, 3) from their steps along
+    ``rows`` and ``columns``, or None."""
+    across_rows = _least_direction(points[rows[1]] - points[rows[0]])
+    across_columns = _least_direction(points[columns[1]] - points[columns[0]])
+    if across_rows is None or across_columns is None:
+        return None
+    return _unit_columns(across_columns, across_rows, np.cross(across_rows, across_columns))
+
+
+def _steps(image: np.ndarray) -> tuple[Pairs, Pairs]:
+    """:func:`sensor_axes`' steps in ``image`` (n, 2): the (first, second) point indices
+    of the steps along its rows and along its columns."""
+    from scipy.spatial import cKDTree
+
+    sample = np.random.default_rng(0).permutation(len(image))[:AXES_SAMPLE]
+    tree = cKDTree(image, balanced_tree=False, compact_nodes=False)  # built faster
+    near = np.asarray(tree.query(image[sample], k=AXES_NEIGHBOURS + 1)[1])[:, 1:]
+    first, second = np.repeat(sample, AXES_NEIGHBOURS), near.ravel()
+    step = image[second] - image[first]
+    angle = np.arctan2(step[:, 1], step[:, 0])
+    turn = angle - np.angle(np.exp(4j * angle).sum()) / 4  # from the dominant direction
+    sine = np.sin(np.radians(AXES_STEP_DEGREES))
+    rows, columns = np.abs(np.sin(turn)) < sine, np.abs(np.cos(turn)) < sine
+    return (first[rows], second[rows]), (first[columns], second[columns])
+
+
+def _least_direction(vectors: np.ndarray) -> np.ndarray | None:
+    """The unit vector (3,) most nearly square to every one of ``vectors`` (k, 3) (the
+    least eigenvector of their directions' scatter), refitted twice without those more
+    than three times the median off square to it; None for fewer than three."""
+    size = np.linalg.norm(vectors, axis=1)
+    directions = vectors[size > 0.0] / size[size > 0.0, None]
+    if len(directions) < 3:
+        return None
+    kept = directions
+    for _ in range(2):
+        off = np.abs(directions @ _least_eigenvector(kept))
+        kept = directions[off <= 3.0 * np.median(off)]
+        if len(kept) < 3:
+            return None
+    return _least_eigenvector(kept)
+
+
+def _least_eigenvector(directions: np.ndarray) -> np.ndarray:
+    """(3,) the unit vector least along ``directions`` (k, 3)."""
+    least: np.ndarray = np.linalg.eigh(directions.T @ directions)[1][:, 0]
+    return least
+
+
+def _unit_columns(*columns: np.ndarray) -> np.ndarray | None:
+    """(3, 3) the ``columns`` (3,) each made a unit vector; None when one is zero."""
+    size = np.array([np.linalg.norm(column) for column in columns])
+    if not (size > 1e-12).all():
+        return None
+    frame: np.ndarray = np.stack(columns, axis=1) / size
+    return frame
+
+
+def _pixels(image: np.ndarray, rounding: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """(rows, columns) (n,) int of the points whose ``image`` (n, 2) lies on a lattice
+    (:func:`lattice_steps`, ``rounding`` allowed for), or None."""
+    rows = lattice_steps(image[:, 1], rounding)
+    columns = None if rows is None else lattice_steps(image[:, 0], rounding)
+    return None if rows is None or columns is None else (rows, columns)
 
 
 def _facing(
