@@ -300,25 +300,34 @@ def grid_steps(grid: np.ndarray) -> set[frozenset[tuple[float, ...]]]:
     return point_pairs(grid[:, :-1], grid[:, 1:]) | point_pairs(grid[:-1], grid[1:])
 
 
-@pytest.mark.parametrize("turned", [False, True])
-def test_a_cloud_without_its_grid_is_triangulated_as_its_grid_is(turned):
+@pytest.mark.parametrize("frame", ["camera", "turned", "off the lattice"])
+def test_a_cloud_without_its_grid_is_triangulated_as_its_grid_is(frame):
     """The two planes' points in random order, from the same viewpoint, make the grid's
     surface: every point, no triangle across the gap between the planes, none over the
     pixels that saw nothing; a grid's square split along either diagonal (four points on
     a circle), so the same area in as many triangles. Each faces the sensor. In the
     camera's frame the points lie on its pixel lattice (:func:`scans.sensor_grid`);
-    turned away from it they do not, and the Delaunay triangulation of their image
-    makes the same surface: the camera's frame is found from them
-    (:func:`scans.sensor_axes`) and the grid with it."""
+    turned away from it they lie on it in a frame found from them
+    (:func:`scans.sensor_axes`); moved within their planes by a hundredth of a pixel
+    they lie on none, and the Delaunay triangulation of their image makes the same
+    surface."""
     points, _ = two_planes()
     points[5:9, 20:30] = np.nan  # a hole the far plane's grid leaves open
     points[2, 3] = np.nan  # a missing pixel
-    turn = random_rotation(np.random.default_rng(3)) if turned else np.eye(3)
+    if frame == "off the lattice":
+        jitter = np.random.default_rng(5).uniform(-1e-2, 1e-2, size=(HEIGHT, WIDTH, 2))
+        points[..., :2] += 0.02 * points[..., 2:] * jitter
+    turn = random_rotation(np.random.default_rng(3)) if frame == "turned" else np.eye(3)
     points = points @ turn.T
     grid_vertices, grid_triangles = organized_surface(points, np.zeros(3))
     shuffled = points.reshape(-1, 3)[np.random.default_rng(0).permutation(HEIGHT * WIDTH)]
     finite = shuffled[np.isfinite(shuffled).all(axis=1)]
-    assert (scans.sensor_grid(finite, np.zeros(3)) is None) == turned
+    assert (scans.sensor_grid(finite, np.zeros(3)) is None) == (frame != "camera")
+    found = [
+        scans.sensor_grid(finite, np.zeros(3), axes)
+        for axes, _ in scans.sensor_axes(finite, np.zeros(3))
+    ]
+    assert any(lattice is not None for lattice in found) == (frame != "off the lattice")
     vertices, faces = viewed_surface(shuffled, np.zeros(3))
     assert {tuple(v) for v in vertices.tolist()} == {tuple(v) for v in grid_vertices.tolist()}
     assert len(vertices) == len(grid_vertices) and len(faces) == len(grid_triangles)
