@@ -431,21 +431,27 @@ def test_a_view_s_pixel_lattice_is_found_in_any_frame(case, monkeypatch):
     it; the same grid in its mesh's frame, the camera elsewhere. On no lattice in their
     own frame, they lie on one in a frame found from them (:func:`scans.sensor_axes`,
     its line of sight the sensor's to 2e-4: float32 rounds points a thousand times their
-    extent from the origin to a hundredth of a pixel), and that lattice is the grid itself (the
-    same steps between the same points, whichever way it is turned): the view is read
-    without a Delaunay triangulation, its every edge a step or a diagonal of the grid,
-    none along the sensor's rays."""
+    extent from the origin to a hundredth of a pixel), and that lattice is the grid
+    itself (the same steps between the same points, whichever way it is turned): the
+    view is read without a Delaunay triangulation, its every edge a step or a diagonal of
+    the grid, none along the sensor's rays, every triangle facing the camera (in the
+    mesh's frame the origin, the sensor a file without one names, stands behind the view:
+    the side is the silhouette's, :func:`scans.sensor_side`)."""
     turn = random_rotation(np.random.default_rng(4))
     if case == "pinhole turned about itself":
         grid, _ = two_planes()
         grid[5:9, 20:30] = np.nan
-        sight = turn @ [0.0, 0.0, 1.0]
+        sight, camera = turn @ [0.0, 0.0, 1.0], np.zeros(3)
     else:
         grid, camera = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), 2000)
         sight = turn @ np.array(DEPTH_DIRECTION) / np.linalg.norm(DEPTH_DIRECTION)
         if case == "orthographic turned about itself":
-            grid = grid - camera
+            grid, camera = grid - camera, np.zeros(3)
+        camera = turn @ camera
     grid = (grid @ turn.T).astype(np.float32).astype(float)
+    if case == "mesh's frame":  # the origin behind the view, the camera before it
+        behind = 3.0 * float(np.ptp(grid[np.isfinite(grid).all(axis=2)], axis=0).max()) * sight
+        grid, camera = grid + behind, camera + behind
     seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()]
     points = seen[np.random.default_rng(0).permutation(len(seen))]
     assert scans.sensor_grid(points, np.zeros(3)) is None
@@ -476,20 +482,25 @@ def test_a_view_s_pixel_lattice_is_found_in_any_frame(case, monkeypatch):
         assert unshadowed(vertices, faces, np.zeros(3)).all()
     else:
         assert unshadowed(vertices, faces, sight=sight).all()
+    corners = vertices[faces]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    assert (np.einsum("ij,ij->i", normals, camera - corners.mean(axis=1)) > 0).all()
 
 
-def test_one_view_written_in_another_frame_is_seen_from_where_it_is_thinnest():
+@pytest.mark.parametrize("turn_seed", [2, 5])  # the least spread's axis toward the camera, away
+def test_one_view_written_in_another_frame_is_seen_from_where_it_is_thinnest(turn_seed):
     """The depth example's view written in its mesh's frame and turned, each point moved
     a thousandth of a pixel at random (off any lattice; seen from the origin, most of
     its points hide behind others): read as seen from afar along the direction the
     points spread least in, the organized cloud's surface (every point on it, the same
-    area to 0.5%). A whole object's points are still refused with the sentence about the
-    sensor the file gave."""
-    grid, _ = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), 2000)
+    area to 0.5%), every triangle facing the camera whichever way that direction's sign
+    fell (the silhouette's side, :func:`scans.sensor_side`). A whole object's points are
+    still refused with the sentence about the sensor the file gave."""
+    grid, camera = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), 2000)
     pitch = np.nanmedian(np.linalg.norm(np.diff(grid, axis=0), axis=2))
     grid = grid + np.random.default_rng(1).normal(scale=1e-3 * pitch, size=grid.shape)
-    turn = random_rotation(np.random.default_rng(2))
-    grid = grid @ turn.T
+    turn = random_rotation(np.random.default_rng(turn_seed))
+    grid, camera = grid @ turn.T, turn @ camera
     sight = turn @ np.array(DEPTH_DIRECTION)
     vertices, faces = organized_surface(grid, scans.thinnest_viewpoint(grid.reshape(-1, 3), sight))
     seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()]
@@ -510,6 +521,9 @@ def test_one_view_written_in_another_frame_is_seen_from_where_it_is_thinnest():
         return float(np.linalg.norm(doubled, axis=1).sum() / 2)
 
     assert area(read, read_faces) == pytest.approx(area(vertices, faces), rel=0.005)
+    corners = read[read_faces]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    assert (np.einsum("ij,ij->i", normals, camera - corners.mean(axis=1)) > 0).all()
     text = "\n".join(f"{x!r} {y!r} {z!r}" for x, y, z in shuffled.tolist()).encode()
     assert read_mesh(text, "view.xyz").cloud == Cloud(len(seen))
     sphere = trimesh.creation.icosphere(subdivisions=4).vertices

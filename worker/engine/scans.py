@@ -223,7 +223,9 @@ def viewed_surface(
     columns in the points' frame, theirs by default, else a frame found from the points,
     :func:`sensor_axes`) are triangulated by that grid instead
     (:func:`organized_surface`), each triangle facing the sensor; an orthographic grid is
-    seen along its own line of sight (:func:`_orthographic_sensor`).
+    seen along its own line of sight, from ``viewpoint`` if it stands on that line
+    (:func:`_seen_along`), else from afar on the side its silhouette says
+    (:func:`sensor_side`).
 
     Raises
     ------
@@ -238,15 +240,19 @@ def viewed_surface(
     finite = points[np.isfinite(points).all(axis=1)]
     if len(finite) < 3:
         raise PointCloudError(f"The file holds too few points to make a surface. {UPLOAD_A_VIEW}")
-    lattice, sensor = sensor_grid(finite, viewpoint, axes), viewpoint
+    lattice, sensor, guessed = sensor_grid(finite, viewpoint, axes), viewpoint, None
     for frame, orthographic in [] if lattice is not None else sensor_axes(finite, viewpoint):
         lattice = sensor_grid(finite, viewpoint, frame, along=(2,))
         if lattice is not None:
-            if orthographic:
-                sensor = _orthographic_sensor(finite, viewpoint, frame[:, 2])
+            if orthographic and not _seen_along(finite, viewpoint, frame[:, 2]):
+                guessed = frame[:, 2]
+                sensor = thinnest_viewpoint(finite, guessed)
             break
     if lattice is not None:
-        return _facing(*organized_surface(lattice, sensor), sensor)
+        vertices, faces = organized_surface(lattice, sensor)
+        if guessed is not None:
+            sensor = thinnest_viewpoint(finite, sensor_side(vertices, faces, guessed) * guessed)
+        return _facing(vertices, faces, sensor)
     where = ", ".join(f"{c:g}" for c in viewpoint)
     rays = finite - viewpoint
     length = np.linalg.norm(rays, axis=1)
@@ -292,19 +298,35 @@ def viewed_surface(
     return finite, faces
 
 
-def _orthographic_sensor(
-    points: np.ndarray, viewpoint: np.ndarray, sight: np.ndarray
-) -> np.ndarray:
-    """(3,) where an orthographic grid of ``points`` (n, 3) along ``sight`` (3,) is seen
-    from: ``viewpoint`` when every ray from it runs within :data:`ORTHOGRAPHIC_DEGREES`
-    of the sight, else afar along the sight on ``viewpoint``'s side
-    (:func:`thinnest_viewpoint`)."""
+def _seen_along(points: np.ndarray, viewpoint: np.ndarray, sight: np.ndarray) -> bool:
+    """Whether every ray from ``viewpoint`` (3,) to ``points`` (n, 3) runs within
+    :data:`ORTHOGRAPHIC_DEGREES` of ``sight`` (3,), as a far orthographic camera's do."""
     rays = points - viewpoint
     along = np.abs(rays @ sight) / np.maximum(np.linalg.norm(rays, axis=1), np.finfo(float).tiny)
-    if along.min() >= np.cos(np.radians(ORTHOGRAPHIC_DEGREES)):
-        return viewpoint
-    side = 1.0 if (viewpoint - points.mean(axis=0)) @ sight >= 0.0 else -1.0
-    return thinnest_viewpoint(points, side * sight)
+    return bool(along.min() >= np.cos(np.radians(ORTHOGRAPHIC_DEGREES)))
+
+
+def sensor_side(vertices: np.ndarray, faces: np.ndarray, direction: np.ndarray) -> float:
+    """1.0 when the sensor that saw the view ``vertices`` (n, 3), ``faces`` (m, 3) stands
+    along ``direction`` (3,) from it, -1.0 when it stands the other way.
+
+    At its silhouette a surface turns away from the sensor that sees it, so the view's
+    boundary vertices lie farther from the sensor than their neighbours do (an occlusion
+    gap's far side, flat, adds little either way): the sign of the summed heights along
+    ``direction`` of each boundary vertex's neighbours over its own. The points alone
+    cannot tell the two sides apart (a depth map is one seen from either), and a view
+    read from the wrong one is described as its mirror image, its unseen side taken on
+    the side it was seen from.
+    """
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    edges, uses = np.unique(edges, axis=0, return_counts=True)
+    boundary = np.unique(edges[uses == 1])
+    height = vertices @ direction
+    both = np.concatenate([edges, edges[:, ::-1]])
+    around = np.bincount(both[:, 0], weights=height[both[:, 1]], minlength=len(vertices))
+    count = np.bincount(both[:, 0], minlength=len(vertices))
+    rise = around[boundary] / np.maximum(count[boundary], 1) - height[boundary]
+    return 1.0 if rise.sum() >= 0.0 else -1.0
 
 
 #: :func:`thinnest_viewpoint`: how far from the points, in their extents, a guessed
@@ -320,19 +342,25 @@ def one_view(
     once more from afar along the direction they spread least in
     (:func:`thinnest_viewpoint`), where a scanner that saw them all would stand, and
     when the triangles so made are an orthographic grid's, once more along its own line
-    of sight (:func:`grid_sight`: exact, where the least spread can be degrees off). When
+    of sight (:func:`grid_sight`: exact, where the least spread can be degrees off), on
+    the side the view's silhouette says its sensor stood (:func:`sensor_side`). When
     that fails too, the first refusal stands: it names the sensor the file gave."""
     try:
         return viewed_surface(points, viewpoint, axes)
     except PointCloudError as refusal:
         try:
-            vertices, faces = viewed_surface(points, thinnest_viewpoint(points))
+            guess = thinnest_viewpoint(points)
+            vertices, faces = viewed_surface(points, guess)
             sight = grid_sight(vertices, faces)
-            if sight is None:
-                return vertices, faces
-            return viewed_surface(points, thinnest_viewpoint(points, sight))
+            if sight is not None:
+                guess = thinnest_viewpoint(points, sight)
+                vertices, faces = viewed_surface(points, guess)
         except PointCloudError:
             raise refusal from None
+        direction = guess - vertices.mean(axis=0)
+        if sensor_side(vertices, faces, direction) < 0.0:
+            faces = faces[:, ::-1]  # its sensor stands the other way: each triangle faces it
+        return vertices, faces
 
 
 def thinnest_viewpoint(points: np.ndarray, direction: np.ndarray | None = None) -> np.ndarray:
