@@ -27,6 +27,7 @@ from worker.engine.scans import (
     view_frame,
     viewed_surface,
 )
+from worker.evaluation.partial import range_image
 from worker.evaluation.samples import (
     DEPTH_DIRECTION,
     PARTIAL_SOURCE,
@@ -485,6 +486,28 @@ def test_a_view_s_pixel_lattice_is_found_in_any_frame(case, monkeypatch):
     corners = vertices[faces]
     normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     assert (np.einsum("ij,ij->i", normals, camera - corners.mean(axis=1)) > 0).all()
+
+
+def test_a_scan_seen_from_a_direction_it_is_not_thinnest_in_is_found_in_rounds(monkeypatch):
+    """A range scan of the quadruped (SHREC'17's orbiting camera) in its mesh's frame,
+    the direction it spreads least in 54 degrees off its line of sight: each round reads
+    its steps across the sight the last one found, and a later round finds its lattice
+    (:data:`scans.AXES_ROUNDS`); the first alone does not."""
+    points, direction, _ = range_image(sample_mesh("quadruped", 0), np.random.default_rng(3))
+    seen = points.reshape(-1, 3)[np.isfinite(points).all(axis=2).ravel()]
+    seen = seen[np.random.default_rng(0).permutation(len(seen))]
+    least = np.linalg.svd(seen - seen.mean(axis=0), full_matrices=False)[2][2]
+    assert np.degrees(np.arccos(abs(least @ direction))) > 45
+
+    def found() -> bool:
+        return any(
+            scans.sensor_grid(seen, np.zeros(3), frame, along=(2,)) is not None
+            for frame, _ in scans.sensor_axes(seen, np.zeros(3))
+        )
+
+    assert found()
+    monkeypatch.setattr(scans, "AXES_ROUNDS", 1)
+    assert not found()
 
 
 @pytest.mark.parametrize("turn_seed", [2, 5])  # the least spread's axis toward the camera, away

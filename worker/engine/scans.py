@@ -496,6 +496,11 @@ def sensor_grid(
 AXES_SAMPLE = 2000
 AXES_NEIGHBOURS = 4
 AXES_STEP_DEGREES = 15.0
+#: How many times the orthographic frame is fitted, its steps read across the line of
+#: sight the last fit found (the points' least spread at first, which can be tens of
+#: degrees off: each round comes nearer; of 54 range scans in their mesh's frame, 3
+#: rounds left 12 on no lattice found, 6 left 7, 12 left 4).
+AXES_ROUNDS = 12
 #: An orthographic grid is seen from the sensor a file gives when every ray from it runs
 #: within this many degrees of the grid's line of sight (a far camera's), and from afar
 #: along that line otherwise (:func:`viewed_surface`).
@@ -525,12 +530,14 @@ def sensor_axes(points: np.ndarray, viewpoint: np.ndarray) -> Iterator[tuple[np.
     (``d`` its line of sight): the rows' steps all lie in the plane of ``a`` and ``d``,
     the columns' in that of ``b`` and ``d``, so the two planes' normals are the
     image's coordinates and ``d`` their cross product. Steps are read in a rough image
-    (the points' central projection from ``viewpoint``, then their projection along the
-    direction they spread least in), from the nearest neighbours of a sample of
-    points, as a row's or a column's by their direction about the image's dominant
-    one (four-fold, rows and columns square), each fit refitted twice without the
-    steps that stray from it (a step across a gap that joined two rows). A frame is
-    only a guess: :func:`sensor_grid` keeps it when every point has its own pixel.
+    (the points' central projection from ``viewpoint``, among their nearest neighbours
+    there; then their projection across the direction they spread least in, among their
+    nearest neighbours in space, and again across each line of sight so found,
+    :data:`AXES_ROUNDS`), for a sample of points, as a row's or a column's by their
+    direction about the image's dominant one (four-fold, rows and columns square), each
+    fit refitted twice without the steps that stray from it (a step across a gap that
+    joined two rows). A frame is only a guess: :func:`sensor_grid` keeps it when every
+    point has its own pixel.
     """
     if len(points) <= AXES_NEIGHBOURS:
         return
@@ -550,10 +557,17 @@ def sensor_axes(points: np.ndarray, viewpoint: np.ndarray) -> Iterator[tuple[np.
         if frame is not None:
             yield frame, True
     centred = points - points.mean(axis=0)
-    rows, columns = _steps(centred @ np.linalg.svd(centred, full_matrices=False)[2][:2].T)
-    frame = _orthographic_frame(points, rows, columns)
-    if frame is not None:
+    pairs = _neighbours(centred)
+    sight = np.linalg.svd(centred, full_matrices=False)[2][2]
+    for _ in range(AXES_ROUNDS):
+        rows, columns = _steps(centred @ view_frame(sight)[:2].T, pairs)
+        frame = _orthographic_frame(points, rows, columns)
+        if frame is None:
+            return
         yield frame, True
+        if abs(float(frame[:, 2] @ sight)) > 1.0 - 1e-12:
+            return  # settled: another round reads the same steps
+        sight = frame[:, 2]
 
 
 def _orthographic_frame(points: np.ndarray, rows: Pairs, columns: Pairs) -> np.ndarray | None:
@@ -566,15 +580,22 @@ def _orthographic_frame(points: np.ndarray, rows: Pairs, columns: Pairs) -> np.n
     return _unit_columns(across_columns, across_rows, np.cross(across_rows, across_columns))
 
 
-def _steps(image: np.ndarray) -> tuple[Pairs, Pairs]:
-    """:func:`sensor_axes`' steps in ``image`` (n, 2): the (first, second) point indices
-    of the steps along its rows and along its columns."""
+def _neighbours(points: np.ndarray) -> Pairs:
+    """The (first, second) indices of each of a seeded sample of ``points`` (n, d) and its
+    nearest ``AXES_NEIGHBOURS``."""
     from scipy.spatial import cKDTree
 
-    sample = np.random.default_rng(0).permutation(len(image))[:AXES_SAMPLE]
-    tree = cKDTree(image, balanced_tree=False, compact_nodes=False)  # built faster
-    near = np.asarray(tree.query(image[sample], k=AXES_NEIGHBOURS + 1)[1])[:, 1:]
-    first, second = np.repeat(sample, AXES_NEIGHBOURS), near.ravel()
+    sample = np.random.default_rng(0).permutation(len(points))[:AXES_SAMPLE]
+    tree = cKDTree(points, balanced_tree=False, compact_nodes=False)  # built faster
+    near = np.asarray(tree.query(points[sample], k=AXES_NEIGHBOURS + 1)[1])[:, 1:]
+    return np.repeat(sample, AXES_NEIGHBOURS), near.ravel()
+
+
+def _steps(image: np.ndarray, pairs: Pairs | None = None) -> tuple[Pairs, Pairs]:
+    """:func:`sensor_axes`' steps in ``image`` (n, 2): the (first, second) point indices
+    of the steps along its rows and along its columns, among ``pairs`` (neighbours in the
+    image by default, :func:`_neighbours`)."""
+    first, second = _neighbours(image) if pairs is None else pairs
     step = image[second] - image[first]
     angle = np.arctan2(step[:, 1], step[:, 0])
     turn = angle - np.angle(np.exp(4j * angle).sum()) / 4  # from the dominant direction
