@@ -318,8 +318,9 @@ def sensor_side(vertices: np.ndarray, faces: np.ndarray, direction: np.ndarray) 
     read from the wrong one is described as its mirror image, its unseen side taken on
     the side it was seen from.
     """
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    edges, uses = np.unique(edges, axis=0, return_counts=True)
+    ends = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    keys, uses = np.unique(ends[:, 0] * len(vertices) + ends[:, 1], return_counts=True)
+    edges = np.stack([keys // len(vertices), keys % len(vertices)], axis=1)
     boundary = np.unique(edges[uses == 1])
     height = vertices @ direction
     both = np.concatenate([edges, edges[:, ::-1]])
