@@ -48,6 +48,7 @@ import numpy as np
 
 from .errors import MeshError, PointCloudError, UnreadableMeshError
 from .formats import DEFAULT_MAX_DECOMPRESSED_BYTES
+from .topology import edge_keys, keys_seen_once
 
 #: An edge closer than this to its sensor's viewing ray crosses a gap, not the surface.
 SHADOW_DEGREES = 12.5
@@ -205,7 +206,11 @@ def organized_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.nda
 
 
 def viewed_surface(
-    points: np.ndarray, viewpoint: np.ndarray, axes: np.ndarray | None = None
+    points: np.ndarray,
+    viewpoint: np.ndarray,
+    axes: np.ndarray | None = None,
+    *,
+    find_frame: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A cloud without a grid read as one view: (n, 3) its finite points and (m, 3) the
     triangles of the surface its sensor saw, facing the sensor.
@@ -220,8 +225,8 @@ def viewed_surface(
     distance to its nearest in the image; a missing pixel leaves a hole as the grid
     does), or shadowed (:func:`unshadowed`, an occluding edge along the ray). Points on
     a camera's pixel lattice (:func:`sensor_grid`, the sensor's ``axes`` (3, 3) as
-    columns in the points' frame, theirs by default, else a frame found from the points,
-    :func:`sensor_axes`) are triangulated by that grid instead
+    columns in the points' frame, theirs by default, else, with ``find_frame``, a frame
+    found from the points, :func:`sensor_axes`) are triangulated by that grid instead
     (:func:`organized_surface`), each triangle facing the sensor; an orthographic grid is
     seen along its own line of sight, from ``viewpoint`` if it stands on that line
     (:func:`_seen_along`), else from afar on the side its silhouette says
@@ -241,7 +246,8 @@ def viewed_surface(
     if len(finite) < 3:
         raise PointCloudError(f"The file holds too few points to make a surface. {UPLOAD_A_VIEW}")
     lattice, sensor, guessed = sensor_grid(finite, viewpoint, axes), viewpoint, None
-    for frame, orthographic in [] if lattice is not None else sensor_axes(finite, viewpoint):
+    searched = find_frame and lattice is None
+    for frame, orthographic in sensor_axes(finite, viewpoint) if searched else []:
         lattice = sensor_grid(finite, viewpoint, frame, along=(2,))
         if lattice is not None:
             if orthographic and not _seen_along(finite, viewpoint, frame[:, 2]):
@@ -318,10 +324,12 @@ def sensor_side(vertices: np.ndarray, faces: np.ndarray, direction: np.ndarray) 
     read from the wrong one is described as its mirror image, its unseen side taken on
     the side it was seen from.
     """
-    ends = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    keys, uses = np.unique(ends[:, 0] * len(vertices) + ends[:, 1], return_counts=True)
-    edges = np.stack([keys // len(vertices), keys % len(vertices)], axis=1)
-    boundary = np.unique(edges[uses == 1])
+    n = len(vertices)
+    keys = edge_keys(faces, n).ravel()
+    once = keys_seen_once(keys)
+    boundary = np.unique(np.concatenate([once // n, once % n]))
+    every = np.unique(keys)
+    edges = np.stack([every // n, every % n], axis=1)
     height = vertices @ direction
     both = np.concatenate([edges, edges[:, ::-1]])
     around = np.bincount(both[:, 0], weights=height[both[:, 1]], minlength=len(vertices))
@@ -350,12 +358,14 @@ def one_view(
         return viewed_surface(points, viewpoint, axes)
     except PointCloudError as refusal:
         try:
+            # The first try searched the points' frames already (sensor_axes: where no
+            # lattice was found from there, none is from afar).
             guess = thinnest_viewpoint(points)
-            vertices, faces = viewed_surface(points, guess)
+            vertices, faces = viewed_surface(points, guess, find_frame=False)
             sight = grid_sight(vertices, faces)
             if sight is not None:
                 guess = thinnest_viewpoint(points, sight)
-                vertices, faces = viewed_surface(points, guess)
+                vertices, faces = viewed_surface(points, guess, find_frame=False)
         except PointCloudError:
             raise refusal from None
         direction = guess - vertices.mean(axis=0)
@@ -373,10 +383,17 @@ def thinnest_viewpoint(points: np.ndarray, direction: np.ndarray | None = None) 
         return np.zeros(3)
     centre = finite.mean(axis=0)
     if direction is None:
-        direction = np.linalg.svd(finite - centre, full_matrices=False)[2][-1]
+        direction = least_spread(finite)
     extent = float(np.ptp(finite, axis=0).max())
     viewpoint: np.ndarray = centre + GUESSED_SENSOR_EXTENTS * extent * direction
     return viewpoint
+
+
+def least_spread(points: np.ndarray) -> np.ndarray:
+    """(3,) the unit direction ``points`` (n, 3) spread least along (their least
+    principal axis)."""
+    least: np.ndarray = np.linalg.svd(points - points.mean(axis=0), full_matrices=False)[2][-1]
+    return least
 
 
 #: :func:`lattice_steps`: values closer than this share of their span are one row or
@@ -544,9 +561,10 @@ def sensor_axes(points: np.ndarray, viewpoint: np.ndarray) -> Iterator[tuple[np.
         return
     rays = points - viewpoint
     mean_ray = rays.mean(axis=0)
-    view = view_frame(mean_ray) if np.linalg.norm(mean_ray) > 0.0 else None
-    if view is not None and (rays @ view[2] > 0.0).all():
-        rows, columns = _steps(rays @ view[:2].T / (rays @ view[2])[:, None])
+    view = view_frame(mean_ray) if np.linalg.norm(mean_ray) > 0.0 else np.zeros((3, 3))
+    depth = rays @ view[2]
+    if (depth > 0.0).all():
+        rows, columns = _steps(rays @ view[:2].T / depth[:, None])
         a = _least_direction(np.cross(rays[rows[0]], rays[rows[1]]))
         b = _least_direction(np.cross(rays[columns[0]], rays[columns[1]]))
         if a is not None and b is not None:
@@ -559,7 +577,7 @@ def sensor_axes(points: np.ndarray, viewpoint: np.ndarray) -> Iterator[tuple[np.
             yield frame, True
     centred = points - points.mean(axis=0)
     pairs = _neighbours(centred)
-    sight = np.linalg.svd(centred, full_matrices=False)[2][2]
+    sight = least_spread(points)
     for _ in range(AXES_ROUNDS):
         rows, columns = _steps(centred @ view_frame(sight)[:2].T, pairs)
         frame = _orthographic_frame(points, rows, columns)
