@@ -301,34 +301,41 @@ def grid_steps(grid: np.ndarray) -> set[frozenset[tuple[float, ...]]]:
     return point_pairs(grid[:, :-1], grid[:, 1:]) | point_pairs(grid[:-1], grid[1:])
 
 
-@pytest.mark.parametrize("frame", ["camera", "turned", "off the lattice"])
-def test_a_cloud_without_its_grid_is_triangulated_as_its_grid_is(frame):
+@pytest.mark.parametrize("frame", ["camera", "turned", "turned, moved", "off the lattice"])
+def test_a_cloud_without_its_grid_is_triangulated_as_its_grid_is(frame, monkeypatch):
     """The two planes' points in random order, from the same viewpoint, make the grid's
     surface: every point, no triangle across the gap between the planes, none over the
     pixels that saw nothing; a grid's square split along either diagonal (four points on
     a circle), so the same area in as many triangles. Each faces the sensor. In the
     camera's frame the points lie on its pixel lattice (:func:`scans.sensor_grid`);
     turned away from it they lie on it in a frame found from them
-    (:func:`scans.sensor_axes`); moved within their planes by a hundredth of a pixel
-    they lie on none, and the Delaunay triangulation of their image makes the same
-    surface."""
+    (:func:`scans.sensor_axes`); moved within their planes by up to a tenth of a pixel, near
+    it (:func:`scans.snapped_steps`, the pitch from the frame's steps); moved by a
+    hundredth of a pixel and not read near a lattice (as if moved farther), the Delaunay
+    triangulation of their image makes the same surface."""
     points, _ = two_planes()
     points[5:9, 20:30] = np.nan  # a hole the far plane's grid leaves open
     points[2, 3] = np.nan  # a missing pixel
-    if frame == "off the lattice":
-        jitter = np.random.default_rng(5).uniform(-1e-2, 1e-2, size=(HEIGHT, WIDTH, 2))
+    if frame in ("turned, moved", "off the lattice"):
+        most = 0.1 if frame == "turned, moved" else 1e-2
+        jitter = np.random.default_rng(5).uniform(-most, most, size=(HEIGHT, WIDTH, 2))
         points[..., :2] += 0.02 * points[..., 2:] * jitter
-    turn = random_rotation(np.random.default_rng(3)) if frame == "turned" else np.eye(3)
+    if frame == "off the lattice":
+        monkeypatch.setattr(scans, "snapped_steps", lambda values, pitch: None)
+    turned = frame.startswith("turned")
+    turn = random_rotation(np.random.default_rng(3)) if turned else np.eye(3)
     points = points @ turn.T
     grid_vertices, grid_triangles = organized_surface(points, np.zeros(3))
     shuffled = points.reshape(-1, 3)[np.random.default_rng(0).permutation(HEIGHT * WIDTH)]
     finite = shuffled[np.isfinite(shuffled).all(axis=1)]
     assert (scans.sensor_grid(finite, np.zeros(3)) is None) == (frame != "camera")
-    found = [
-        scans.sensor_grid(finite, np.zeros(3), axes)
-        for axes, _ in scans.sensor_axes(finite, np.zeros(3))
+    frames = list(scans.sensor_axes(finite, np.zeros(3)))
+    exact = [scans.sensor_grid(finite, np.zeros(3), axes) for axes, _, _ in frames]
+    assert any(lattice is not None for lattice in exact) == (frame in ("camera", "turned"))
+    snapped = [
+        scans.sensor_grid(finite, np.zeros(3), axes, steps=steps) for axes, _, steps in frames
     ]
-    assert any(lattice is not None for lattice in found) == (frame != "off the lattice")
+    assert any(lattice is not None for lattice in snapped) == (frame != "off the lattice")
     vertices, faces = viewed_surface(shuffled, np.zeros(3))
     assert {tuple(v) for v in vertices.tolist()} == {tuple(v) for v in grid_vertices.tolist()}
     assert len(vertices) == len(grid_vertices) and len(faces) == len(grid_triangles)
@@ -372,6 +379,25 @@ def test_lattice_steps_number_a_sensor_s_columns_and_refuse_other_values():
     values = 0.02 * steps + rng.uniform(-4e-4, 4e-4, size=3000)
     assert np.array_equal(scans.lattice_steps(values, rounding=8e-4), steps - steps.min())
     assert scans.lattice_steps(values) is None
+
+
+def test_snapped_steps_read_values_moved_off_their_columns():
+    """300 columns 0.02 apart, some missing, each value moved by up to 0.3 of a pitch (a
+    view smoothed after the scan, or written with few decimals): each value's column,
+    the pitch given 3% off, and so for a patch of 1,024 values over 30 columns. Values
+    moved by up to 0.45 of a pitch, or on no lattice: none (their own lattice is none of
+    :func:`scans.lattice_steps`')."""
+    rng = np.random.default_rng(0)
+    for size, count in ((30_000, 300), (1024, 30)):
+        columns = np.setdiff1d(np.arange(count), [7, 8, 12, 120, 121, 122, 250])
+        steps = rng.choice(columns, size)
+        values = 1.5 + 0.02 * steps + rng.uniform(-0.006, 0.006, size=size)
+        assert scans.lattice_steps(values) is None
+        for pitch in (0.02, 0.0206, 0.0194):
+            assert np.array_equal(scans.snapped_steps(values, pitch), steps - steps.min())
+        far = 1.5 + 0.02 * steps + rng.uniform(-0.009, 0.009, size=size)
+        assert scans.snapped_steps(far, 0.02) is None
+        assert scans.snapped_steps(rng.uniform(0.0, 6.0, size=size), 0.02) is None
 
 
 @pytest.mark.parametrize("frame", ["camera", "x backwards", "orthographic along y"])
@@ -423,7 +449,13 @@ def test_points_on_a_camera_s_lattice_are_read_by_its_grid(frame):
 
 
 @pytest.mark.parametrize(
-    "case", ["pinhole turned about itself", "orthographic turned about itself", "mesh's frame"]
+    "case",
+    [
+        "pinhole turned about itself",
+        "orthographic turned about itself",
+        "mesh's frame",
+        "mesh's frame, moved",
+    ],
 )
 def test_a_view_s_pixel_lattice_is_found_in_any_frame(case, monkeypatch):
     """Points of one view written out of their sensor's frame, in another order, as
@@ -437,7 +469,10 @@ def test_a_view_s_pixel_lattice_is_found_in_any_frame(case, monkeypatch):
     view is read without a Delaunay triangulation, its every edge a step or a diagonal of
     the grid, none along the sensor's rays, every triangle facing the camera (in the
     mesh's frame the origin, the sensor a file without one names, stands behind the view:
-    the side is the silhouette's, :func:`scans.sensor_side`)."""
+    the side is the silhouette's, :func:`scans.sensor_side`). Each point moved a tenth of
+    a pixel at random, as smoothing after the scan moves it, the view lies on no lattice
+    but near one: its nodes are found from the steps the frame was fitted to
+    (:func:`scans.snapped_steps`), and the view is read on the same grid."""
     turn = random_rotation(np.random.default_rng(4))
     if case == "pinhole turned about itself":
         grid, _ = two_planes()
@@ -453,18 +488,27 @@ def test_a_view_s_pixel_lattice_is_found_in_any_frame(case, monkeypatch):
     if case == "mesh's frame":  # the origin behind the view, the camera before it
         behind = 3.0 * float(np.ptp(grid[np.isfinite(grid).all(axis=2)], axis=0).max()) * sight
         grid, camera = grid + behind, camera + behind
+    moved = case == "mesh's frame, moved"
+    if moved:
+        pitch = np.nanmedian(np.linalg.norm(np.diff(grid, axis=0), axis=2))
+        noise = np.random.default_rng(2).normal(size=grid.shape)
+        grid = grid + 0.1 * pitch / np.sqrt(3) * noise
     seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()]
     points = seen[np.random.default_rng(0).permutation(len(seen))]
     assert scans.sensor_grid(points, np.zeros(3)) is None
+    frames = list(scans.sensor_axes(points, np.zeros(3)))
+    exact = [scans.sensor_grid(points, np.zeros(3), frame) for frame, _, _ in frames]
+    snapped = [
+        scans.sensor_grid(points, np.zeros(3), frame, steps=steps) for frame, _, steps in frames
+    ]
+    assert any(found is not None for found in exact) != moved
     lattice, frame = next(
         (found, frame)
-        for found, frame in (
-            (scans.sensor_grid(points, np.zeros(3), frame), frame)
-            for frame, _ in scans.sensor_axes(points, np.zeros(3))
-        )
+        for found, (frame, _, _) in zip(snapped if moved else exact, frames, strict=True)
         if found is not None
     )
-    assert min(np.linalg.norm(frame[:, 2] - sight), np.linalg.norm(frame[:, 2] + sight)) < 2e-4
+    off = min(np.linalg.norm(frame[:, 2] - sight), np.linalg.norm(frame[:, 2] + sight))
+    assert off < (1e-2 if moved else 2e-4)
     assert np.isfinite(lattice).all(axis=2).sum() == len(points)
     assert grid_steps(lattice) == grid_steps(grid)
 
@@ -502,7 +546,7 @@ def test_a_scan_seen_from_a_direction_it_is_not_thinnest_in_is_found_in_rounds(m
     def found() -> bool:
         return any(
             scans.sensor_grid(seen, np.zeros(3), frame, along=(2,)) is not None
-            for frame, _ in scans.sensor_axes(seen, np.zeros(3))
+            for frame, _, _ in scans.sensor_axes(seen, np.zeros(3))
         )
 
     assert found()
@@ -511,14 +555,17 @@ def test_a_scan_seen_from_a_direction_it_is_not_thinnest_in_is_found_in_rounds(m
 
 
 @pytest.mark.parametrize("turn_seed", [2, 5])  # the least spread's axis toward the camera, away
-def test_one_view_written_in_another_frame_is_seen_from_where_it_is_thinnest(turn_seed):
+def test_one_view_written_in_another_frame_is_seen_from_where_it_is_thinnest(
+    turn_seed, monkeypatch
+):
     """The depth example's view written in its mesh's frame and turned, each point moved
-    a thousandth of a pixel at random (off any lattice; seen from the origin, most of
-    its points hide behind others): read as seen from afar along the direction the
-    points spread least in, the organized cloud's surface (every point on it, the same
-    area to 0.5%), every triangle facing the camera whichever way that direction's sign
-    fell (the silhouette's side, :func:`scans.sensor_side`). A whole object's points are
-    still refused with the sentence about the sensor the file gave."""
+    a thousandth of a pixel at random (off any lattice, and not read near one, as if
+    moved farther; seen from the origin, most of its points hide behind others): read as
+    seen from afar along the direction the points spread least in, the organized cloud's
+    surface (every point on it, the same area to 0.5%), every triangle facing the camera
+    whichever way that direction's sign fell (the silhouette's side,
+    :func:`scans.sensor_side`). A whole object's points are still refused with the
+    sentence about the sensor the file gave."""
     grid, camera = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), 2000)
     pitch = np.nanmedian(np.linalg.norm(np.diff(grid, axis=0), axis=2))
     grid = grid + np.random.default_rng(1).normal(scale=1e-3 * pitch, size=grid.shape)
@@ -528,9 +575,10 @@ def test_one_view_written_in_another_frame_is_seen_from_where_it_is_thinnest(tur
     vertices, faces = organized_surface(grid, scans.thinnest_viewpoint(grid.reshape(-1, 3), sight))
     seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()]
     shuffled = seen[np.random.default_rng(0).permutation(len(seen))]
+    monkeypatch.setattr(scans, "snapped_steps", lambda values, pitch: None)  # as if farther
     assert all(
-        scans.sensor_grid(shuffled, np.zeros(3), f) is None
-        for f, _ in scans.sensor_axes(shuffled, np.zeros(3))
+        scans.sensor_grid(shuffled, np.zeros(3), f, steps=steps) is None
+        for f, _, steps in scans.sensor_axes(shuffled, np.zeros(3))
     )
     with pytest.raises(PointCloudError, match=r"not one view from the sensor at \(0, 0, 0\)"):
         viewed_surface(shuffled, np.zeros(3))

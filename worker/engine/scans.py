@@ -16,7 +16,9 @@ have given, and their Delaunay triangulation is the grid's (:func:`viewed_surfac
 gaps left open as the grid leaves them. In the camera's own frame the pixels are a
 lattice, and the grid itself is found again (:func:`sensor_grid`); in any other frame the
 camera's is found first, from the steps between neighbouring points
-(:func:`sensor_axes`). A view on no lattice written in another frame is seen from afar
+(:func:`sensor_axes`), and points moved a little off their pixels after the scan
+(smoothed, or written with few decimals) are read on the lattice they lie near
+(:func:`snapped_steps`). A view on no lattice written in another frame is seen from afar
 along the direction it is thinnest in (:func:`one_view`). Points of which some hide
 behind others as seen from there (a whole object's, a scan merged from several views)
 are refused: their neighbours are not known, and guessing them fuses touching sheets
@@ -226,7 +228,8 @@ def viewed_surface(
     does), or shadowed (:func:`unshadowed`, an occluding edge along the ray). Points on
     a camera's pixel lattice (:func:`sensor_grid`, the sensor's ``axes`` (3, 3) as
     columns in the points' frame, theirs by default, else, with ``find_frame``, a frame
-    found from the points, :func:`sensor_axes`) are triangulated by that grid instead
+    found from the points, :func:`sensor_axes`, there also points moved a little off
+    their pixels, :func:`snapped_steps`) are triangulated by that grid instead
     (:func:`organized_surface`), each triangle facing the sensor; an orthographic grid is
     seen along its own line of sight, from ``viewpoint`` if it stands on that line
     (:func:`_seen_along`), else from afar on the side its silhouette says
@@ -247,8 +250,8 @@ def viewed_surface(
         raise PointCloudError(f"The file holds too few points to make a surface. {UPLOAD_A_VIEW}")
     lattice, sensor, guessed = sensor_grid(finite, viewpoint, axes), viewpoint, None
     searched = find_frame and lattice is None
-    for frame, orthographic in sensor_axes(finite, viewpoint) if searched else []:
-        lattice = sensor_grid(finite, viewpoint, frame, along=(2,))
+    for frame, orthographic, steps in sensor_axes(finite, viewpoint) if searched else []:
+        lattice = sensor_grid(finite, viewpoint, frame, along=(2,), steps=steps)
         if lattice is not None:
             if orthographic and not _seen_along(finite, viewpoint, frame[:, 2]):
                 guessed = frame[:, 2]
@@ -415,6 +418,11 @@ FLOAT32_SPREAD = 2.1e-7
 #: time all the points take).
 LATTICE_MAX_FILL = 16
 LATTICE_TRIAL = 1024
+#: :func:`snapped_steps`: each value within ``SNAP_RESIDUAL`` of a pitch of its lattice
+#: node, so two neighbouring columns' values at least ``SNAP_GAP`` of a pitch apart
+#: (1 - 2 x 0.35, less a little); a cloud on no lattice has values half a pitch off.
+SNAP_RESIDUAL = 0.35
+SNAP_GAP = 0.25
 
 
 def lattice_steps(values: np.ndarray, rounding: float = 0.0) -> np.ndarray | None:
@@ -455,11 +463,42 @@ def lattice_steps(values: np.ndarray, rounding: float = 0.0) -> np.ndarray | Non
     return steps
 
 
+def snapped_steps(values: np.ndarray, pitch: float) -> np.ndarray | None:
+    """(n,) int, each of ``values`` (n,) as the step of its nearest node on a regular
+    lattice (0 at the least) whose pitch is ``pitch`` to within a few percent, or None
+    when a value lies farther than :data:`SNAP_RESIDUAL` of a pitch from every node.
+
+    The values of one column of pixels, moved off their node (a view's points smoothed
+    or resampled after the scan, or written with few decimals), are one run of the
+    ordered values, apart from the next column's by more than :data:`SNAP_GAP` of a
+    pitch; each run's mean is its column's node, and the columns' steps the whole
+    pitches between neighbouring runs (a missing column two). The lattice's pitch and
+    origin are then the least-squares line through the runs' steps and means, and each
+    value's step its nearest node on it (:func:`lattice_steps` reads a lattice its
+    values lie on exactly).
+    """
+    ordered = np.sort(values)
+    starts = np.flatnonzero(np.diff(ordered) > SNAP_GAP * pitch) + 1
+    bounds = np.concatenate([[0], starts, [len(ordered)]])
+    centres = np.add.reduceat(ordered, bounds[:-1]) / np.diff(bounds)
+    step = np.concatenate([[0.0], np.cumsum(np.round(np.diff(centres) / pitch))])
+    if step[-1] < 1.0:
+        return None
+    fitted, start = (float(c) for c in np.polyfit(step, centres, 1))
+    position = (values - start) / fitted
+    nearest = np.round(position)
+    if np.abs(position - nearest).max() > SNAP_RESIDUAL:
+        return None
+    steps: np.ndarray = (nearest - nearest.min()).astype(np.int64)
+    return steps
+
+
 def sensor_grid(
     points: np.ndarray,
     viewpoint: np.ndarray,
     axes: np.ndarray | None = None,
     along: tuple[int, ...] = (2, 0, 1),
+    steps: Pairs | None = None,
 ) -> np.ndarray | None:
     """The organized cloud (h, w, 3) (``nan`` where no point is) of ``points`` (n, 3) that
     lie on a camera's pixel lattice, or None.
@@ -474,7 +513,10 @@ def sensor_grid(
     point lies on one side of the viewpoint along it, then as an orthographic one (on a
     sample of the points first, :data:`LATTICE_TRIAL`); the first lattice on which every
     point has its own pixel is the grid, and triangulating it needs no Delaunay
-    triangulation.
+    triangulation. Given ``steps`` between neighbouring pixels (the (first, second)
+    indices of pairs of the points, :func:`sensor_axes`'), whose median lengths along
+    the image's two axes are its pitches, points within :data:`SNAP_RESIDUAL` of a pitch
+    of a lattice's nodes are read on it too (:func:`snapped_steps`).
     """
     rays = points - viewpoint
     if axes is not None:
@@ -488,10 +530,10 @@ def sensor_grid(
         if (depth > 0.0).all() or (depth < 0.0).all():
             images.insert(0, (rays[:, across] / depth[:, None], 0.0))
         for image, spread in images:
-            # Most frames hold no lattice: a seeded sample of the points tells first.
-            if _pixels(image[trial], spread) is None:
-                continue
-            pixels = _pixels(image, spread)
+            pixels = _pixels(image, trial, spread)
+            if pixels is None and steps is not None:
+                pitches = _pitches(image, steps)
+                pixels = None if pitches is None else _pixels(image, trial, spread, pitches)
             if pixels is None:
                 continue
             rows, columns = pixels
@@ -529,12 +571,15 @@ ORTHOGRAPHIC_DEGREES = 1.0
 Pairs = tuple[np.ndarray, np.ndarray]
 
 
-def sensor_axes(points: np.ndarray, viewpoint: np.ndarray) -> Iterator[tuple[np.ndarray, bool]]:
-    """Frames (3, 3) (unit columns: across the sensor's rows, across its columns, its
-    line of sight) in which ``points`` (n, 3), one view written in any frame, may lie on
-    their sensor's pixel lattice (:func:`sensor_grid`), each with whether it is an
-    orthographic sensor's, made as they are tried: when every point lies in front of
-    ``viewpoint``, a pinhole camera's there and an orthographic grid's from the same
+def sensor_axes(
+    points: np.ndarray, viewpoint: np.ndarray
+) -> Iterator[tuple[np.ndarray, bool, Pairs]]:
+    """Frames (3, 3) (unit columns: across the sensor's rows, across its columns, its line
+    of sight) in which ``points`` (n, 3), one view written in any frame, may lie on their
+    sensor's pixel lattice (:func:`sensor_grid`), each with whether it is an orthographic
+    sensor's and the steps it was fitted to (the (first, second) indices of neighbouring
+    pixels, for the lattice's pitch), made as they are tried: when every point lies in front
+    of ``viewpoint``, a pinhole camera's there and an orthographic grid's from the same
     steps; then an orthographic grid's from steps read afresh (the points' image from
     ``viewpoint`` may be none of theirs: a view written in its mesh's frame).
 
@@ -571,10 +616,10 @@ def sensor_axes(points: np.ndarray, viewpoint: np.ndarray) -> Iterator[tuple[np.
             sight = np.cross(a, b)
             frame = _unit_columns(np.cross(b, sight), np.cross(a, sight), sight)
             if frame is not None:
-                yield frame, False
+                yield frame, False, _joined(rows, columns)
         frame = _orthographic_frame(points, rows, columns)
         if frame is not None:
-            yield frame, True
+            yield frame, True, _joined(rows, columns)
     centred = points - points.mean(axis=0)
     pairs = _neighbours(centred)
     sight = least_spread(points)
@@ -583,7 +628,7 @@ def sensor_axes(points: np.ndarray, viewpoint: np.ndarray) -> Iterator[tuple[np.
         frame = _orthographic_frame(points, rows, columns)
         if frame is None:
             return
-        yield frame, True
+        yield frame, True, _joined(rows, columns)
         if abs(float(frame[:, 2] @ sight)) > 1.0 - 1e-12:
             return  # settled: another round reads the same steps
         sight = frame[:, 2]
@@ -655,12 +700,52 @@ def _unit_columns(*columns: np.ndarray) -> np.ndarray | None:
     return frame
 
 
-def _pixels(image: np.ndarray, rounding: float) -> tuple[np.ndarray, np.ndarray] | None:
+def _joined(rows: Pairs, columns: Pairs) -> Pairs:
+    """The steps along ``rows`` and along ``columns`` as one set of pairs."""
+    return np.concatenate([rows[0], columns[0]]), np.concatenate([rows[1], columns[1]])
+
+
+def _pitches(image: np.ndarray, steps: Pairs) -> tuple[float, float] | None:
+    """The pitches (across columns, across rows) of the lattice ``image`` (n, 2) may lie
+    on: the median length of the ``steps`` that run along each of its axes (at least
+    twice as far along it as across), or None when fewer than ten do."""
+    delta = np.abs(image[steps[1]] - image[steps[0]])
+    pitches = []
+    for axis in (0, 1):
+        along = delta[:, axis] > 2.0 * delta[:, 1 - axis]
+        if along.sum() < 10:
+            return None
+        pitches.append(float(np.median(delta[along, axis])))
+    return pitches[0], pitches[1]
+
+
+def _pixels(
+    image: np.ndarray,
+    trial: np.ndarray,
+    rounding: float,
+    pitches: tuple[float, float] | None = None,
+) -> tuple[np.ndarray, np.ndarray] | None:
     """(rows, columns) (n,) int of the points whose ``image`` (n, 2) lies on a lattice
-    (:func:`lattice_steps`, ``rounding`` allowed for), or None."""
-    rows = lattice_steps(image[:, 1], rounding)
-    columns = None if rows is None else lattice_steps(image[:, 0], rounding)
-    return None if rows is None or columns is None else (rows, columns)
+    (:func:`lattice_steps`, ``rounding`` allowed for; near one of about ``pitches``,
+    :func:`snapped_steps`, when given), or None. Most frames hold no lattice: the
+    ``trial`` sample of the points (indices) tells first; near a lattice, as many points
+    around the image's median instead (a sample's few values in each column, moved,
+    could lie farther apart than two columns)."""
+    if pitches is not None:
+        middle = np.abs(image - np.median(image, axis=0)).max(axis=1)
+        trial = np.argpartition(middle, len(trial) - 1)[: len(trial)]
+    pixels = None
+    for part in (image[trial], image):
+        if pitches is None:
+            rows = lattice_steps(part[:, 1], rounding)
+            columns = None if rows is None else lattice_steps(part[:, 0], rounding)
+        else:
+            rows = snapped_steps(part[:, 1], pitches[1])
+            columns = None if rows is None else snapped_steps(part[:, 0], pitches[0])
+        if rows is None or columns is None:
+            return None
+        pixels = rows, columns
+    return pixels
 
 
 def _facing(
