@@ -63,12 +63,13 @@ UPLOAD_A_VIEW = (
 )
 
 #: :func:`viewed_surface`: the share of a cloud's points that must lie on the surface
-#: seen from its sensor for it to be one view (92-100% of a range scan's, 9-20% of a
-#: whole object's vertices seen from afar: docs/decisions.md), and an edge's length in
-#: the image, in spacings of its points, past which it crosses a gap (a grid's diagonal
-#: is 1.41 spacings, the edge across a missing pixel 2).
+#: seen from its sensor for it to be one view (92-100% of a range scan's, at most 48% of
+#: a whole object's vertices seen from afar: docs/decisions.md), and a triangle's longest
+#: edge in the image, in spacings of its corners (the least of their median edges),
+#: past which it crosses a gap (a grid's diagonal is 1.41 spacings, the edge across a
+#: missing pixel 2; a voxel-filtered or smoothed view's own edges reach past 1.5).
 VIEW_SHARE = 0.8
-GAP_SPACINGS = 1.5
+GAP_SPACINGS = 1.9
 
 #: PCD field types (``TYPE`` and ``SIZE``) as numpy's little-endian type letters.
 _PCD_TYPES = {"F": "f", "I": "i", "U": "u"}
@@ -223,9 +224,10 @@ def viewed_surface(
     (exact for a depth camera at the origin of its points' frame). Its Delaunay
     triangulation is the grid's own: each pixel joined to its neighbours, a square split
     along a diagonal. As on a grid, a triangle is left out when an edge crosses a gap:
-    longer in the image than ``GAP_SPACINGS`` times the spacing of its ends (each point's
-    distance to its nearest in the image; a missing pixel leaves a hole as the grid
-    does), or shadowed (:func:`unshadowed`, an occluding edge along the ray). Points on
+    longer in the image than ``GAP_SPACINGS`` times the spacing of its corners (the
+    least of their median edges in the image: the points' own spacing however irregular
+    or noisy; a missing pixel's hole, which the grid leaves, may close), or shadowed
+    (:func:`unshadowed`, an occluding edge along the ray). Points on
     a camera's pixel lattice (:func:`sensor_grid`, the sensor's ``axes`` (3, 3) as
     columns in the points' frame, theirs by default, else, with ``find_frame``, a frame
     found from the points, :func:`sensor_axes`, there also points moved a little off
@@ -284,11 +286,8 @@ def viewed_surface(
         ) from exc
     corners = image[faces]
     sides = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)  # (m, 3)
-    spacing = np.full(len(finite), np.inf)
-    for side in range(3):  # side k joins corners k - 1 and k
-        np.minimum.at(spacing, faces[:, side], sides[:, side])
-        np.minimum.at(spacing, faces[:, side - 1], sides[:, side])
-    kept = sides.max(axis=1) <= GAP_SPACINGS * spacing[faces].max(axis=1)
+    spacing = _median_edges(image, faces)
+    kept = sides.max(axis=1) <= GAP_SPACINGS * spacing[faces].min(axis=1)
     kept &= unshadowed(finite, faces, viewpoint)
     faces = faces[kept]
     seen = np.unique(faces).size / len(finite)
@@ -305,6 +304,21 @@ def viewed_surface(
     turn = ax * by - ay * bx
     faces[turn > 0] = faces[turn > 0][:, ::-1]
     return finite, faces
+
+
+def _median_edges(image: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(n,) each point's median length of its edges among ``faces`` (m, 3) in ``image``
+    (n, 2); ``inf`` for a point on none."""
+    n = len(image)
+    first, second = np.divmod(np.unique(edge_keys(faces, n).ravel()), n)
+    length = np.linalg.norm(image[first] - image[second], axis=1)
+    ends, lengths = np.concatenate([first, second]), np.concatenate([length, length])
+    order = np.lexsort((lengths, ends))
+    count = np.bincount(ends, minlength=n)
+    middle = np.cumsum(count) - count + (count - 1) // 2
+    median = np.full(n, np.inf)
+    median[count > 0] = lengths[order][middle[count > 0]]
+    return median
 
 
 def _seen_along(points: np.ndarray, viewpoint: np.ndarray, sight: np.ndarray) -> bool:
