@@ -8,7 +8,8 @@ was made), written as an organized PCD (ascii, binary), as a structured E57 scan
 points without the grid (in another order, in the camera's frame: an XYZ text file and a
 binary PLY of vertices; the PLY's points also turned about the camera, so that they lie
 on no pixel lattice in their own frame, turned in the mesh's frame, the camera elsewhere,
-and turned with each point moved a tenth of a pixel at random, on no lattice at all), and
+and turned with each point moved at random, a tenth of a pixel (near its lattice) or half
+a pixel (near none)), and
 its surface (what :func:`~worker.engine.scans.read_pcd` makes of the binary file) as an
 OFF mesh: a mesh of the same size. Each file is described by
 :func:`~worker.engine.pipeline.describe_file` ``--repeats`` times, the files' order
@@ -61,7 +62,7 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], int, tuple[int, int]]:
     seen = (vertices - viewpoint)[np.random.default_rng(0).permutation(len(vertices))]
     turn = random_rotation(np.random.default_rng(1))  # out of the camera's frame
     pitch = float(np.nanmedian(np.linalg.norm(np.diff(points, axis=1), axis=2)))
-    moved = seen + np.random.default_rng(2).normal(scale=0.1 * pitch / np.sqrt(3), size=seen.shape)
+    noise = np.random.default_rng(2).normal(scale=pitch / np.sqrt(3), size=seen.shape)
     files = {
         "mesh.off": mesh.encode(),
         "scan.pcd (ascii)": pcd_bytes(points, viewpoint),
@@ -71,7 +72,8 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], int, tuple[int, int]]:
         "scan.ply (no grid)": points_ply(seen),
         "scan.ply (no grid, turned)": points_ply(seen @ turn.T),
         "scan.ply (no grid, mesh's frame)": points_ply((seen + viewpoint) @ turn.T),
-        "scan.ply (no grid, turned, moved)": points_ply(moved @ turn.T),
+        "scan.ply (no grid, turned, moved 0.1 pixel)": points_ply((seen + 0.1 * noise) @ turn.T),
+        "scan.ply (no grid, turned, moved 0.5 pixel)": points_ply((seen + 0.5 * noise) @ turn.T),
     }
     return files, cloud.points, cloud.grid
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from worker.engine import scans
 from worker.engine.holes import boundary_loops
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
 from worker.evaluation import partial
@@ -148,6 +149,27 @@ def test_view_points_are_the_range_cloud_s_scans_read_without_their_grid(sphere,
         assert shared >= 0.99 * max(grid.n_vertices, points.n_vertices)
         area = face_areas(points.vertices, points.faces).sum()
         assert area == pytest.approx(face_areas(grid.vertices, grid.faces).sum(), rel=0.01)
+
+
+def test_view_voxels_are_the_range_cloud_s_scans_thinned(sphere, monkeypatch):
+    """``view-voxels`` draws ``range-cloud``'s scans (its seed) and keeps the mean of the
+    points in each voxel of two pixels: a quarter to a half of the points, on no pixel
+    lattice, read by Delaunay's triangulation of their image, which covers the grid's
+    surface to within 5% of its area."""
+    monkeypatch.setattr(partial, "similarity", lambda mesh, rng: mesh)
+    lattices = []
+    search = scans.sensor_grid
+    monkeypatch.setattr(
+        scans, "sensor_grid", lambda *a, **k: lattices.append(search(*a, **k)) or lattices[-1]
+    )
+    for name in ("sphere.off", "other.off"):
+        grid = make_variant(sphere, "range-cloud", name)
+        lattices.clear()
+        thinned = make_variant(sphere, "view-voxels", name)
+        assert lattices and all(lattice is None for lattice in lattices)
+        assert 0.25 * grid.n_vertices < thinned.n_vertices < 0.5 * grid.n_vertices
+        area = face_areas(thinned.vertices, thinned.faces).sum()
+        assert area == pytest.approx(face_areas(grid.vertices, grid.faces).sum(), rel=0.05)
 
 
 def test_a_noisy_view_is_the_view_moved_along_its_rays(sphere):

@@ -24,6 +24,8 @@ here keeps a part of the surface, its largest connected piece:
 * ``view-points``: ``range-cloud``'s very scans (drawn from its seed, :data:`DRAWN_AS`)
   without their grid, their points in another order, read as the service reads one
   view's points (:func:`worker.engine.scans.viewed_surface`, from the camera);
+* ``view-voxels``: the same scans' points thinned by a voxel filter of two pixels (on no
+  pixel lattice), read as ``view-points``;
 * ``shrec-holes``: SHREC'17's holes: geodesic discs of random radius (up to 20% of the
   diameter) eroded around some of 70 farthest samples, the rest decimated to a random
   resolution (300 vertices .. as many as the mesh has), in a random similarity transform;
@@ -365,6 +367,27 @@ def view_points(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     return similarity(clean_mesh(vertices, faces), rng)
 
 
+#: ``view-voxels``: the voxel's edge, in pixels of the scan.
+VOXEL_PIXELS = 2.0
+
+
+def view_voxels(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
+    """:func:`range_cloud`'s scan (its generator drawn from that variant's seed) thinned
+    as point-cloud tools thin a scan (a voxel filter: the mean of the points in each
+    cube of :data:`VOXEL_PIXELS` pixels, the cubes aligned with the mesh's frame), read as
+    :func:`view_points` reads its points: on no pixel lattice, by the Delaunay
+    triangulation of their image from the camera."""
+    points, direction, pitch = range_image(mesh, rng, up)
+    seen = points.reshape(-1, 3)[np.isfinite(points).all(axis=2).ravel()]
+    _, voxel = np.unique(np.floor(seen / (VOXEL_PIXELS * pitch)), axis=0, return_inverse=True)
+    voxel = voxel.ravel()
+    sums = np.stack([np.bincount(voxel, seen[:, k]) for k in range(3)], axis=1)
+    means = sums / np.bincount(voxel)[:, None]
+    shuffled = means[np.random.default_rng(0).permutation(len(means))]
+    vertices, faces = viewed_surface(shuffled, far_viewpoint(mesh, direction))
+    return similarity(clean_mesh(vertices, faces), rng)
+
+
 def single_view(mesh: Mesh, direction: np.ndarray) -> Mesh:
     """The faces a scanner looking along ``-direction`` (3,) sees: facing it, and with no
     other face in front of their centroid on the ray through it (orthographic rays;
@@ -412,7 +435,12 @@ def single_view(mesh: Mesh, direction: np.ndarray) -> Mesh:
 
 #: A variant drawn from another's seed (:func:`.variants.make_variant`): the same scans,
 #: read another way.
-DRAWN_AS = {"view-points": "range-cloud", "view-noise-0.25": "view", "view-noise-0.5": "view"}
+DRAWN_AS = {
+    "view-points": "range-cloud",
+    "view-voxels": "range-cloud",
+    "view-noise-0.25": "view",
+    "view-noise-0.5": "view",
+}
 
 #: The variants shot by the range camera: made with the axis their whole stands on
 #: (:data:`.datasets.UP_AXES`; z when not told) as well.
@@ -420,6 +448,7 @@ ORBITING: dict[str, Callable[[Mesh, np.random.Generator, str], Mesh]] = {
     "range": range_scan,
     "range-cloud": range_cloud,
     "view-points": view_points,
+    "view-voxels": view_voxels,
 }
 
 #: name -> how to make it from a mesh and a random generator, in report order.
@@ -433,6 +462,7 @@ PARTIAL_VARIANTS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
     "range": range_scan,
     "range-cloud": range_cloud,
     "view-points": view_points,
+    "view-voxels": view_voxels,
     "shrec-holes": shrec_holes,
     "noise-0.25": lambda mesh, rng: noisy_surface(mesh, 0.25, rng),
     "noise-0.5": lambda mesh, rng: noisy_surface(mesh, 0.5, rng),
