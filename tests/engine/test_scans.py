@@ -556,6 +556,24 @@ def test_a_scan_seen_from_a_direction_it_is_not_thinnest_in_is_found_in_rounds(m
     assert not found()
 
 
+def test_median_edges_are_each_point_s_middle_edge():
+    """:func:`scans.median_edges` against a plain loop over the points: the Delaunay
+    triangulation of random points far from the origin (their numbers' offsets must not
+    blur their lengths), and a point on no edge."""
+    from scipy.spatial import Delaunay
+
+    image = 1e3 + np.random.default_rng(0).random((3000, 2))
+    indptr, indices = Delaunay(image).vertex_neighbor_vertices
+    indptr = np.concatenate([indptr, [indptr[-1]]])  # one more point, on no edge
+    image = np.concatenate([image, [[0.0, 0.0]]])
+    want = np.full(len(image), np.inf)
+    for point in range(len(image) - 1):
+        others = indices[indptr[point] : indptr[point + 1]]
+        lengths = np.sort(np.linalg.norm(image[others] - image[point], axis=1))
+        want[point] = lengths[(len(lengths) - 1) // 2]
+    np.testing.assert_allclose(scans.median_edges(image, (indptr, indices)), want, rtol=1e-9)
+
+
 def test_a_voxel_filtered_view_keeps_its_surface(monkeypatch):
     """The depth example's view filtered to one point per voxel of two pixels (each
     voxel's mean, as point-cloud tools thin a scan), turned about its camera: on no

@@ -278,15 +278,16 @@ def viewed_surface(
         )
     image = rays @ frame[:2].T / depth[:, None]
     try:
-        faces = Delaunay(image).simplices.astype(np.int64)
+        triangulation = Delaunay(image)
     except QhullError as exc:
         raise PointCloudError(
             f"The file's points lie on one line as seen from ({where}): no surface joins "
             f"them. {UPLOAD_A_VIEW}"
         ) from exc
+    faces = triangulation.simplices.astype(np.int64)
     corners = image[faces]
     sides = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)  # (m, 3)
-    spacing = _median_edges(image, faces)
+    spacing = median_edges(image, triangulation.vertex_neighbor_vertices)
     kept = sides.max(axis=1) <= GAP_SPACINGS * spacing[faces].min(axis=1)
     kept &= unshadowed(finite, faces, viewpoint)
     faces = faces[kept]
@@ -306,18 +307,21 @@ def viewed_surface(
     return finite, faces
 
 
-def _median_edges(image: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(n,) each point's median length of its edges among ``faces`` (m, 3) in ``image``
-    (n, 2); ``inf`` for a point on none."""
-    n = len(image)
-    first, second = np.divmod(np.unique(edge_keys(faces, n).ravel()), n)
-    length = np.linalg.norm(image[first] - image[second], axis=1)
-    ends, lengths = np.concatenate([first, second]), np.concatenate([length, length])
-    order = np.lexsort((lengths, ends))
-    count = np.bincount(ends, minlength=n)
-    middle = np.cumsum(count) - count + (count - 1) // 2
-    median = np.full(n, np.inf)
-    median[count > 0] = lengths[order][middle[count > 0]]
+def median_edges(image: np.ndarray, neighbours: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """(n,) each point's median length in ``image`` (n, 2) of its edges to its
+    ``neighbours`` (a CSR pair ``(indptr, indices)``: point ``i``'s are
+    ``indices[indptr[i]:indptr[i + 1]]``), the lower of two middle ones; ``inf`` for a
+    point with none. One sort of every edge's length offset by its point's number (below
+    one), which orders each point's edges and keeps the points apart."""
+    indptr, indices = neighbours
+    count = np.diff(indptr)
+    owner = np.repeat(np.arange(len(image)), count)
+    length = np.linalg.norm(image[indices] - image[owner], axis=1)
+    scale = 2.0 * float(length.max(initial=0.0)) or 1.0
+    ordered = np.sort(owner + length / scale)
+    median = np.full(len(image), np.inf)
+    has = np.flatnonzero(count > 0)
+    median[has] = (ordered[indptr[has] + (count[has] - 1) // 2] - has) * scale
     return median
 
 
