@@ -251,14 +251,12 @@ def viewed_surface(
     if len(finite) < 3:
         raise PointCloudError(f"The file holds too few points to make a surface. {UPLOAD_A_VIEW}")
     lattice, sensor, guessed = sensor_grid(finite, viewpoint, axes), viewpoint, None
-    searched = find_frame and lattice is None
-    for frame, orthographic, steps in sensor_axes(finite, viewpoint) if searched else []:
-        lattice = sensor_grid(finite, viewpoint, frame, along=(2,), steps=steps)
-        if lattice is not None:
-            if orthographic and not _seen_along(finite, viewpoint, frame[:, 2]):
-                guessed = frame[:, 2]
-                sensor = thinnest_viewpoint(finite, guessed)
-            break
+    found = _found_lattice(finite, viewpoint) if find_frame and lattice is None else None
+    if found is not None:
+        lattice, frame, orthographic = found
+        if orthographic and not _seen_along(finite, viewpoint, frame[:, 2]):
+            guessed = frame[:, 2]
+            sensor = thinnest_viewpoint(finite, guessed)
     if lattice is not None:
         vertices, faces = organized_surface(lattice, sensor)
         if guessed is not None:
@@ -323,6 +321,28 @@ def median_edges(image: np.ndarray, neighbours: tuple[np.ndarray, np.ndarray]) -
     has = np.flatnonzero(count > 0)
     median[has] = (ordered[indptr[has] + (count[has] - 1) // 2] - has) * scale
     return median
+
+
+def _found_lattice(
+    points: np.ndarray, viewpoint: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, bool] | None:
+    """:func:`sensor_grid`'s organized cloud of ``points`` (n, 3) in a frame found from them
+    (:func:`sensor_axes`), that frame (3, 3) and whether it is an orthographic grid's; or
+    None. A lattice the points lie on in any frame goes first; else one they lie near
+    (:func:`snapped_steps`), tried in the last orthographic frame first (the most refined)
+    and the pinhole camera's last: a far orthographic grid lies near a pinhole camera's
+    lattice too, a little sheared, its squares' diagonals the other way."""
+    frames = []
+    for frame, orthographic, steps in sensor_axes(points, viewpoint):
+        lattice = sensor_grid(points, viewpoint, frame, along=(2,))
+        if lattice is not None:
+            return lattice, frame, orthographic
+        frames.append((frame, orthographic, steps))
+    for frame, orthographic, steps in sorted(frames[::-1], key=lambda tried: not tried[1]):
+        lattice = sensor_grid(points, viewpoint, frame, along=(2,), steps=steps)
+        if lattice is not None:
+            return lattice, frame, orthographic
+    return None
 
 
 def _seen_along(points: np.ndarray, viewpoint: np.ndarray, sight: np.ndarray) -> bool:
