@@ -27,7 +27,7 @@ from worker.engine.scans import (
     view_frame,
     viewed_surface,
 )
-from worker.evaluation.partial import range_image
+from worker.evaluation.partial import range_image, voxel_means
 from worker.evaluation.samples import (
     DEPTH_DIRECTION,
     PARTIAL_SOURCE,
@@ -587,10 +587,7 @@ def test_a_voxel_filtered_view_keeps_its_surface(monkeypatch):
     sight = np.array(DEPTH_DIRECTION) / np.linalg.norm(DEPTH_DIRECTION)
     pitch = np.nanmedian(np.linalg.norm(np.diff(grid, axis=1), axis=2))
     seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()]
-    _, voxel = np.unique(np.floor(seen / (2 * pitch)), axis=0, return_inverse=True)
-    voxel = voxel.ravel()
-    means = np.stack([np.bincount(voxel, seen[:, k]) for k in range(3)], axis=1)
-    means /= np.bincount(voxel)[:, None]
+    means = voxel_means(seen, 2 * pitch)
     turn = random_rotation(np.random.default_rng(6))
     points = (means - camera) @ turn.T
 

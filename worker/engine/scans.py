@@ -553,8 +553,9 @@ def sensor_grid(
     point has its own pixel is the grid, and triangulating it needs no Delaunay
     triangulation. Given ``steps`` between neighbouring pixels (the (first, second)
     indices of pairs of the points, :func:`sensor_axes`'), whose median lengths along
-    the image's two axes are its pitches, points within :data:`SNAP_RESIDUAL` of a pitch
-    of a lattice's nodes are read on it too (:func:`snapped_steps`).
+    the image's two axes are its pitches, the lattice sought is instead one the points
+    lie near, each within :data:`SNAP_RESIDUAL` of a pitch of its node
+    (:func:`snapped_steps`; points on a lattice lie near it too).
     """
     rays = points - viewpoint
     if axes is not None:
@@ -568,10 +569,10 @@ def sensor_grid(
         if (depth > 0.0).all() or (depth < 0.0).all():
             images.insert(0, (rays[:, across] / depth[:, None], 0.0))
         for image, spread in images:
-            pixels = _pixels(image, trial, spread)
-            if pixels is None and steps is not None:
-                pitches = _pitches(image, steps)
-                pixels = None if pitches is None else _pixels(image, trial, spread, pitches)
+            pitches = None if steps is None else _pitches(image, steps)
+            if steps is not None and pitches is None:
+                continue
+            pixels = _pixels(image, trial, spread, pitches)
             if pixels is None:
                 continue
             rows, columns = pixels

@@ -371,6 +371,16 @@ def view_points(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
 VOXEL_PIXELS = 2.0
 
 
+def voxel_means(points: np.ndarray, size: float) -> np.ndarray:
+    """(k, 3) the mean of ``points`` (n, 3) in each cube of edge ``size`` that holds any
+    (the cubes aligned with the points' frame), as a voxel filter thins a cloud."""
+    _, voxel = np.unique(np.floor(points / size), axis=0, return_inverse=True)
+    voxel = voxel.ravel()
+    sums = np.stack([np.bincount(voxel, points[:, k]) for k in range(3)], axis=1)
+    means: np.ndarray = sums / np.bincount(voxel)[:, None]
+    return means
+
+
 def view_voxels(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     """:func:`range_cloud`'s scan (its generator drawn from that variant's seed) thinned
     as point-cloud tools thin a scan (a voxel filter: the mean of the points in each
@@ -379,10 +389,7 @@ def view_voxels(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     triangulation of their image from the camera."""
     points, direction, pitch = range_image(mesh, rng, up)
     seen = points.reshape(-1, 3)[np.isfinite(points).all(axis=2).ravel()]
-    _, voxel = np.unique(np.floor(seen / (VOXEL_PIXELS * pitch)), axis=0, return_inverse=True)
-    voxel = voxel.ravel()
-    sums = np.stack([np.bincount(voxel, seen[:, k]) for k in range(3)], axis=1)
-    means = sums / np.bincount(voxel)[:, None]
+    means = voxel_means(seen, VOXEL_PIXELS * pitch)
     shuffled = means[np.random.default_rng(0).permutation(len(means))]
     vertices, faces = viewed_surface(shuffled, far_viewpoint(mesh, direction))
     return similarity(clean_mesh(vertices, faces), rng)
