@@ -534,16 +534,16 @@ def test_a_view_s_pixel_lattice_is_found_in_any_frame(case, monkeypatch):
     assert (np.einsum("ij,ij->i", normals, camera - corners.mean(axis=1)) > 0).all()
 
 
-def test_a_scan_seen_from_a_direction_it_is_not_thinnest_in_is_found_in_rounds(monkeypatch):
+def test_a_scan_seen_from_far_off_its_line_of_sight_is_found_in_rounds(monkeypatch):
     """A range scan of the quadruped (SHREC'17's orbiting camera) in its mesh's frame,
-    the direction it spreads least in 54 degrees off its line of sight: each round reads
-    its steps across the sight the last one found, and a later round finds its lattice
-    (:data:`scans.AXES_ROUNDS`); the first alone does not."""
+    the first rounds started from the direction it spreads least in, 54 degrees off its
+    line of sight: each round reads its steps across the sight the last one found, and a
+    later round finds its lattice (:data:`scans.AXES_ROUNDS`); the first alone does not."""
     points, direction, _ = range_image(sample_mesh("quadruped", 0), np.random.default_rng(3))
     seen = points.reshape(-1, 3)[np.isfinite(points).all(axis=2).ravel()]
     seen = seen[np.random.default_rng(0).permutation(len(seen))]
-    least = np.linalg.svd(seen - seen.mean(axis=0), full_matrices=False)[2][2]
-    assert np.degrees(np.arccos(abs(least @ direction))) > 45
+    assert np.degrees(np.arccos(abs(scans.least_spread(seen) @ direction))) > 45
+    monkeypatch.setattr(scans, "unfolded_sight", scans.least_spread)
 
     def found() -> bool:
         return any(
@@ -554,6 +554,58 @@ def test_a_scan_seen_from_a_direction_it_is_not_thinnest_in_is_found_in_rounds(m
     assert found()
     monkeypatch.setattr(scans, "AXES_ROUNDS", 1)
     assert not found()
+
+
+def mesh_frame_scan(pose: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """A range scan of the quadruped's ``pose`` (SHREC'17's orbiting camera, ``seed``) in
+    its mesh's frame, no sensor placed: its organized cloud, its points in a fixed random
+    order, its line of sight and its pitch."""
+    grid, direction, pitch = range_image(
+        sample_mesh("quadruped", pose), np.random.default_rng(seed)
+    )
+    seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()]
+    return grid, seen[np.random.default_rng(0).permutation(len(seen))], direction, pitch
+
+
+@pytest.mark.parametrize("pose", [0, 1, 2])
+def test_a_long_narrow_view_is_found_along_the_sight_it_overlaps_itself_least_in(pose):
+    """The quadruped's scan seen from its side and below (the seed's orbit), in its mesh's
+    frame: long and narrow, it spreads least 80 degrees off its line of sight, and the
+    rounds started there found no lattice (and the points, seen from there, were refused).
+    Seen along their :func:`scans.unfolded_sight` they hardly overlap, and its rounds find
+    the scanner's lattice: the view is read as its grid (its triangles to 1%, edges near
+    the shadow rule's angle judged along the sight found), every point on a triangle."""
+    grid, seen, direction, _ = mesh_frame_scan(pose, 1)
+
+    def off(sight: np.ndarray) -> float:
+        return float(np.degrees(np.arccos(min(1.0, abs(sight @ direction)))))
+
+    assert off(scans.least_spread(seen)) > 80
+    assert off(scans.unfolded_sight(seen)) < 20
+    assert any(
+        scans.sensor_grid(seen, np.zeros(3), frame, along=(2,)) is not None
+        for frame, _, _ in scans.sensor_axes(seen, np.zeros(3))
+    )
+    vertices, faces = scans.one_view(seen, np.zeros(3))
+    _, grid_faces = organized_surface(grid, scans.guessed_viewpoint(seen, direction))
+    assert len(vertices) == len(seen)
+    assert len(faces) == pytest.approx(len(grid_faces), rel=0.01)  # a shadowed edge or two
+
+
+def test_a_voxel_filtered_view_in_its_mesh_s_frame_is_read_from_afar_along_its_sight():
+    """The quadruped's scan thinned by a voxel filter of two pixels (on no lattice) in its
+    mesh's frame, no sensor placed, spreading least 41 degrees off its line of sight: seen
+    from there 28% of its points hid behind others and it was refused; seen from afar along
+    its :func:`scans.unfolded_sight` every one lies on the surface, each triangle facing
+    one way."""
+    _, seen, direction, pitch = mesh_frame_scan(0, 0)
+    means = voxel_means(seen, 2 * pitch)
+    vertices, faces = scans.one_view(means, np.zeros(3))
+    assert len(vertices) == len(means) and np.unique(faces).size > 0.99 * len(means)
+    corners = vertices[faces]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    facing = np.sign(normals @ direction)
+    assert abs(facing.sum()) > 0.99 * len(faces)
 
 
 def test_median_edges_are_each_point_s_middle_edge():
@@ -625,7 +677,7 @@ def test_one_view_written_in_another_frame_is_seen_from_where_it_is_thinnest(
     turn = random_rotation(np.random.default_rng(turn_seed))
     grid, camera = grid @ turn.T, turn @ camera
     sight = turn @ np.array(DEPTH_DIRECTION)
-    vertices, faces = organized_surface(grid, scans.thinnest_viewpoint(grid.reshape(-1, 3), sight))
+    vertices, faces = organized_surface(grid, scans.guessed_viewpoint(grid.reshape(-1, 3), sight))
     seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()]
     shuffled = seen[np.random.default_rng(0).permutation(len(seen))]
     monkeypatch.setattr(scans, "snapped_steps", lambda values, pitch: None)  # as if farther
@@ -695,11 +747,15 @@ def test_a_pcd_without_its_grid_is_read_in_its_sensor_s_frame(monkeypatch):
 def test_a_view_s_frame_is_right_handed_and_looks_along_its_direction(direction):
     """The image plane's two axes and the view direction: orthonormal rows, the third
     the direction made a unit vector, the frame right-handed (the viewed surface's
-    winding relies on it), whichever axis the direction lies near."""
+    winding relies on it), whichever axis the direction lies near; several directions'
+    frames at once, each as its own."""
     frame = view_frame(np.array(direction, dtype=float))
     np.testing.assert_allclose(frame @ frame.T, np.eye(3), atol=1e-12)
     np.testing.assert_allclose(frame[2], np.array(direction) / np.linalg.norm(direction))
     assert np.linalg.det(frame) == pytest.approx(1.0)
+    several = np.array([direction, (0, 0, 1), (1, 0.5, 0)], dtype=float)
+    for stacked, one in zip(view_frame(several), several, strict=True):
+        np.testing.assert_array_equal(stacked, view_frame(one))
 
 
 def test_points_in_a_text_file_or_a_mesh_file_without_faces_are_read_as_one_view():
