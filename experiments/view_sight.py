@@ -13,9 +13,10 @@ axis the protocol's), its points shuffled and written as float32, and the same s
 thinned by a voxel filter of two pixels (on no lattice). Per guess, the direction the
 points overlap themselves least in (:func:`~worker.engine.scans.unfolded_sight`) and
 their least principal axis (:func:`~worker.engine.scans.least_spread`, the guess before
-2026-12-05): its angle to the scanner's line of sight (median, 90%, largest), the scans
-read on their lattice and refused, the median milliseconds reading one, and the voxel
-views refused and the median share of their points on a triangle.
+2026-12-05, here with the current rounds): its angle to the scanner's line of sight
+(median, 90%, largest), the scans read on their lattice and refused, the median
+milliseconds reading one, and the voxel views refused and the median share of their
+points on a triangle.
 """
 
 from __future__ import annotations

@@ -626,6 +626,23 @@ def test_median_edges_are_each_point_s_middle_edge():
     np.testing.assert_allclose(scans.median_edges(image, (indptr, indices)), want, rtol=1e-9)
 
 
+def test_the_rounds_stop_when_noise_turns_the_sight_and_no_lattice_draws_it_in():
+    """The depth example's view turned about its camera, each point moved half a pixel at
+    random (near no lattice): each round turns the orthographic line of sight by a
+    fraction of a degree, as far as the round before, and the rounds stop there
+    (:data:`scans.AXES_STALL_DEGREES`) instead of running all :data:`scans.AXES_ROUNDS`.
+    A grid on its lattice still settles on it (the scans read in their mesh's frame
+    above)."""
+    grid, camera = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), 6000)
+    pitch = np.nanmedian(np.linalg.norm(np.diff(grid, axis=1), axis=2))
+    seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()] - camera
+    moved = seen + np.random.default_rng(2).normal(scale=0.5 * pitch / np.sqrt(3), size=seen.shape)
+    points = moved @ random_rotation(np.random.default_rng(1)).T
+    frames = [frame for frame, _, _ in scans.sensor_axes(points, np.zeros(3))]
+    assert len(frames) < 2 + scans.AXES_ROUNDS // 2
+    assert all(scans.sensor_grid(points, np.zeros(3), f, along=(2,)) is None for f in frames)
+
+
 def test_a_voxel_filtered_view_keeps_its_surface(monkeypatch):
     """The depth example's view filtered to one point per voxel of two pixels (each
     voxel's mean, as point-cloud tools thin a scan), turned about its camera: on no

@@ -660,6 +660,10 @@ AXES_STEP_DEGREES = 15.0
 #: degrees off: each round comes nearer; of TOSCA's 83 range scans in their mesh's frame,
 #: 23 are found in the first round, one in the fourth, 59 in the frames from the origin).
 AXES_ROUNDS = 12
+#: A round that turns the line of sight less than this, and not half as far as the round
+#: before, stops them: points off any lattice (moved by noise, or a pinhole camera's seen
+#: as an orthographic grid's) keep turning it by a fraction of a degree, round after round.
+AXES_STALL_DEGREES = 1.0
 #: An orthographic grid is seen from the sensor a file gives when every ray from it runs
 #: within this many degrees of the grid's line of sight (a far camera's), and from afar
 #: along that line otherwise (:func:`viewed_surface`).
@@ -721,16 +725,20 @@ def sensor_axes(
             yield frame, True, _joined(rows, columns)
     centred = points - points.mean(axis=0)
     pairs = _neighbours(centred)
-    sight = unfolded_sight(points)
+    sight, moved = unfolded_sight(points), np.inf
     for _ in range(AXES_ROUNDS):
         rows, columns = _steps(centred @ view_frame(sight)[:2].T, pairs)
         frame = _orthographic_frame(points, rows, columns)
         if frame is None:
             return
         yield frame, True, _joined(rows, columns)
-        if abs(float(frame[:, 2] @ sight)) > 1.0 - 1e-12:
+        along = abs(float(frame[:, 2] @ sight))
+        if along > 1.0 - 1e-12:
             return  # settled: another round reads the same steps
-        sight = frame[:, 2]
+        turn = float(np.degrees(np.arccos(along)))
+        if turn < AXES_STALL_DEGREES and turn > 0.5 * moved:
+            return  # stalled: the steps' noise moves it, no lattice draws it nearer
+        sight, moved = frame[:, 2], turn
 
 
 def _orthographic_frame(points: np.ndarray, rows: Pairs, columns: Pairs) -> np.ndarray | None:
