@@ -460,10 +460,10 @@ def unfolded_sight(points: np.ndarray) -> np.ndarray:
     turn = np.pi * (1.0 + np.sqrt(5.0)) * (np.arange(SIGHT_DIRECTIONS) + 0.5)
     height = (np.arange(SIGHT_DIRECTIONS) + 0.5) / SIGHT_DIRECTIONS
     radius = np.sqrt(1.0 - height**2)
-    tried = np.stack([radius * np.cos(turn), radius * np.sin(turn), height], axis=1)
+    lattice = np.stack([radius * np.cos(turn), radius * np.sin(turn), height], axis=1)
+    tried = np.vstack([least_spread(sample), lattice])
     angles = np.linspace(0.0, 2.0 * np.pi, 8, endpoint=False)
-    ring = np.stack([np.cos(angles), np.sin(angles)], axis=1)
-    tried = np.vstack([least_spread(sample), tried])
+    ring = np.stack([np.cos(angles), np.sin(angles)], axis=1)  # across the best, unit
     best: np.ndarray = tried[0]
     for off in (None, *SIGHT_RINGS):
         if off is not None:
