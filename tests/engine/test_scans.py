@@ -534,6 +534,15 @@ def test_a_view_s_pixel_lattice_is_found_in_any_frame(case, monkeypatch):
     assert (np.einsum("ij,ij->i", normals, camera - corners.mean(axis=1)) > 0).all()
 
 
+def on_a_found_lattice(points: np.ndarray) -> bool:
+    """Whether a frame :func:`scans.sensor_axes` finds from ``points``' steps (no sensor
+    placed) holds them exactly on a pixel lattice."""
+    return any(
+        scans.sensor_grid(points, np.zeros(3), frame, along=(2,)) is not None
+        for frame, _, _ in scans.sensor_axes(points, np.zeros(3))
+    )
+
+
 def test_a_scan_seen_from_far_off_its_line_of_sight_is_found_in_rounds(monkeypatch):
     """A range scan of the quadruped (SHREC'17's orbiting camera) in its mesh's frame,
     the first rounds started from the direction it spreads least in, 54 degrees off its
@@ -544,16 +553,9 @@ def test_a_scan_seen_from_far_off_its_line_of_sight_is_found_in_rounds(monkeypat
     seen = seen[np.random.default_rng(0).permutation(len(seen))]
     assert np.degrees(np.arccos(abs(scans.least_spread(seen) @ direction))) > 45
     monkeypatch.setattr(scans, "unfolded_sight", scans.least_spread)
-
-    def found() -> bool:
-        return any(
-            scans.sensor_grid(seen, np.zeros(3), frame, along=(2,)) is not None
-            for frame, _, _ in scans.sensor_axes(seen, np.zeros(3))
-        )
-
-    assert found()
+    assert on_a_found_lattice(seen)
     monkeypatch.setattr(scans, "AXES_ROUNDS", 1)
-    assert not found()
+    assert not on_a_found_lattice(seen)
 
 
 def mesh_frame_scan(pose: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
@@ -582,10 +584,7 @@ def test_a_long_narrow_view_is_found_along_the_sight_it_overlaps_itself_least_in
 
     assert off(scans.least_spread(seen)) > 80
     assert off(scans.unfolded_sight(seen)) < 20
-    assert any(
-        scans.sensor_grid(seen, np.zeros(3), frame, along=(2,)) is not None
-        for frame, _, _ in scans.sensor_axes(seen, np.zeros(3))
-    )
+    assert on_a_found_lattice(seen)
     vertices, faces = scans.one_view(seen, np.zeros(3))
     _, grid_faces = organized_surface(grid, scans.guessed_viewpoint(seen, direction))
     assert len(vertices) == len(seen)

@@ -43,8 +43,9 @@ from __future__ import annotations
 import struct
 import tempfile
 import warnings
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from functools import cache
 from typing import Any
 
 import numpy as np
@@ -215,6 +216,7 @@ def viewed_surface(
     axes: np.ndarray | None = None,
     *,
     find_frame: bool = True,
+    start: Callable[[], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A cloud without a grid read as one view: (n, 3) its finite points and (m, 3) the
     triangles of the surface its sensor saw, facing the sensor.
@@ -231,8 +233,9 @@ def viewed_surface(
     (:func:`unshadowed`, an occluding edge along the ray). Points on
     a camera's pixel lattice (:func:`sensor_grid`, the sensor's ``axes`` (3, 3) as
     columns in the points' frame, theirs by default, else, with ``find_frame``, a frame
-    found from the points, :func:`sensor_axes`, there also points moved a little off
-    their pixels, :func:`snapped_steps`) are triangulated by that grid instead
+    found from the points, :func:`sensor_axes`, its rounds from ``start``'s direction,
+    there also points moved a little off their pixels, :func:`snapped_steps`) are
+    triangulated by that grid instead
     (:func:`organized_surface`), each triangle facing the sensor; an orthographic grid is
     seen along its own line of sight, from ``viewpoint`` if it stands on that line
     (:func:`_seen_along`), else from afar on the side its silhouette says
@@ -252,7 +255,8 @@ def viewed_surface(
     if len(finite) < 3:
         raise PointCloudError(f"The file holds too few points to make a surface. {UPLOAD_A_VIEW}")
     lattice, sensor, guessed = sensor_grid(finite, viewpoint, axes), viewpoint, None
-    found = _found_lattice(finite, viewpoint) if find_frame and lattice is None else None
+    searched = find_frame and lattice is None
+    found = _found_lattice(finite, viewpoint, start) if searched else None
     if found is not None:
         lattice, frame, orthographic = found
         if orthographic and not _seen_along(finite, viewpoint, frame[:, 2]):
@@ -325,16 +329,17 @@ def median_edges(image: np.ndarray, neighbours: tuple[np.ndarray, np.ndarray]) -
 
 
 def _found_lattice(
-    points: np.ndarray, viewpoint: np.ndarray
+    points: np.ndarray, viewpoint: np.ndarray, start: Callable[[], np.ndarray] | None = None
 ) -> tuple[np.ndarray, np.ndarray, bool] | None:
     """:func:`sensor_grid`'s organized cloud of ``points`` (n, 3) in a frame found from them
     (:func:`sensor_axes`), that frame (3, 3) and whether it is an orthographic grid's; or
     None. A lattice the points lie on in any frame goes first; else one they lie near
     (:func:`snapped_steps`), tried in the last orthographic frame first (the most refined)
     and the pinhole camera's last: a far orthographic grid lies near a pinhole camera's
-    lattice too, a little sheared, its squares' diagonals the other way."""
+    lattice too, a little sheared, its squares' diagonals the other way. ``start``: as
+    :func:`sensor_axes`'."""
     frames = []
-    for frame, orthographic, steps in sensor_axes(points, viewpoint):
+    for frame, orthographic, steps in sensor_axes(points, viewpoint, start):
         lattice = sensor_grid(points, viewpoint, frame, along=(2,))
         if lattice is not None:
             return lattice, frame, orthographic
@@ -397,13 +402,18 @@ def one_view(
     be degrees off), on the side the view's silhouette says its sensor stood
     (:func:`sensor_side`). When that fails too, the first refusal stands: it names the
     sensor the file gave."""
+    finite = points[np.isfinite(points).all(axis=1)]
+    # Computed once, when the frame search's rounds or the second try first need it.
+    start = cache(lambda: unfolded_sight(finite))
     try:
-        return viewed_surface(points, viewpoint, axes)
+        return viewed_surface(points, viewpoint, axes, start=start)
     except PointCloudError as refusal:
+        if len(finite) < 3:
+            raise  # too few points from anywhere
         try:
             # The first try searched the points' frames already (sensor_axes: where no
             # lattice was found from there, none is from afar).
-            guess = guessed_viewpoint(points)
+            guess = guessed_viewpoint(points, start())
             vertices, faces = viewed_surface(points, guess, find_frame=False)
             sight = grid_sight(vertices, faces)
             if sight is not None:
@@ -417,16 +427,13 @@ def one_view(
         return vertices, faces
 
 
-def guessed_viewpoint(points: np.ndarray, direction: np.ndarray | None = None) -> np.ndarray:
+def guessed_viewpoint(points: np.ndarray, direction: np.ndarray) -> np.ndarray:
     """(3,) a point ``GUESSED_SENSOR_EXTENTS`` extents away from ``points`` (n, 3)'s
-    centroid along ``direction`` (3,), by default the direction they overlap themselves
-    least in (:func:`unfolded_sight`)."""
+    centroid along ``direction`` (3,)."""
     finite = points[np.isfinite(points).all(axis=1)]
     if len(finite) < 3:
         return np.zeros(3)
     centre = finite.mean(axis=0)
-    if direction is None:
-        direction = unfolded_sight(finite)
     extent = float(np.ptp(finite, axis=0).max())
     viewpoint: np.ndarray = centre + GUESSED_SENSOR_EXTENTS * extent * direction
     return viewpoint
@@ -675,7 +682,7 @@ Pairs = tuple[np.ndarray, np.ndarray]
 
 
 def sensor_axes(
-    points: np.ndarray, viewpoint: np.ndarray
+    points: np.ndarray, viewpoint: np.ndarray, start: Callable[[], np.ndarray] | None = None
 ) -> Iterator[tuple[np.ndarray, bool, Pairs]]:
     """Frames (3, 3) (unit columns: across the sensor's rows, across its columns, its line
     of sight) in which ``points`` (n, 3), one view written in any frame, may lie on their
@@ -703,7 +710,9 @@ def sensor_axes(
     row's or a column's by their direction about the image's dominant one (four-fold,
     rows and columns square), each fit refitted twice without the steps that stray from
     it (a step across a gap that joined two rows). A frame is only a guess:
-    :func:`sensor_grid` keeps it when every point has its own pixel.
+    :func:`sensor_grid` keeps it when every point has its own pixel. ``start`` gives the
+    direction the rounds start from (:func:`unfolded_sight` of the points by default),
+    called when they first need it.
     """
     if len(points) <= AXES_NEIGHBOURS:
         return
@@ -725,7 +734,8 @@ def sensor_axes(
             yield frame, True, _joined(rows, columns)
     centred = points - points.mean(axis=0)
     pairs = _neighbours(centred)
-    sight, moved = unfolded_sight(points), np.inf
+    sight = unfolded_sight(points) if start is None else start()
+    moved = np.inf
     for _ in range(AXES_ROUNDS):
         rows, columns = _steps(centred @ view_frame(sight)[:2].T, pairs)
         frame = _orthographic_frame(points, rows, columns)
