@@ -183,6 +183,15 @@ def test_an_off_file_with_a_word_for_a_number_is_unreadable():
         load_mesh(bad, "bad.off")
 
 
+def test_an_obj_file_with_a_vertex_line_cut_short_is_unreadable():
+    """trimesh reads the file's vertices as pairs (or single numbers) when a line holds
+    fewer than three; the file is damaged, not a crash."""
+    for line in (b"v 0.0\n", b"v 0.0 1.0\n"):
+        bad = b"v 0 0 0\nv 1 0 0\nv 0 1 0\n" + line + b"f 1 2 3\nf 1 3 4\n"
+        with pytest.raises(errors.UnreadableMeshError, match="could not be read as OBJ"):
+            load_mesh(bad, "bad.obj")
+
+
 def test_truncated_gzip():
     data = gzip.compress(_off(*_tetra()))[:20]
     with pytest.raises(errors.UnreadableMeshError, match="truncated|not valid gzip"):

@@ -256,8 +256,13 @@ def _parse(
         return points, np.empty((0, 3), dtype=np.int64), None
     vertices, faces, offset = [], [], 0
     for mesh in meshes:
-        vertices.append(np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3))
-        faces.append(np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3) + offset)
+        vertices.append(np.asarray(mesh.vertices, dtype=np.float64))
+        faces.append(np.asarray(mesh.faces, dtype=np.int64) + offset)
+        if vertices[-1].ndim != 2 or vertices[-1].shape[1] != 3 or faces[-1].shape[1:] != (3,):
+            # an OBJ's vertex line cut short parses as fewer coordinates
+            raise UnreadableMeshError(
+                f"The file could not be read as {fmt.upper()}: it is damaged or not a mesh."
+            )
         offset += len(vertices[-1])
     return np.concatenate(vertices), np.concatenate(faces), None
 

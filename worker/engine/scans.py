@@ -594,6 +594,8 @@ def snapped_steps(values: np.ndarray, pitch: float) -> np.ndarray | None:
     nearest = np.round(position)
     if np.abs(position - nearest).max() > SNAP_RESIDUAL:
         return None
+    if not np.ptp(nearest) <= LATTICE_MAX_FILL * len(values):  # a stray point far off
+        return None
     steps: np.ndarray = (nearest - nearest.min()).astype(np.int64)
     return steps
 
@@ -617,12 +619,13 @@ def sensor_grid(
     along each axis in turn (those numbered in ``along``), as a pinhole camera when every
     point lies on one side of the viewpoint along it, then as an orthographic one (on a
     sample of the points first, :data:`LATTICE_TRIAL`); the first lattice on which every
-    point has its own pixel is the grid, and triangulating it needs no Delaunay
-    triangulation. Given ``steps`` between neighbouring pixels (the (first, second)
-    indices of pairs of the points, :func:`sensor_axes`'), whose median lengths along
-    the image's two axes are its pitches, the lattice sought is instead one the points
-    lie near, each within :data:`SNAP_RESIDUAL` of a pitch of its node
-    (:func:`snapped_steps`; points on a lattice lie near it too).
+    point has its own pixel, and no row or column between them is empty, is the grid,
+    and triangulating it needs no Delaunay triangulation. Given ``steps`` between
+    neighbouring pixels (the (first, second) indices of pairs of the points,
+    :func:`sensor_axes`'), whose median lengths along the image's two axes are its
+    pitches, the lattice sought is instead one the points lie near, each within
+    :data:`SNAP_RESIDUAL` of a pitch of its node (:func:`snapped_steps`; points on a
+    lattice lie near it too).
     """
     rays = points - viewpoint
     if axes is not None:
@@ -648,6 +651,13 @@ def sensor_grid(
                 continue
             pixel = rows * width + columns
             if np.unique(pixel).size < len(points):
+                continue
+            # Every row and column between the first and the last holds a point: points
+            # written with coordinates rounded finer than their pixels (whole
+            # millimetres, a scan's pitch 2) lie each on its own node of the rounding's
+            # lattice too, with rows and columns of it left empty between them, which no
+            # triangle of its grid would cross.
+            if np.unique(rows).size < height or np.unique(columns).size < width:
                 continue
             grid = np.full((height * width, 3), np.nan)
             grid[pixel] = points
@@ -898,14 +908,16 @@ def read_pcd(
         header.
     """
     header, body = _pcd_header(data)
+    fields = header["FIELDS"]
     try:
         width, height = int(header["WIDTH"][0]), int(header["HEIGHT"][0])
+        counts = [int(c) for c in header.get("COUNT", ["1"] * len(fields))]
     except ValueError as exc:
-        raise UnreadableMeshError("The PCD header's WIDTH or HEIGHT is not a number.") from exc
-    fields = header["FIELDS"]
+        raise UnreadableMeshError(
+            "The PCD header's WIDTH, HEIGHT or COUNT is not a whole number."
+        ) from exc
     if not {"x", "y", "z"} <= set(fields):
         raise UnreadableMeshError("The PCD file has no x, y and z fields.")
-    counts = [int(c) for c in header.get("COUNT", ["1"] * len(fields))]
     if not len(counts) == len(header["SIZE"]) == len(header["TYPE"]) == len(fields):
         raise UnreadableMeshError("The PCD header's FIELDS, SIZE, TYPE and COUNT disagree.")
     kind = header["DATA"][0].lower() if header["DATA"] else ""
