@@ -11,7 +11,7 @@ import pytest
 import trimesh
 from conftest import e57_scan, random_rotation
 
-from worker.engine import scans
+from worker.engine import mesh_io, scans
 from worker.engine.errors import PointCloudError, UnreadableMeshError
 from worker.engine.mesh_io import read_mesh
 from worker.engine.scans import (
@@ -825,8 +825,33 @@ def test_points_in_a_text_file_or_a_mesh_file_without_faces_are_read_as_one_view
         assert cleaned.mesh.n_vertices == HEIGHT * (WIDTH - 15), name
         surface = triangles(cleaned.mesh.vertices, cleaned.mesh.faces)
         assert surface <= (single if name == "scan.ply" else want), name  # PLY: float32
-    with pytest.raises(UnreadableMeshError, match="three numbers"):
+    with pytest.raises(UnreadableMeshError, match="x, y and z as numbers"):
         read_mesh(b"1 2 3\n4 5 six\n", "scan.xyz")
+
+
+@pytest.mark.parametrize(
+    ("header", "order"),
+    [
+        (",x,y,z", "ixyz"),  # a table written with its row numbers first (pandas)
+        ("id;X;Y;Z;intensity", "ixyzn"),
+        ("//X,Y,Z,R,G,B", "xyznnn"),  # CloudCompare
+        ('"X","Y","Z","Intensity"', "xyzn"),  # PDAL
+        ("z y x", "zyx"),
+        ("a b c", "xyz"),  # no column named: the first three
+    ],
+)
+def test_a_text_file_s_header_says_which_columns_hold_x_y_and_z(header, order):
+    """The columns a header line names x, y and z are the points', in whatever order
+    and among whatever other columns (the code before read the first three: a table's
+    row numbers as x, its columns out of order as a mirror image)."""
+    points = np.array([[1.5, 2.5, 3.5], [4.0, 5.0, 6.0], [7.0, 8.0, 9.25]])
+    split = "," if "," in header else (";" if ";" in header else " ")
+    rows = []
+    for number, point in enumerate(points):
+        value = {"i": float(number), "n": 7.0, **dict(zip("xyz", point, strict=True))}
+        rows.append(split.join(repr(float(value[column])) for column in order))
+    text = "\n".join([header, *rows]).encode()
+    assert np.array_equal(mesh_io._parse_text_points(text), points)
 
 
 def test_points_that_are_not_one_view_are_refused_with_a_sentence():

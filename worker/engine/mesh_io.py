@@ -10,6 +10,7 @@ message can be shown to the person who uploaded the file.
 from __future__ import annotations
 
 import io
+import re
 import warnings
 import zlib
 from dataclasses import dataclass, replace
@@ -165,16 +166,19 @@ def _parse_triangle_off(data: bytes) -> tuple[np.ndarray, np.ndarray] | None:
     return np.ascontiguousarray(vertices), faces[:, 1:].astype(np.int64)
 
 
-#: Formats of points as text, a point a line (its first three numbers; lines without
-#: three, a header or a count, skipped).
+#: Formats of points as text, a point a line (its x, y and z: the columns a header line
+#: names so, else its first three numbers; lines without three, a header or a count,
+#: skipped).
 TEXT_POINTS = ("xyz", "pts", "csv")
 
 
 def _parse_text_points(data: bytes) -> np.ndarray:
-    """(n, 3) the points of an XYZ, PTS or CSV file: on each line, its first three
-    numbers (separated by spaces, tabs, commas or semicolons; more columns, as colours
-    or normals, ignored); lines before the first with three numbers (a header, a PTS
-    count) skipped."""
+    """(n, 3) the points of an XYZ, PTS or CSV file: on each line, its x, y and z
+    (separated by spaces, tabs, commas or semicolons): the columns the header names
+    ``x``, ``y`` and ``z`` (:func:`_named_columns`: a table written with its row numbers
+    first, CloudCompare's ``//X,Y,Z``, PDAL's ``"X","Y","Z"``, in any order), else the
+    first three (more columns, as colours or normals, ignored); lines before the first
+    with three numbers (a header, a PTS count) skipped."""
     try:
         lines = data.decode("utf-8-sig").splitlines()
     except UnicodeDecodeError as exc:
@@ -187,21 +191,36 @@ def _parse_text_points(data: bytes) -> np.ndarray:
         return np.empty((0, 3))
     body = [line for line in lines[start:] if line.strip()]
     columns = len(_tokens(body[0]))
+    header = [line for line in lines[:start] if line.strip()]
+    named = _named_columns(header[-1]) if header else None
+    xyz = list(named) if named is not None and max(named) < columns else [0, 1, 2]
     # Every line as many numbers as the first: all at once; otherwise line by line.
     with warnings.catch_warnings():  # a token that is not a number warns, or raises
         warnings.simplefilter("error")
         try:
             values = np.fromstring(_tokens_text(" ".join(body)), sep=" ")
             if values.size == columns * len(body):
-                return np.ascontiguousarray(values.reshape(len(body), columns)[:, :3])
+                return np.ascontiguousarray(values.reshape(len(body), columns)[:, xyz])
         except (ValueError, DeprecationWarning):
             pass
     try:
-        return np.array([_tokens(line)[:3] for line in body], dtype=np.float64)
-    except ValueError as exc:
+        return np.array([[_tokens(line)[k] for k in xyz] for line in body], dtype=np.float64)
+    except (ValueError, IndexError) as exc:
         raise UnreadableMeshError(
-            "A line of the file of points does not start with three numbers."
+            "A line of the file of points does not hold its x, y and z as numbers."
         ) from exc
+
+
+def _named_columns(line: str) -> tuple[int, int, int] | None:
+    """The columns a header ``line`` names ``x``, ``y`` and ``z`` (any case, quoted or
+    not, after a comment's ``//`` or ``#``; fields split as the numbers are, an empty
+    first name, a table's row numbers, kept), or None."""
+    text = line.strip().lstrip("/#").strip()
+    fields = re.split(r"\s*[,;]\s*", text) if re.search(r"[,;]", text) else text.split()
+    names = [field.strip("\"' ").lower() for field in fields]
+    if not {"x", "y", "z"} <= set(names):
+        return None
+    return names.index("x"), names.index("y"), names.index("z")
 
 
 def _tokens_text(text: str) -> str:
