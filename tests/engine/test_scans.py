@@ -451,25 +451,43 @@ def test_points_on_a_camera_s_lattice_are_read_by_its_grid(frame):
 
 
 @pytest.mark.parametrize("frame", ["camera", "mesh"])
-@pytest.mark.parametrize("rounding", [0.5, 0.6])
-def test_a_view_written_with_coordinates_rounded_finer_than_its_pixels_keeps_its_surface(
+@pytest.mark.parametrize("rounding", [0.55, 0.7, 0.9])
+def test_a_view_written_with_coordinates_rounded_finer_than_its_pixels_is_read_by_its_grid(
     frame, rounding
 ):
-    """The depth example's 1,583 points written with every coordinate rounded to half or
-    0.6 of a pixel (whole millimetres from a scanner whose pitch is 2 or 1.7), in the
-    camera's frame and in the mesh's: each lies on its own node of the rounding's lattice,
-    rows and columns of it empty between them. That lattice is not the sensor's (the
-    code before read the view by its grid and kept a piece of 4 of its points); read as
-    points, over 95% of them lie in one surface of at least 1.4 triangles a point."""
+    """The depth example's 1,583 points (an orthographic grid along y) written with
+    every coordinate rounded to 0.55 .. 0.9 of a pixel (whole millimetres from a scanner
+    whose pixels lie 1.1 .. 1.8 mm apart), in the camera's frame and in the mesh's: each
+    lies on its own node of the rounding's lattice, columns of it empty between them.
+    Closed up, that lattice is the grid: every triangle joins neighbouring pixels, and
+    there are as many as the grid's (read by that lattice unclosed, a piece of 4 or 9
+    points was kept at 0.5 and 0.7; by the rounded points' Delaunay triangulation, half
+    the triangles at 0.7)."""
     grid, viewpoint = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), 1500)
     pitch = float(np.nanmedian(np.linalg.norm(np.diff(grid, axis=1), axis=2)))
     seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()]
     points = seen - viewpoint if frame == "camera" else seen
     rounded = np.round(points / (rounding * pitch)) * (rounding * pitch)
-    text = "".join(f"{x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in rounded).encode()
-    mesh = read_mesh(text, "view.xyz").mesh
-    assert mesh.n_vertices > 0.95 * len(seen)
-    assert len(mesh.faces) > 1.4 * mesh.n_vertices
+    shuffled = rounded[np.random.default_rng(0).permutation(len(seen))]
+    vertices, faces = scans.one_view(shuffled, np.zeros(3))
+    number = {tuple(point): k for k, point in enumerate(rounded.tolist())}
+    read = np.array([number[tuple(point)] for point in vertices.tolist()])
+    pixel = np.argwhere(np.isfinite(grid).all(axis=2))  # each seen point's row and column
+    corners = pixel[read[faces]]
+    reach = np.abs(corners - np.roll(corners, 1, axis=1)).max(axis=2)
+    assert (reach == 1).all()  # every edge joins neighbouring pixels
+    assert len(faces) >= 0.98 * len(organized_surface(grid, viewpoint)[1])
+
+
+def test_closed_up_numbers_the_columns_a_rounding_left_empty_between():
+    """Columns 1.4 apart rounded to whole numbers (0, 1, 3, 4, 6, ...), any order: the
+    sensor's columns in turn. None empty: the steps as they are. One empty (a gap of
+    the view's own), or columns on no wider lattice: none."""
+    sensor = np.random.default_rng(0).permutation(np.repeat(np.arange(40), 3))
+    assert np.array_equal(scans.closed_up(np.round(1.4 * sensor).astype(np.int64)), sensor)
+    assert np.array_equal(scans.closed_up(sensor), sensor)
+    assert scans.closed_up(np.where(sensor < 20, sensor, sensor + 1)) is None
+    assert scans.closed_up(np.where(sensor < 20, sensor, sensor + 5)) is None
 
 
 def test_a_stray_point_far_off_snaps_to_no_lattice():

@@ -619,11 +619,11 @@ def sensor_grid(
     along each axis in turn (those numbered in ``along``), as a pinhole camera when every
     point lies on one side of the viewpoint along it, then as an orthographic one (on a
     sample of the points first, :data:`LATTICE_TRIAL`); the first lattice on which every
-    point has its own pixel, and no row or column between them is empty, is the grid,
-    and triangulating it needs no Delaunay triangulation. Given ``steps`` between
-    neighbouring pixels (the (first, second) indices of pairs of the points,
-    :func:`sensor_axes`'), whose median lengths along the image's two axes are its
-    pitches, the lattice sought is instead one the points lie near, each within
+    point has its own pixel is the grid (its empty rows and columns closed up,
+    :func:`closed_up`), and triangulating it needs no Delaunay triangulation. Given
+    ``steps`` between neighbouring pixels (the (first, second) indices of pairs of the
+    points, :func:`sensor_axes`'), whose median lengths along the image's two axes are
+    its pitches, the lattice sought is instead one the points lie near, each within
     :data:`SNAP_RESIDUAL` of a pitch of its node (:func:`snapped_steps`; points on a
     lattice lie near it too).
     """
@@ -645,24 +645,54 @@ def sensor_grid(
             pixels = _pixels(image, trial, spread, pitches)
             if pixels is None:
                 continue
-            rows, columns = pixels
+            rows, columns = (closed_up(steps) for steps in pixels)
+            if rows is None or columns is None:
+                continue
             height, width = int(rows.max()) + 1, int(columns.max()) + 1
             if height * width > LATTICE_MAX_FILL * len(points):
                 continue
             pixel = rows * width + columns
             if np.unique(pixel).size < len(points):
                 continue
-            # Every row and column between the first and the last holds a point: points
-            # written with coordinates rounded finer than their pixels (whole
-            # millimetres, a scan's pitch 2) lie each on its own node of the rounding's
-            # lattice too, with rows and columns of it left empty between them, which no
-            # triangle of its grid would cross.
-            if np.unique(rows).size < height or np.unique(columns).size < width:
-                continue
             grid = np.full((height * width, 3), np.nan)
             grid[pixel] = points
             return grid.reshape(height, width, 3)
     return None
+
+
+#: :func:`closed_up`: how far (in columns) the columns that hold values may lie from the
+#: wider lattice they are rounded from (half a column, and a little for the fit).
+CLOSED_RESIDUAL = 0.6
+
+
+def closed_up(steps: np.ndarray | None) -> np.ndarray | None:
+    """(n,) int, ``steps`` (n,) of a lattice's columns (:func:`lattice_steps`) with the
+    empty columns between them closed up, or None.
+
+    Every column of a sensor's grid between the first and the last holds a point (a
+    view's silhouette is one piece across them). Points written with coordinates rounded
+    finer than their pixels (whole millimetres from a camera whose pixels lie 1.4 mm
+    apart) lie on the rounding's lattice instead, each on its own node but with columns
+    left empty between them (0, 1, 3, 4, 6, ...: the sensor's column ``k`` at
+    ``round(1.4 k)``), and no triangle of that lattice's grid would join them. When at
+    least two columns are empty and those holding values lie within
+    :data:`CLOSED_RESIDUAL` of a column of a regular lattice of wider pitch, the values
+    are the sensor's columns in turn; with none empty, ``steps`` themselves; otherwise
+    (a gap of its own, values on no such lattice) None."""
+    if steps is None:
+        return None
+    held, rank = np.unique(steps, return_inverse=True)
+    empty = int(held[-1]) + 1 - len(held)
+    if empty == 0:
+        return steps
+    if empty < 2 or len(held) < 3:
+        return None
+    order = np.arange(len(held))
+    pitch, start = np.polyfit(order, held, 1)
+    if np.abs(held - (start + pitch * order)).max() > CLOSED_RESIDUAL:
+        return None
+    closed: np.ndarray = rank.ravel()
+    return closed
 
 
 #: :func:`sensor_axes`: the points whose neighbours in a rough image of the view are
