@@ -479,6 +479,23 @@ def test_a_view_written_with_coordinates_rounded_finer_than_its_pixels_is_read_b
     assert len(faces) >= 0.98 * len(organized_surface(grid, viewpoint)[1])
 
 
+@pytest.mark.parametrize("frame", ["camera", "turned"])
+def test_points_written_more_than_once_are_read_once(frame):
+    """The depth example's points with a third of them written twice more (frames
+    merged, an export's repeats), in another order: the same surface as the points
+    once (the code before refused them: the copies hid behind one another)."""
+    grid, viewpoint = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), 1500)
+    seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()] - viewpoint
+    if frame == "turned":
+        seen = seen @ random_rotation(np.random.default_rng(1)).T
+    rng = np.random.default_rng(0)
+    repeated = np.repeat(seen[rng.choice(len(seen), len(seen) // 3, replace=False)], 2, axis=0)
+    points = np.vstack([seen, repeated])[rng.permutation(len(seen) + len(repeated))]
+    assert triangles(*scans.one_view(points, np.zeros(3))) == triangles(
+        *scans.one_view(seen, np.zeros(3))
+    )
+
+
 def test_closed_up_numbers_the_columns_a_rounding_left_empty_between():
     """Columns 1.4 apart rounded to whole numbers (0, 1, 3, 4, 6, ...), any order: the
     sensor's columns in turn. None empty: the steps as they are. One empty (a gap of

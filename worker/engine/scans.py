@@ -401,24 +401,27 @@ def one_view(
     along its own line of sight (:func:`grid_sight`: exact, where the unfolded sight can
     be degrees off), on the side the view's silhouette says its sensor stood
     (:func:`sensor_side`). When that fails too, the first refusal stands: it names the
-    sensor the file gave."""
+    sensor the file gave. A point written more than once (frames merged, an export's
+    repeats) is read once: its copies would hide behind one another, and share a pixel."""
     finite = points[np.isfinite(points).all(axis=1)]
+    rows = np.ascontiguousarray(finite).view(np.dtype((np.void, 3 * finite.itemsize))).ravel()
+    finite = finite[np.sort(np.unique(rows, return_index=True)[1])]  # in the file's order
     # Computed once, when the frame search's rounds or the second try first need it.
     start = cache(lambda: unfolded_sight(finite))
     try:
-        return viewed_surface(points, viewpoint, axes, start=start)
+        return viewed_surface(finite, viewpoint, axes, start=start)
     except PointCloudError as refusal:
         if len(finite) < 3:
             raise  # too few points from anywhere
         try:
             # The first try searched the points' frames already (sensor_axes: where no
             # lattice was found from there, none is from afar).
-            guess = guessed_viewpoint(points, start())
-            vertices, faces = viewed_surface(points, guess, find_frame=False)
+            guess = guessed_viewpoint(finite, start())
+            vertices, faces = viewed_surface(finite, guess, find_frame=False)
             sight = grid_sight(vertices, faces)
             if sight is not None:
-                guess = guessed_viewpoint(points, sight)
-                vertices, faces = viewed_surface(points, guess, find_frame=False)
+                guess = guessed_viewpoint(finite, sight)
+                vertices, faces = viewed_surface(finite, guess, find_frame=False)
         except PointCloudError:
             raise refusal from None
         direction = guess - vertices.mean(axis=0)
