@@ -496,6 +496,25 @@ def test_points_written_more_than_once_are_read_once(frame):
     )
 
 
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_written_once_keeps_each_point_once_in_the_order_written(dtype):
+    """Against a plain reference (each point's first appearance, by its coordinates):
+    clouds with no point repeated, some repeated many times, and grid points (whose
+    coordinates repeat one by one, never all three)."""
+    rng = np.random.default_rng(0)
+    grid = np.stack(np.meshgrid(np.arange(30.0), np.arange(20.0), [1.0]), axis=-1)
+    for points in (
+        rng.normal(size=(500, 3)),
+        rng.normal(size=(200, 3))[rng.integers(0, 200, size=700)],
+        grid.reshape(-1, 3)[rng.permutation(600)],
+    ):
+        points = points.astype(dtype)
+        first: dict[tuple[float, ...], int] = {}
+        for k, point in enumerate(points.tolist()):
+            first.setdefault(tuple(point), k)
+        assert np.array_equal(scans.written_once(points), points[sorted(first.values())])
+
+
 def test_closed_up_numbers_the_columns_a_rounding_left_empty_between():
     """Columns 1.4 apart rounded to whole numbers (0, 1, 3, 4, 6, ...), any order: the
     sensor's columns in turn. None empty: the steps as they are. One empty (a gap of

@@ -403,9 +403,7 @@ def one_view(
     (:func:`sensor_side`). When that fails too, the first refusal stands: it names the
     sensor the file gave. A point written more than once (frames merged, an export's
     repeats) is read once: its copies would hide behind one another, and share a pixel."""
-    finite = points[np.isfinite(points).all(axis=1)]
-    rows = np.ascontiguousarray(finite).view(np.dtype((np.void, 3 * finite.itemsize))).ravel()
-    finite = finite[np.sort(np.unique(rows, return_index=True)[1])]  # in the file's order
+    finite = written_once(points[np.isfinite(points).all(axis=1)])
     # Computed once, when the frame search's rounds or the second try first need it.
     start = cache(lambda: unfolded_sight(finite))
     try:
@@ -428,6 +426,18 @@ def one_view(
         if sensor_side(vertices, faces, direction) < 0.0:
             faces = faces[:, ::-1]  # its sensor stands the other way: each triangle faces it
         return vertices, faces
+
+
+def written_once(points: np.ndarray) -> np.ndarray:
+    """``points`` (n, 3), each written more than once kept once, in the order written.
+    One sort of a number each point's coordinates make tells first that none is (equal
+    points make equal numbers), in a fifth of the time the rows' own take."""
+    key = points @ np.array([1.0, np.pi, np.e])
+    if np.unique(key).size == len(key):
+        return points
+    rows = np.ascontiguousarray(points).view(np.dtype((np.void, 3 * points.itemsize))).ravel()
+    once: np.ndarray = points[np.sort(np.unique(rows, return_index=True)[1])]
+    return once
 
 
 def guessed_viewpoint(points: np.ndarray, direction: np.ndarray) -> np.ndarray:
