@@ -430,8 +430,8 @@ def one_view(
 
 def written_once(points: np.ndarray) -> np.ndarray:
     """``points`` (n, 3), each written more than once kept once, in the order written.
-    One sort of a number each point's coordinates make tells first that none is (equal
-    points make equal numbers), in a fifth of the time the rows' own take."""
+    One sort of a number made of each point's coordinates first tells whether any is
+    (equal points make equal numbers), in a fifth of the time the rows' own sort takes."""
     key = points @ np.array([1.0, np.pi, np.e])
     if np.unique(key).size == len(key):
         return points
@@ -678,7 +678,7 @@ def sensor_grid(
 CLOSED_RESIDUAL = 0.6
 
 
-def closed_up(steps: np.ndarray | None) -> np.ndarray | None:
+def closed_up(steps: np.ndarray) -> np.ndarray | None:
     """(n,) int, ``steps`` (n,) of a lattice's columns (:func:`lattice_steps`) with the
     empty columns between them closed up, or None.
 
@@ -692,8 +692,6 @@ def closed_up(steps: np.ndarray | None) -> np.ndarray | None:
     :data:`CLOSED_RESIDUAL` of a column of a regular lattice of wider pitch, the values
     are the sensor's columns in turn; with none empty, ``steps`` themselves; otherwise
     (a gap of its own, values on no such lattice) None."""
-    if steps is None:
-        return None
     held, rank = np.unique(steps, return_inverse=True)
     empty = int(held[-1]) + 1 - len(held)
     if empty == 0:
