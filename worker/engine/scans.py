@@ -997,10 +997,12 @@ def read_pcd(
         ) from exc
     pose = _pcd_viewpoint(header)
     viewpoint = pose[:3]
+    with np.errstate(invalid="ignore"):  # a signalling NaN (a damaged file's) is a NaN too
+        xyz = xyz.astype(np.float64)
     if height <= 1 or width <= 1:  # no grid: one view seen from its viewpoint
-        points, faces = one_view(xyz.astype(np.float64), viewpoint, _rotation(pose[3:]))
+        points, faces = one_view(xyz, viewpoint, _rotation(pose[3:]))
         return points, faces, Cloud(len(points))
-    points, faces = organized_surface(xyz.astype(np.float64).reshape(height, width, 3), viewpoint)
+    points, faces = organized_surface(xyz.reshape(height, width, 3), viewpoint)
     return points, faces, Cloud(len(points), (width, height))
 
 
