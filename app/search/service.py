@@ -116,7 +116,8 @@ class PartialQuery:
             fitted = (
                 f"{self.verified} of the best by the parts that are there (and by their "
                 "surfaces' features) were fitted to it rigidly and ranked among themselves "
-                f"by how much of it they hold (fitness). The fittest holds {self.held:.1%} of it"
+                f"by how much of it they hold (fitness). The fittest holds "
+                f"{math.floor(1000 * self.held + 1e-9) / 10:.1f}% of it"  # 89.97% is no 90.0%
             )
             least = f"{_rigid().HELD_FITNESS:.0%}"
             verdict = (
