@@ -277,7 +277,7 @@ def _parse(
     for mesh in meshes:
         vertices.append(np.asarray(mesh.vertices, dtype=np.float64))
         faces.append(np.asarray(mesh.faces, dtype=np.int64) + offset)
-        if vertices[-1].ndim != 2 or vertices[-1].shape[1] != 3 or faces[-1].shape[1:] != (3,):
+        if vertices[-1].ndim != 2 or vertices[-1].shape[1] != 3:
             # an OBJ's vertex line cut short parses as fewer coordinates
             raise UnreadableMeshError(
                 f"The file could not be read as {fmt.upper()}: it is damaged or not a mesh."

@@ -10,7 +10,7 @@ def unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     Parameters
     ----------
-    rows : (n, d) int
+    rows : (n, d) int (or float: rows equal value by value)
 
     Returns
     -------
