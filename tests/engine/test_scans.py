@@ -57,6 +57,15 @@ def two_planes() -> tuple[np.ndarray, int]:
     return camera_grid(depth), near
 
 
+def framed(points: np.ndarray) -> np.ndarray:
+    """``points`` (h, w, 3) with the frame's outermost pixels blank, as a camera framing an
+    object sees nothing around it: no plane runs out of the frame, so none is left out as
+    a floor or a wall (:func:`~worker.engine.scans.without_support`)."""
+    inside = np.full_like(points, np.nan)
+    inside[1:-1, 1:-1] = points[1:-1, 1:-1]
+    return inside
+
+
 #: A 6 x 8 grid's fields in turn (``soa_fields(small_grid())``) as liblzf 3.6 compresses
 #: them (python-lzf 0.2.6's ``lzf.compress``): literal runs, copies of 3 to 183 bytes
 #: from 4 to 296 bytes back, overlapping ones among them.
@@ -218,8 +227,7 @@ def test_pixels_that_saw_nothing_are_left_out():
 
 @pytest.mark.parametrize("data", ["ascii", "binary", "binary_compressed"])
 def test_a_pcd_file_is_read_as_its_grid_triangulated_from_its_viewpoint(data):
-    points, _ = two_planes()
-    points[0, 0] = np.nan
+    points = framed(two_planes()[0])
     vertices, faces, grid = read_pcd(pcd(points, data))
     assert_read_as(points, vertices, faces, grid)
     # The shadows are seen from the file's viewpoint.
@@ -260,9 +268,9 @@ def test_pcl_binary_compressed_file_is_read():
 
 
 def assert_read_as(points: np.ndarray, vertices, faces, grid) -> np.ndarray:
-    """That a file's surface is ``points``' (stored in single precision, the first pixel
-    blank) triangulated from the origin; returns the triangles."""
-    assert grid == Cloud(WIDTH * HEIGHT - 1, (WIDTH, HEIGHT))
+    """That a file's surface is ``points``' (stored in single precision, :func:`framed`)
+    triangulated from the origin; returns the triangles."""
+    assert grid == Cloud((HEIGHT - 2) * (WIDTH - 2), (WIDTH, HEIGHT))
     want_vertices, want_faces = organized_surface(points.astype(np.float32), np.zeros(3))
     np.testing.assert_allclose(vertices, want_vertices, rtol=1e-6)
     np.testing.assert_array_equal(faces, want_faces)
@@ -270,13 +278,14 @@ def assert_read_as(points: np.ndarray, vertices, faces, grid) -> np.ndarray:
 
 
 def test_a_gzipped_pcd_is_read_as_a_mesh():
-    points, _ = two_planes()
+    points = framed(two_planes()[0])
     cleaned = read_mesh(pcd_gz_bytes(points, np.zeros(3)), "scan.pcd.gz")
     # The larger piece, the far plane (the near one is separate once the gap is open).
-    assert cleaned.mesh.n_vertices == HEIGHT * (WIDTH - 15)
+    assert cleaned.mesh.n_vertices == (HEIGHT - 2) * (WIDTH - 16)
     assert np.allclose(cleaned.mesh.vertices[:, 2], 3.0, atol=1e-6)
     assert 0.5 < cleaned.kept_area_fraction < 1.0
-    assert cleaned.cloud == Cloud(WIDTH * HEIGHT, (WIDTH, HEIGHT))  # the file's, not the piece's
+    # The file's, not the piece's.
+    assert cleaned.cloud == Cloud((HEIGHT - 2) * (WIDTH - 2), (WIDTH, HEIGHT))
 
 
 def triangles(vertices: np.ndarray, faces: np.ndarray) -> set[tuple[tuple[float, ...], ...]]:
@@ -950,8 +959,7 @@ def test_a_truncated_binary_pcd_is_refused():
 
 
 def test_a_structured_e57_scan_is_read_as_its_grid_from_the_scanner_s_position():
-    points, _ = two_planes()
-    points[0, 0] = np.nan
+    points = framed(two_planes()[0])
     vertices, faces, grid = read_e57(e57_scan(points))
     want_faces = assert_read_as(points, vertices, faces, grid)
     # The scan's pose places its points, and its origin is where the scanner stood: the

@@ -190,3 +190,27 @@ def test_a_noisy_view_is_the_view_moved_along_its_rays(sphere):
         corners = view.vertices[view.faces]
         normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
         assert abs(np.mean(np.sign(normals @ ray))) > 0.95
+
+
+def test_range_floor_reads_the_scan_without_its_floor(sphere, monkeypatch):
+    """``range-floor`` shoots ``range-cloud``'s scans (its seed) of the whole on a floor
+    from above it, the frame cut so that the floor runs out of it: read as the service
+    reads a depth camera's organized cloud, no floor is left and the sphere's view is
+    whole (a hemisphere seen from anywhere: as ``range-cloud``'s, within 2% of its area)."""
+    monkeypatch.setattr(partial, "similarity", lambda mesh, rng: mesh)
+    supports = []
+    left_out = scans.without_support
+    monkeypatch.setattr(
+        partial,
+        "without_support",
+        lambda *a: supports.append(left_out(*a)[1]) or left_out(*a),
+    )
+    low = float(sphere.vertices[:, 2].min())
+    for name in ("sphere.off", "other.off"):
+        grid = make_variant(sphere, "range-cloud", name)
+        supports.clear()
+        floor = make_variant(sphere, "range-floor", name)
+        assert len(supports) == 1 and supports[0] > floor.n_vertices  # the floor's points
+        assert floor.vertices[:, 2].min() > low + 1e-9
+        area = face_areas(floor.vertices, floor.faces).sum()
+        assert area == pytest.approx(face_areas(grid.vertices, grid.faces).sum(), rel=0.02)

@@ -82,11 +82,14 @@ _PCD_VIEWPOINT = ["0", "0", "0", "1", "0", "0", "0"]
 @dataclass(frozen=True)
 class Cloud:
     """The point cloud a surface was triangulated from: its ``points`` that saw the
-    surface, and its sensor ``grid``, (width, height) pixels (None: a cloud without one,
-    triangulated as seen from its sensor, :func:`viewed_surface`)."""
+    surface, its sensor ``grid``, (width, height) pixels (None: a cloud without one,
+    triangulated as seen from its sensor, :func:`viewed_surface`), and the points of the
+    floor, table or wall its object stood on or against, left out
+    (:func:`without_support`; an organized cloud's)."""
 
     points: int
     grid: tuple[int, int] | None = None
+    support: int = 0
 
 
 def grid_faces(valid: np.ndarray) -> np.ndarray:
@@ -180,6 +183,153 @@ def _sight_of(points: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
         return None
     sight: np.ndarray = solution / np.linalg.norm(solution)
     return sight
+
+
+#: :func:`without_support`: a plane is searched for among the points within
+#: ``SUPPORT_BAND`` times the grid's spacing of it (the median distance between
+#: neighbouring pixels' points, along the finer of its rows and columns); it is the
+#: floor, a table or a wall the object stands on or against when it holds at least
+#: ``SUPPORT_SHARE`` of the points and leaves as many further than that from it, runs out
+#: of the frame along at least ``SUPPORT_BORDER`` of the grid's border, and
+#: ``SUPPORT_FRONT`` of those further points lie on the sensor's side of it. On 45 views of
+#: three figures on a floor or before a wall (docs/decisions.md, "A floor or a wall in the
+#: frame is left out"), such planes ran out along 0.17-1.00 of the border with every other
+#: point in front; the figures' own largest planes along at most 0.07, with at most 0.83
+#: in front. ``SUPPORT_PLANES`` planes are tried, the largest first (a floor and a wall: a
+#: corner of a room), each the best of ``SUPPORT_TRIALS`` planes through three points
+#: near the frame's border (within ``SUPPORT_RING`` of its size: a support reaches it),
+#: scored on ``SUPPORT_SAMPLE`` points (RANSAC: Fischler and Bolles 1981), seeded so that
+#: a file is always read alike.
+SUPPORT_BAND = 2.0
+SUPPORT_SHARE = 0.05
+SUPPORT_BORDER = 0.15
+SUPPORT_FRONT = 0.98
+SUPPORT_PLANES = 4
+SUPPORT_TRIALS = 256
+SUPPORT_SAMPLE = 4000
+SUPPORT_RING = 0.05
+#: What is left out of a support: its points within ``SUPPORT_SIGMAS`` times their
+#: residuals' spread of the plane (their median absolute residual over 0.6745, a
+#: Gaussian's sigma), measured in ``SUPPORT_RANGES`` bands of distance from the sensor (a
+#: depth camera's noise grows with the square of the depth), at least ``SUPPORT_LEAST``
+#: of the search's band (an exact plane's points, and not the object's feet on it) and at
+#: most all of it; the plane refitted to them ``SUPPORT_REFITS`` times by
+#: least squares, so that the object's points near it pull the fit off it no more.
+SUPPORT_SIGMAS = 4.0
+SUPPORT_RANGES = 8
+SUPPORT_LEAST = 0.02
+SUPPORT_REFITS = 4
+
+
+def without_support(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarray, int]:
+    """An organized cloud (H, W, 3) (non-finite where a pixel saw nothing) with the planes
+    its object stands on or against left out: (H, W, 3) those pixels made ``nan``, and how
+    many points they were.
+
+    A depth camera's frame nearly always holds the floor or table under its object and
+    often a wall behind it; read with them, the object and its support are one piece, and
+    the piece matches no enrolled object. What tells a support from the object's own flat
+    faces (a box's, a tablet's, an underside seen from below): a support runs out of the
+    picture, where a framed object's faces end inside it, and the object stands in front
+    of it as the sensor sees it, where the rest of a box lies behind its nearest face
+    (:data:`SUPPORT_BAND` .. :data:`SUPPORT_REFITS`)."""
+    valid = np.isfinite(points).all(axis=2)
+    count = int(np.count_nonzero(valid))
+    # The finer of the grid's two directions: a floor seen at a slant is coarse along one.
+    steps = [
+        np.linalg.norm(a - b, axis=-1)[np.isfinite(a - b).all(axis=-1)]
+        for a, b in ((points[:, 1:], points[:, :-1]), (points[1:], points[:-1]))
+    ]
+    if count < 3 or not any(len(s) for s in steps):
+        return points, 0  # no two neighbouring pixels saw the surface
+    band = SUPPORT_BAND * min(float(np.median(s)) for s in steps if len(s))
+    border = np.zeros(valid.shape, dtype=bool)
+    border[[0, -1]] = border[:, [0, -1]] = True
+    width = max(1, round(SUPPORT_RING * min(valid.shape)))
+    ring = np.ones_like(valid)
+    ring[width:-width, width:-width] = False
+    flat = np.nan_to_num(points)
+    reach = np.linalg.norm(flat - viewpoint, axis=2)
+    rng = np.random.default_rng(0)
+    support = np.zeros_like(valid)
+    candidates = valid.copy()
+    for _ in range(SUPPORT_PLANES):
+        if np.count_nonzero(candidates & ring) < 3:
+            break
+        plane = _largest_plane(flat, reach, candidates, ring, band, rng)
+        if plane is None:
+            break
+        normal, offset, within = plane
+        distance = flat @ normal - offset
+        on = valid & ~support & (np.abs(distance) < within)
+        # Clearly not on it: beyond the search's band and twice its own points' band.
+        off = valid & ~support & (np.abs(distance) >= np.maximum(band, 2.0 * within))
+        side = np.sign(viewpoint @ normal - offset)
+        front = np.mean(np.sign(distance[off]) == side) if off.any() else 0.0
+        out = np.count_nonzero(on & border) / np.count_nonzero(border)
+        if (
+            min(np.count_nonzero(on), np.count_nonzero(off)) >= SUPPORT_SHARE * count
+            and front >= SUPPORT_FRONT
+            and out >= SUPPORT_BORDER
+        ):
+            support |= on
+            candidates &= ~on
+        else:  # not tried again, nor anything near it
+            candidates &= np.abs(distance) >= band
+    kept = points.copy()
+    kept[support] = np.nan
+    return kept, int(np.count_nonzero(support))
+
+
+def _largest_plane(
+    points: np.ndarray,
+    reach: np.ndarray,
+    candidates: np.ndarray,
+    ring: np.ndarray,
+    band: float,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, float, np.ndarray] | None:
+    """The plane through three of the ``candidates`` (H, W) bool of ``points`` (H, W, 3) in
+    the ``ring`` near the frame's border within ``band`` of which most candidates lie
+    (:data:`SUPPORT_TRIALS`, :data:`SUPPORT_SAMPLE`): its unit normal (3,) and offset,
+    and (H, W) how near it each pixel must lie to be its own, from the spread of the
+    residuals at its ``reach`` (distance from the sensor) (:data:`SUPPORT_SIGMAS` ..
+    :data:`SUPPORT_REFITS`); None when every triple drawn lies (nearly) on a line, or no candidate
+    lies near the plane."""
+    near_border, pool = points[candidates & ring], points[candidates]
+    sample = pool[rng.choice(len(pool), min(SUPPORT_SAMPLE, len(pool)), replace=False)]
+    a, b, c = (near_border[rng.integers(len(near_border), size=SUPPORT_TRIALS)] for _ in range(3))
+    normals = np.cross(b - a, c - a)
+    size = np.linalg.norm(normals, axis=1)
+    # Sides at 6 degrees or more: three points along one row of pixels fit any plane.
+    fine = size > 0.1 * np.linalg.norm(b - a, axis=1) * np.linalg.norm(c - a, axis=1)
+    if not fine.any():
+        return None
+    normals = normals[fine] / size[fine, None]
+    offsets = np.einsum("ij,ij->i", normals, a[fine])
+    best = np.argmax(np.count_nonzero(np.abs(sample @ normals.T - offsets) < band, axis=0))
+    normal, offset = normals[best], float(offsets[best])
+    within = band
+    for _ in range(SUPPORT_REFITS):
+        near = candidates & (np.abs(points @ normal - offset) < within)
+        if np.count_nonzero(near) < 3:
+            break
+        centre = points[near].mean(axis=0)
+        normal = np.linalg.svd(points[near] - centre, full_matrices=False)[2][2]
+        offset = float(centre @ normal)
+        spread = float(np.median(np.abs(points[near] @ normal - offset))) / 0.6745
+        within = min(max(SUPPORT_SIGMAS * spread, SUPPORT_LEAST * band), band)
+    # What is its own: the spread in bands of reach holding equal shares of its points.
+    residual = np.abs(points @ normal - offset)
+    near = candidates & (residual < band)
+    if not near.any():
+        return None
+    order = np.argsort(reach[near])
+    parts = np.array_split(order, min(SUPPORT_RANGES, len(order)))
+    spreads = np.array([np.median(residual[near][k]) for k in parts]) / 0.6745
+    ranges = np.searchsorted(reach[near][[k[0] for k in parts[1:]]], reach, side="right")
+    own = np.clip(SUPPORT_SIGMAS * spreads[ranges], SUPPORT_LEAST * band, band)
+    return normal, offset, own
 
 
 def view_frame(direction: np.ndarray) -> np.ndarray:
@@ -1002,8 +1152,9 @@ def read_pcd(
     if height <= 1 or width <= 1:  # no grid: one view seen from its viewpoint
         points, faces = one_view(xyz, viewpoint, _rotation(pose[3:]))
         return points, faces, Cloud(len(points))
-    points, faces = organized_surface(xyz.reshape(height, width, 3), viewpoint)
-    return points, faces, Cloud(len(points), (width, height))
+    grid, support = without_support(xyz.reshape(height, width, 3), viewpoint)
+    points, faces = organized_surface(grid, viewpoint)
+    return points, faces, Cloud(len(points), (width, height), support)
 
 
 def _pcd_viewpoint(header: dict[str, list[str]]) -> np.ndarray:
@@ -1114,8 +1265,9 @@ def _structured_scan(e57: Any, max_bytes: int) -> tuple[np.ndarray, np.ndarray, 
     # A pixel with several returns keeps the last one listed.
     grid[rows, columns] = np.stack([scan[f"cartesian{a}"] for a in "XYZ"], axis=1)
     viewpoint = np.asarray(e57.scan_position(0), dtype=np.float64).reshape(3)
+    grid, support = without_support(grid, viewpoint)
     points, faces = organized_surface(grid, viewpoint)
-    return points, faces, Cloud(len(points), (width, height))
+    return points, faces, Cloud(len(points), (width, height), support)
 
 
 def _bounds(header: Any, axis: str, indices: np.ndarray) -> tuple[int, int]:

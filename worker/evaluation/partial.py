@@ -26,6 +26,9 @@ here keeps a part of the surface, its largest connected piece:
   view's points (:func:`worker.engine.scans.viewed_surface`, from the camera);
 * ``view-voxels``: the same scans' points thinned by a voxel filter of two pixels (on no
   pixel lattice), read as ``view-points``;
+* ``range-floor``: ``range-cloud``'s scans (drawn from its seed) of the whole standing
+  on a floor, the camera above it, the frame cropped so that the floor runs out of it,
+  read as the service reads a depth camera's organized cloud (the floor left out first);
 * ``shrec-holes``: SHREC'17's holes: geodesic discs of random radius (up to 20% of the
   diameter) eroded around some of 70 farthest samples, the rest decimated to a random
   resolution (300 vertices .. as many as the mesh has), in a random similarity transform;
@@ -41,7 +44,7 @@ the same way.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import scipy.sparse as sp
@@ -50,7 +53,13 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from worker.engine.errors import MeshError
 from worker.engine.geodesic import farthest_point_samples
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
-from worker.engine.scans import grid_faces, organized_surface, view_frame, viewed_surface
+from worker.engine.scans import (
+    grid_faces,
+    organized_surface,
+    view_frame,
+    viewed_surface,
+    without_support,
+)
 from worker.engine.topology import edge_keys
 
 #: Number of discs the ``holes-*`` variants remove.
@@ -355,6 +364,64 @@ def range_cloud(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     return similarity(clean_mesh(vertices, faces), rng)
 
 
+#: ``range-floor``: the frame's margin around the whole, in its size in the image.
+FLOOR_MARGIN = 0.25
+
+
+def floor_frame(
+    mesh: Mesh,
+    direction: np.ndarray,
+    pitch: float,
+    up: str = "z",
+    walls: Sequence[tuple[str, float]] = (),
+) -> np.ndarray:
+    """(h, w, 3) the organized cloud a depth camera looking along ``-direction`` (its
+    pixels ``pitch`` apart; from above the floor) sees of ``mesh`` standing on a floor
+    (the plane across ``up`` at its lowest point) and before ``walls`` (each the plane
+    across an axis at a value), the frame ``FLOOR_MARGIN`` around the whole: each plane
+    is the quadrilateral the frame's corner rays meet it in, so that it runs out of the
+    frame on every side it reaches (a plane the rays run along is not seen)."""
+    frame = view_frame(direction)
+    seen = mesh.vertices @ frame.T
+    low, high = seen[:, :2].min(axis=0), seen[:, :2].max(axis=0)
+    # A pixel beyond the margin, so that the planes cover the frame's every pixel.
+    margin = FLOOR_MARGIN * (high - low) + pitch
+    low, high = low - margin, high + margin
+    corners = np.array([[low[0], low[1]], [high[0], low[1]], [high[0], high[1]], [low[0], high[1]]])
+    on_plane = corners @ frame[:2]  # (4, 3) on the image plane, depth 0
+    vertices, faces = [mesh.vertices], [mesh.faces]
+    n = mesh.n_vertices
+    for axis, value in ((up, float(mesh.vertices[:, "xyz".index(up)].min())), *walls):
+        k = "xyz".index(axis)
+        if abs(frame[2, k]) < 1e-6:
+            continue
+        depth = (value - on_plane[:, k]) / frame[2, k]
+        vertices.append(on_plane + depth[:, None] * frame[2])
+        faces.append(np.array([[n, n + 1, n + 2], [n, n + 2, n + 3]]))
+        n += 4
+    image, origin = depth_grid(Mesh(np.vstack(vertices), np.vstack(faces)), direction, pitch)
+    points: np.ndarray = grid_points(image, origin, direction, pitch)
+    # The pixels whose centres lie within half a pixel of the frame: on every plane.
+    first = np.maximum(np.floor((low + pitch - origin) / pitch).astype(int), 0)
+    last = np.floor((high - pitch - origin) / pitch).astype(int)
+    return points[first[1] : last[1] + 1, first[0] : last[0] + 1]
+
+
+def range_floor(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
+    """:func:`range_cloud`'s scan (its generator drawn from that variant's seed) of the
+    whole standing on a floor, the camera above it (the elevation's sign made positive;
+    :func:`floor_frame`), read as the service reads a depth camera's organized cloud: the
+    floor left out (:func:`worker.engine.scans.without_support`), then triangulated
+    (:func:`~worker.engine.scans.organized_surface`), its largest piece in the same
+    random similarity."""
+    _, direction, pitch = range_image(mesh, rng, up)
+    direction["xyz".index(up)] = abs(direction["xyz".index(up)])
+    viewpoint = far_viewpoint(mesh, direction)
+    frame, _ = without_support(floor_frame(mesh, direction, pitch, up), viewpoint)
+    vertices, faces = organized_surface(frame, viewpoint)
+    return similarity(clean_mesh(vertices, faces), rng)
+
+
 def view_points(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     """:func:`range_cloud`'s scan (its generator drawn from that variant's seed) read
     without its grid: the points that saw the surface in a fixed random order, triangulated
@@ -445,6 +512,7 @@ def single_view(mesh: Mesh, direction: np.ndarray) -> Mesh:
 DRAWN_AS = {
     "view-points": "range-cloud",
     "view-voxels": "range-cloud",
+    "range-floor": "range-cloud",
     "view-noise-0.25": "view",
     "view-noise-0.5": "view",
 }
@@ -456,6 +524,7 @@ ORBITING: dict[str, Callable[[Mesh, np.random.Generator, str], Mesh]] = {
     "range-cloud": range_cloud,
     "view-points": view_points,
     "view-voxels": view_voxels,
+    "range-floor": range_floor,
 }
 
 #: name -> how to make it from a mesh and a random generator, in report order.
@@ -470,6 +539,7 @@ PARTIAL_VARIANTS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
     "range-cloud": range_cloud,
     "view-points": view_points,
     "view-voxels": view_voxels,
+    "range-floor": range_floor,
     "shrec-holes": shrec_holes,
     "noise-0.25": lambda mesh, rng: noisy_surface(mesh, 0.25, rng),
     "noise-0.5": lambda mesh, rng: noisy_surface(mesh, 0.5, rng),
