@@ -237,6 +237,7 @@ class JobCollector:
                 kept_area_fraction=descriptor.kept_area_fraction,
                 input_points=descriptor.input_points,
                 input_grid=None if descriptor.input_grid is None else list(descriptor.input_grid),
+                input_support=descriptor.input_support,
                 facing_share=descriptor.facing_share,
                 smoothed=descriptor.surface_smoothed,
             ),

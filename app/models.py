@@ -154,6 +154,9 @@ class Descriptor(Base):
     # (None: a mesh, a cloud without a grid, or made before they were kept).
     input_points: Mapped[int | None]
     input_grid: Mapped[list[int] | None] = mapped_column(JSON)
+    # Of an organized cloud: the points of a floor, table or wall left out (None: not an
+    # organized cloud, or made before they were left out).
+    input_support: Mapped[int | None]
     # The largest share of the surface facing one way (None: made before it was kept).
     facing_share: Mapped[float | None]
     # Whether it was smoothed of a scanner's noise (None: made before it was kept).

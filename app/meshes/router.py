@@ -130,6 +130,7 @@ def mesh_out(mesh: Mesh, descriptor: Descriptor | None, collection: str) -> Mesh
             kept_area_fraction=descriptor.kept_area_fraction,
             input_points=descriptor.input_points,
             input_grid=descriptor.input_grid,
+            input_support=descriptor.input_support,
             facing_share=descriptor.facing_share,
             smoothed=descriptor.smoothed,
         ),

@@ -43,6 +43,13 @@ class DescriptorInfo(BaseModel):
         description="that cloud's sensor grid, [width, height] pixels; null for a mesh or "
         "a cloud without one",
     )
+    input_support: int | None = Field(
+        None,
+        description="that organized cloud's points on a floor, table or wall its object "
+        "stood on or against (a plane running out of the frame with every other point in "
+        "front of it), left out before it was triangulated; null for a mesh, a cloud "
+        "without a grid, or descriptors made before it was recorded",
+    )
     facing_share: float | None = Field(
         None,
         description="the largest share of the described surface's area facing one way: "

@@ -152,8 +152,10 @@ class QueryOut(BaseModel):
         "whole, a cut or a holed copy, near 1 for one view); "
         "for a point cloud also input_points (its points that saw the surface), and for "
         "an organized one (a PCD with a grid or a structured E57 scan) input_grid "
-        "([width, height]); smoothed (true) when its surface looked noisy and was smoothed "
-        "before it was described (a single view: before it was fitted)",
+        "([width, height]) and input_support (its points on a floor, table or wall its "
+        "object stood on or against, left out); smoothed (true) when its surface looked "
+        "noisy and was smoothed before it was described (a single view: before it was "
+        "fitted)",
     )
     partial: PartialOut | None = Field(
         None,

@@ -178,6 +178,13 @@ def query_notes(
             f"The query is a scanner's point cloud: {points:,} points on a {width} x {height} "
             "grid, triangulated by it."
         )
+        support = facts.get("input_support")
+        if isinstance(support, int) and support > 0:
+            notes.append(
+                f"{support:,} other points were left out: they lie on a plane the object "
+                "stood on or against (a floor, a table or a wall, running out of the frame "
+                "with everything else in front of it)."
+            )
     elif points is not None:
         notes.append(
             f"The query is a scanner's point cloud: {points:,} points, triangulated as one view."
@@ -330,6 +337,8 @@ def query_facts(descriptor: ShapeDescriptor) -> dict[str, bool | int | float | l
         facts["input_points"] = descriptor.input_points
     if descriptor.input_grid is not None:
         facts["input_grid"] = list(descriptor.input_grid)
+    if descriptor.input_support is not None:
+        facts["input_support"] = descriptor.input_support
     if descriptor.surface_smoothed:
         facts["smoothed"] = True
     return facts

@@ -224,7 +224,10 @@ function pointCloud(facts) {
   const points = `a scanner's point cloud: ${facts.input_points.toLocaleString("en")} points`;
   if (!facts.input_grid) return `${points}, triangulated as one view`;
   const [width, height] = facts.input_grid;
-  return `${points} on a ${width} x ${height} grid, triangulated by it`;
+  const grid = `${points} on a ${width} x ${height} grid, triangulated by it`;
+  if (!facts.input_support) return grid;
+  const support = facts.input_support.toLocaleString("en");
+  return `${grid} (${support} points of a floor, table or wall it stood on or against left out)`;
 }
 
 function percent(value) {

@@ -199,7 +199,11 @@ def test_the_sec_4_1_preset_keeps_the_scale_and_the_surface_presets_do_not(figur
 def test_descriptor_round_trips(figure_descriptor):
     partial = replace(figure_descriptor, kept_area_fraction=0.625)
     scanned = replace(
-        figure_descriptor, input_points=1583, input_grid=(77, 56), surface_smoothed=True
+        figure_descriptor,
+        input_points=1583,
+        input_grid=(77, 56),
+        input_support=2704,
+        surface_smoothed=True,
     )
     for original in (figure_descriptor, partial, scanned):
         for restored in (
@@ -214,15 +218,17 @@ def test_descriptor_round_trips(figure_descriptor):
             assert restored.area == original.area
             assert restored.input_points == original.input_points
             assert restored.input_grid == original.input_grid
+            assert restored.input_support == original.input_support
             assert restored.surface_smoothed == original.surface_smoothed
             np.testing.assert_array_equal(restored.vector(SIZE), original.vector(SIZE))
     # A descriptor stored before the kept share was recorded reads as not known.
     old = figure_descriptor.to_json()
     del old["kept_area_fraction"], old["input_points"], old["input_grid"]
-    del old["surface_smoothed"]
+    del old["input_support"], old["surface_smoothed"]
     restored = ShapeDescriptor.from_json(old)
     assert restored.kept_area_fraction is None and restored.surface_smoothed is None
     assert restored.input_points is None and restored.input_grid is None
+    assert restored.input_support is None
 
 
 def test_describe_file_times_every_stage(small_preset):
@@ -230,7 +236,8 @@ def test_describe_file_times_every_stage(small_preset):
     assert list(d.timings) == ["load", "resample", "gdm", "eigen_ddt", "modal", "surface", "total"]
     assert d.timings["total"] == pytest.approx(sum(v for k, v in d.timings.items() if k != "total"))
     assert d.kept_area_fraction == 1.0  # one connected surface
-    assert d.input_points is None and d.input_grid is None  # a mesh, not a cloud
+    # A mesh, not a cloud.
+    assert d.input_points is None and d.input_grid is None and d.input_support is None
 
 
 def test_a_file_of_separate_parts_describes_its_largest_and_says_so(small_preset):

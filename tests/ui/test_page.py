@@ -26,8 +26,14 @@ from benchmarks.common import EXAMPLES, Service
 from tests.service.conftest import migrated_service, running
 from worker.engine.mesh_io import load_mesh
 from worker.engine.scans import read_pcd
-from worker.evaluation.partial import noisy_surface
-from worker.evaluation.samples import DEPTH_SAMPLE, PARTIAL_SAMPLE
+from worker.evaluation.partial import far_viewpoint, floor_frame, noisy_surface
+from worker.evaluation.samples import (
+    DEPTH_SAMPLE,
+    PARTIAL_SAMPLE,
+    PARTIAL_SOURCE,
+    pcd_bytes,
+    sample_mesh,
+)
 
 pytestmark = [pytest.mark.slow, pytest.mark.service]
 
@@ -611,4 +617,27 @@ def test_an_enrolled_scan_says_it_was_a_point_cloud(page, site):
     facts = page.locator("#detail-meta").inner_text()
     assert f"in the file ({depth_cloud_phrase()}); the descriptor resampled it" in facts, facts
     shoot(page, "scan-detail")
+    # The same quadruped on a floor, seen from above: the card says the floor was left out.
+    mesh = sample_mesh(*PARTIAL_SOURCE)
+    direction = np.array([0.0, np.cos(np.radians(35.0)), np.sin(np.radians(35.0))])
+    frame = floor_frame(mesh, direction, float(np.ptp(mesh.vertices, axis=0).max()) / 60)
+    data = pcd_bytes(frame, far_viewpoint(mesh, direction))
+    cloud = read_pcd(data)[2]
+    enrolled = site.client.post("/collections/scans/meshes", files={"file": ("floor.pcd", data)})
+    assert enrolled.status_code == 202, enrolled.text
+    mesh_id = enrolled.json()["id"]
+    assert site.wait_mesh(mesh_id, collection="scans")["status"] == "ready"
+    page.reload()
+    page.locator('#collection option[value="scans"]').wait_for(state="attached")
+    page.select_option("#collection", "scans")
+    page.click("#tab-gallery")
+    card = page.locator(f'#gallery-grid .card[data-mesh-id="{mesh_id}"]')
+    card.wait_for()
+    card.press("Enter")
+    page.locator("#detail").wait_for(state="visible")
+    facts = page.locator("#detail-meta").inner_text()
+    assert (
+        f"({cloud.support:,} points of a floor, table or wall it stood on or against left out)"
+        in facts
+    ), facts
     page.select_option("#collection", "default")  # as the page was before this test

@@ -64,6 +64,9 @@ class ShapeDescriptor:
         :mod:`~worker.engine.scans` reads one view), its points that saw the surface, and
         its grid (width, height) when it was organized (a depth camera's PCD or a laser
         scanner's structured E57 scan, triangulated by it); None for a mesh.
+    input_support : of an organized cloud, the points of the floor, table or wall its
+        object stood on or against, left out (:func:`~worker.engine.scans.without_support`);
+        None for a mesh or a cloud without a grid.
     facing_share : the largest share of the described surface's area whose faces face
         one direction (:func:`~worker.engine.holes.facing_share`): about a half for a
         whole, a cut or a holed copy, near 1 for one view of a scanner. None for a
@@ -95,6 +98,7 @@ class ShapeDescriptor:
     area: float | None = None
     input_points: int | None = None
     input_grid: tuple[int, int] | None = None
+    input_support: int | None = None
     facing_share: float | None = None
     surface: np.ndarray = field(default_factory=lambda: np.zeros((0, 6), dtype=np.float16))
     surface_unit: float | None = None
@@ -154,6 +158,7 @@ class ShapeDescriptor:
             "area": self.area,
             "input_points": self.input_points,
             "input_grid": None if self.input_grid is None else list(self.input_grid),
+            "input_support": self.input_support,
             "facing_share": self.facing_share,
             "surface_unit": self.surface_unit,
             "surface_voxel": self.surface_voxel,
@@ -194,6 +199,7 @@ class ShapeDescriptor:
             area=meta.get("area"),
             input_points=meta.get("input_points"),
             input_grid=None if (grid := meta.get("input_grid")) is None else (grid[0], grid[1]),
+            input_support=meta.get("input_support"),
             facing_share=meta.get("facing_share"),
             # Descriptors stored before the surface was kept have none.
             surface=np.asarray(arrays.get("surface", np.zeros((0, 6))), dtype=np.float16).reshape(
