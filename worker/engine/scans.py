@@ -235,6 +235,11 @@ def without_support(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarr
     (:data:`SUPPORT_BAND` .. :data:`SUPPORT_REFITS`)."""
     valid = np.isfinite(points).all(axis=2)
     count = int(np.count_nonzero(valid))
+    border = np.zeros(valid.shape, dtype=bool)
+    border[[0, -1]] = border[:, [0, -1]] = True
+    reaches = SUPPORT_BORDER * np.count_nonzero(border)  # the border's pixels a support holds
+    if np.count_nonzero(valid & border) < reaches:
+        return points, 0  # a framed object: no plane runs out of the frame
     # The finer of the grid's two directions: a floor seen at a slant is coarse along one.
     steps = [
         np.linalg.norm(a - b, axis=-1)[np.isfinite(a - b).all(axis=-1)]
@@ -243,8 +248,6 @@ def without_support(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarr
     if count < 3 or not any(len(s) for s in steps):
         return points, 0  # no two neighbouring pixels saw the surface
     band = SUPPORT_BAND * min(float(np.median(s)) for s in steps if len(s))
-    border = np.zeros(valid.shape, dtype=bool)
-    border[[0, -1]] = border[:, [0, -1]] = True
     width = max(1, round(SUPPORT_RING * min(valid.shape)))
     ring = np.ones_like(valid)
     ring[width:-width, width:-width] = False
@@ -254,8 +257,10 @@ def without_support(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarr
     support = np.zeros_like(valid)
     candidates = valid.copy()
     for _ in range(SUPPORT_PLANES):
+        if np.count_nonzero(valid & ~support & border) < reaches:
+            break  # no plane left can run out of the frame
         if np.count_nonzero(candidates & ring) < 3:
-            break
+            break  # none left to search from
         plane = _largest_plane(flat, reach, candidates, ring, band, rng)
         if plane is None:
             break
@@ -266,11 +271,10 @@ def without_support(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarr
         off = valid & ~support & (np.abs(distance) >= np.maximum(band, 2.0 * within))
         side = np.sign(viewpoint @ normal - offset)
         front = np.mean(np.sign(distance[off]) == side) if off.any() else 0.0
-        out = np.count_nonzero(on & border) / np.count_nonzero(border)
         if (
             min(np.count_nonzero(on), np.count_nonzero(off)) >= SUPPORT_SHARE * count
             and front >= SUPPORT_FRONT
-            and out >= SUPPORT_BORDER
+            and np.count_nonzero(on & border) >= reaches
         ):
             support |= on
             candidates &= ~on
