@@ -191,15 +191,14 @@ def _sight_of(points: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
 #: floor, a table or a wall the object stands on or against when it holds at least
 #: ``SUPPORT_SHARE`` of the points and leaves as many further than that from it, runs out
 #: of the frame along at least ``SUPPORT_BORDER`` of the grid's border, and
-#: ``SUPPORT_FRONT`` of those further points lie on the sensor's side of it. On 45 views of
-#: three figures on a floor or before a wall (docs/decisions.md, "A floor or a wall in the
-#: frame is left out"), such planes ran out along 0.17-1.00 of the border with every other
-#: point in front; the figures' own largest planes along at most 0.07, with at most 0.83
-#: in front. ``SUPPORT_PLANES`` planes are tried, the largest first (a floor and a wall: a
-#: corner of a room), each the best of ``SUPPORT_TRIALS`` planes through three points
-#: near the frame's border (within ``SUPPORT_RING`` of its size: a support reaches it),
-#: scored on ``SUPPORT_SAMPLE`` points (RANSAC: Fischler and Bolles 1981), seeded so that
-#: a file is always read alike.
+#: ``SUPPORT_FRONT`` of those further points lie on the sensor's side of it
+#: (docs/decisions.md, "A floor or a wall in the frame is left out": every support of 50
+#: views of five figures on a floor or before a wall went, and no point of a figure's,
+#: nor of 924 range scans of TOSCA's and SCAPE's wholes). ``SUPPORT_PLANES`` planes are
+#: tried, the largest first (a floor and a wall: a corner of a room), each the best of
+#: ``SUPPORT_TRIALS`` planes through three points near the frame's border (within
+#: ``SUPPORT_RING`` of its size: a support reaches it), scored on ``SUPPORT_SAMPLE``
+#: points (RANSAC: Fischler and Bolles 1981), seeded so that a file is always read alike.
 SUPPORT_BAND = 2.0
 SUPPORT_SHARE = 0.05
 SUPPORT_BORDER = 0.15
@@ -213,8 +212,8 @@ SUPPORT_RING = 0.05
 #: Gaussian's sigma), measured in ``SUPPORT_RANGES`` bands of distance from the sensor (a
 #: depth camera's noise grows with the square of the depth), at least ``SUPPORT_LEAST``
 #: of the search's band (an exact plane's points, and not the object's feet on it) and at
-#: most all of it; the plane refitted to them ``SUPPORT_REFITS`` times by
-#: least squares, so that the object's points near it pull the fit off it no more.
+#: most the band; the plane refitted to them ``SUPPORT_REFITS`` times by least squares,
+#: so that the object's points near it pull the fit off it no more.
 SUPPORT_SIGMAS = 4.0
 SUPPORT_RANGES = 8
 SUPPORT_LEAST = 0.02
@@ -294,14 +293,16 @@ def _largest_plane(
     rng: np.random.Generator,
 ) -> tuple[np.ndarray, float, np.ndarray] | None:
     """The plane through three of the ``candidates`` (H, W) bool of ``points`` (H, W, 3) in
-    the ``ring`` near the frame's border within ``band`` of which most candidates lie
-    (:data:`SUPPORT_TRIALS`, :data:`SUPPORT_SAMPLE`): its unit normal (3,) and offset,
-    and (H, W) how near it each pixel must lie to be its own, from the spread of the
-    residuals at its ``reach`` (distance from the sensor) (:data:`SUPPORT_SIGMAS` ..
-    :data:`SUPPORT_REFITS`); None when every triple drawn lies (nearly) on a line, or no candidate
-    lies near the plane."""
-    near_border, pool = points[candidates & ring], points[candidates]
-    sample = pool[rng.choice(len(pool), min(SUPPORT_SAMPLE, len(pool)), replace=False)]
+    the ``ring`` near the frame's border within ``band`` of which most of
+    :data:`SUPPORT_SAMPLE` candidates lie (the best of :data:`SUPPORT_TRIALS`), refitted to
+    that sample's points near it: its unit normal (3,) and offset, and (H, W) how near it
+    each pixel must lie to be its own, from the spread of the sample's residuals at its
+    ``reach`` (distance from the sensor) (:data:`SUPPORT_SIGMAS` .. :data:`SUPPORT_REFITS`);
+    None when every triple drawn lies (nearly) on a line, or no sampled point lies near
+    the plane."""
+    near_border, pool = points[candidates & ring], int(np.count_nonzero(candidates))
+    drawn = rng.choice(pool, size=min(SUPPORT_SAMPLE, pool), replace=False)
+    sample, sample_reach = points[candidates][drawn], reach[candidates][drawn]
     a, b, c = (near_border[rng.integers(len(near_border), size=SUPPORT_TRIALS)] for _ in range(3))
     normals = np.cross(b - a, c - a)
     size = np.linalg.norm(normals, axis=1)
@@ -315,23 +316,23 @@ def _largest_plane(
     normal, offset = normals[best], float(offsets[best])
     within = band
     for _ in range(SUPPORT_REFITS):
-        near = candidates & (np.abs(points @ normal - offset) < within)
-        if np.count_nonzero(near) < 3:
+        near = sample[np.abs(sample @ normal - offset) < within]
+        if len(near) < 3:
             break
-        centre = points[near].mean(axis=0)
-        normal = np.linalg.svd(points[near] - centre, full_matrices=False)[2][2]
+        centre = near.mean(axis=0)
+        normal = np.linalg.svd(near - centre, full_matrices=False)[2][2]
         offset = float(centre @ normal)
-        spread = float(np.median(np.abs(points[near] @ normal - offset))) / 0.6745
+        spread = float(np.median(np.abs(near @ normal - offset))) / 0.6745
         within = min(max(SUPPORT_SIGMAS * spread, SUPPORT_LEAST * band), band)
     # What is its own: the spread in bands of reach holding equal shares of its points.
-    residual = np.abs(points @ normal - offset)
-    near = candidates & (residual < band)
-    if not near.any():
+    residual = np.abs(sample @ normal - offset)
+    held = residual < band
+    if not held.any():
         return None
-    order = np.argsort(reach[near])
+    order = np.argsort(sample_reach[held])
     parts = np.array_split(order, min(SUPPORT_RANGES, len(order)))
-    spreads = np.array([np.median(residual[near][k]) for k in parts]) / 0.6745
-    ranges = np.searchsorted(reach[near][[k[0] for k in parts[1:]]], reach, side="right")
+    spreads = np.array([np.median(residual[held][k]) for k in parts]) / 0.6745
+    ranges = np.searchsorted(sample_reach[held][[k[0] for k in parts[1:]]], reach, side="right")
     own = np.clip(SUPPORT_SIGMAS * spreads[ranges], SUPPORT_LEAST * band, band)
     return normal, offset, own
 
