@@ -25,6 +25,7 @@ from worker.evaluation.samples import (
     DEPTH_PIXELS,
     DEPTH_SAMPLE,
     FIGURES,
+    FLOOR_SAMPLE,
     N_POSES,
     PARTIAL_SAMPLE,
     SAMPLE_CLASSES,
@@ -158,6 +159,19 @@ def test_the_depth_example_is_the_quadruped_s_left_side_as_a_camera_s_grid():
     assert (vertices @ facing).mean() > (whole.vertices @ facing).mean()
     area = trimesh.Trimesh(vertices, scan.mesh.faces, process=False).area
     assert 0.2 < area / whole.area < 0.5
+
+
+def test_the_floor_example_is_the_quadruped_on_a_floor_that_is_left_out():
+    """The same quadruped on a floor, seen from 35 degrees above: the frame holds more
+    floor than quadruped, and read as the service reads it only the quadruped's side is
+    left, on the whole's surface."""
+    whole = read_off_gz(example("quadruped-3"))
+    scan = read_mesh(EXAMPLES / FLOOR_SAMPLE)
+    assert scan.cloud is not None and scan.cloud.support > scan.cloud.points
+    extent = np.ptp(whole.vertices, axis=0).max()
+    # (its nearest triangles found approximately)
+    assert np.quantile(surface_distance(scan.mesh.vertices, whole), 0.99) < 1e-3 * extent
+    assert scan.mesh.vertices[:, 2].min() > whole.vertices[:, 2].min()  # none on the floor
 
 
 @pytest.mark.slow

@@ -26,14 +26,8 @@ from benchmarks.common import EXAMPLES, Service
 from tests.service.conftest import migrated_service, running
 from worker.engine.mesh_io import load_mesh
 from worker.engine.scans import read_pcd
-from worker.evaluation.partial import far_viewpoint, floor_frame, noisy_surface
-from worker.evaluation.samples import (
-    DEPTH_SAMPLE,
-    PARTIAL_SAMPLE,
-    PARTIAL_SOURCE,
-    pcd_bytes,
-    sample_mesh,
-)
+from worker.evaluation.partial import noisy_surface
+from worker.evaluation.samples import DEPTH_SAMPLE, FLOOR_SAMPLE, PARTIAL_SAMPLE
 
 pytestmark = [pytest.mark.slow, pytest.mark.service]
 
@@ -618,12 +612,11 @@ def test_an_enrolled_scan_says_it_was_a_point_cloud(page, site):
     assert f"in the file ({depth_cloud_phrase()}); the descriptor resampled it" in facts, facts
     shoot(page, "scan-detail")
     # The same quadruped on a floor, seen from above: the card says the floor was left out.
-    mesh = sample_mesh(*PARTIAL_SOURCE)
-    direction = np.array([0.0, np.cos(np.radians(35.0)), np.sin(np.radians(35.0))])
-    frame = floor_frame(mesh, direction, float(np.ptp(mesh.vertices, axis=0).max()) / 60)
-    data = pcd_bytes(frame, far_viewpoint(mesh, direction))
-    cloud = read_pcd(data)[2]
-    enrolled = site.client.post("/collections/scans/meshes", files={"file": ("floor.pcd", data)})
+    data = (EXAMPLES / FLOOR_SAMPLE).read_bytes()
+    cloud = read_pcd(gzip.decompress(data))[2]
+    enrolled = site.client.post(
+        "/collections/scans/meshes", files={"file": (FLOOR_SAMPLE.name, data)}
+    )
     assert enrolled.status_code == 202, enrolled.text
     mesh_id = enrolled.json()["id"]
     assert site.wait_mesh(mesh_id, collection="scans")["status"] == "ready"

@@ -371,6 +371,12 @@ PARTIAL_SAMPLE = Path("partial") / "quadruped-3-top-cut.off.gz"
 DEPTH_SAMPLE = Path("partial") / "quadruped-3-depth.pcd.gz"
 DEPTH_DIRECTION = (0.0, 1.0, 0.0)
 DEPTH_PIXELS = 1500
+#: The same sample standing on a floor, seen from its left FLOOR_ELEVATION degrees above
+#: the floor (pixels a FLOOR_PIXELS-th of its extent apart), the frame cut around it so
+#: that the floor runs out of it: what a depth camera on a tripod writes.
+FLOOR_SAMPLE = Path("partial") / "quadruped-3-floor.pcd.gz"
+FLOOR_ELEVATION = 35.0
+FLOOR_PIXELS = 60
 
 
 def pcd_bytes(points: np.ndarray, viewpoint: np.ndarray, data: str = "ascii") -> bytes:
@@ -445,10 +451,21 @@ def depth_scan(mesh: Mesh, direction: np.ndarray, pixels: int) -> tuple[np.ndarr
     return grid_points(image, origin, direction, pitch), far_viewpoint(mesh, direction)
 
 
+def floor_scan(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """``mesh`` on a floor as :data:`FLOOR_SAMPLE` sees it: the organized cloud (h, w, 3)
+    and a viewpoint far along the camera's direction (3,)."""
+    from .partial import far_viewpoint, floor_frame
+
+    angle = np.radians(FLOOR_ELEVATION)
+    direction = np.array([0.0, np.cos(angle), np.sin(angle)])
+    pitch = float(np.ptp(mesh.vertices, axis=0).max()) / FLOOR_PIXELS
+    return floor_frame(mesh, direction, pitch), far_viewpoint(mesh, direction)
+
+
 def write_samples(out_dir: str | Path) -> list[Path]:
     """Write every sample (``<class>-<pose>.off.gz``), ``labels.csv`` (columns
-    ``file,class``), the partial scan ``PARTIAL_SAMPLE`` and the depth camera's view
-    ``DEPTH_SAMPLE`` into ``out_dir``; returns
+    ``file,class``), the partial scan ``PARTIAL_SAMPLE`` and the depth camera's views
+    ``DEPTH_SAMPLE`` and ``FLOOR_SAMPLE`` into ``out_dir``; returns
     the paths written, labels last."""
     from .partial import planar_cut
 
@@ -467,7 +484,8 @@ def write_samples(out_dir: str | Path) -> list[Path]:
                 (out / PARTIAL_SAMPLE).write_bytes(off_gz_bytes(part))
                 scan = depth_scan(mesh, np.array(DEPTH_DIRECTION), DEPTH_PIXELS)
                 (out / DEPTH_SAMPLE).write_bytes(pcd_gz_bytes(*scan))
-                written += [out / PARTIAL_SAMPLE, out / DEPTH_SAMPLE]
+                (out / FLOOR_SAMPLE).write_bytes(pcd_gz_bytes(*floor_scan(mesh)))
+                written += [out / PARTIAL_SAMPLE, out / DEPTH_SAMPLE, out / FLOOR_SAMPLE]
     labels = out / "labels.csv"
     with open(labels, "w", newline="") as handle:
         writer = csv.writer(handle, lineterminator="\n")
