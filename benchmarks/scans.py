@@ -11,10 +11,13 @@ on no pixel lattice in their own frame, turned in the mesh's frame, the camera e
 and turned with each point moved at random, a tenth of a pixel (near its lattice) or half
 a pixel (near none)), and
 its surface (what :func:`~worker.engine.scans.read_pcd` makes of the binary file) as an
-OFF mesh: a mesh of the same size. Each file is described by
+OFF mesh: a mesh of the same size. Beside them, the quadruped on a floor seen from 35
+degrees above at the same pitch (as ``examples/partial/quadruped-3-floor`` was made) as a
+binary PCD, the floor left out as it is read, against that surface as an OFF mesh. Each
+file is described by
 :func:`~worker.engine.pipeline.describe_file` ``--repeats`` times, the files' order
 alternated, in one process; the table gives the median load (read, triangulate, clean)
-and total seconds, and each total over the mesh's.
+and total seconds, and each total over the mesh's of its surface.
 """
 
 from __future__ import annotations
@@ -30,9 +33,10 @@ import trimesh
 from worker.engine.pipeline import describe_file
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.engine.scans import read_pcd
-from worker.evaluation.partial import random_rotation
+from worker.evaluation.partial import far_viewpoint, floor_frame, random_rotation
 from worker.evaluation.samples import (
     DEPTH_DIRECTION,
+    FLOOR_ELEVATION,
     PARTIAL_SOURCE,
     depth_scan,
     e57_bytes,
@@ -51,20 +55,37 @@ def points_ply(points: np.ndarray) -> bytes:
     return header.encode() + points.astype("<f4").tobytes()
 
 
-def scan_files(pixels: int) -> tuple[dict[str, bytes], int, tuple[int, int]]:
-    """The scan's files by name (the mesh first), its points and its grid (width,
-    height)."""
-    points, viewpoint = depth_scan(sample_mesh(*PARTIAL_SOURCE), np.array(DEPTH_DIRECTION), pixels)
+#: The floor scan's files: their names end so, and they are timed against its mesh.
+ON_A_FLOOR = "(on a floor)"
+
+
+def off_bytes(vertices: np.ndarray, faces: np.ndarray) -> bytes:
+    """A surface as an OFF file."""
+    return cast(
+        str, trimesh.Trimesh(vertices, faces, process=False).export(file_type="off")
+    ).encode()
+
+
+def scan_files(pixels: int) -> tuple[dict[str, bytes], str, str]:
+    """The scan's files by name (the meshes first), and the scan and the floor scan as
+    the table names them (their points and grids)."""
+    whole = sample_mesh(*PARTIAL_SOURCE)
+    points, viewpoint = depth_scan(whole, np.array(DEPTH_DIRECTION), pixels)
     binary = pcd_bytes(points, viewpoint, "binary")
     vertices, faces, cloud = read_pcd(binary)
     assert cloud.grid is not None
-    mesh = cast(str, trimesh.Trimesh(vertices, faces, process=False).export(file_type="off"))
     seen = (vertices - viewpoint)[np.random.default_rng(0).permutation(len(vertices))]
     turn = random_rotation(np.random.default_rng(1))  # out of the camera's frame
     pitch = float(np.nanmedian(np.linalg.norm(np.diff(points, axis=1), axis=2)))
     noise = np.random.default_rng(2).normal(scale=pitch / np.sqrt(3), size=seen.shape)
+    angle = np.radians(FLOOR_ELEVATION)
+    above = np.array([0.0, np.cos(angle), np.sin(angle)])
+    on_floor = pcd_bytes(floor_frame(whole, above, pitch), far_viewpoint(whole, above), "binary")
+    floor_vertices, floor_faces, floor = read_pcd(on_floor)
+    assert floor.grid is not None
     files = {
-        "mesh.off": mesh.encode(),
+        "mesh.off": off_bytes(vertices, faces),
+        f"mesh.off {ON_A_FLOOR}": off_bytes(floor_vertices, floor_faces),
         "scan.pcd (ascii)": pcd_bytes(points, viewpoint),
         "scan.pcd (binary)": binary,
         "scan.e57": e57_bytes(points, viewpoint),
@@ -74,8 +95,14 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], int, tuple[int, int]]:
         "scan.ply (no grid, mesh's frame)": points_ply((seen + viewpoint) @ turn.T),
         "scan.ply (no grid, turned, moved 0.1 pixel)": points_ply((seen + 0.1 * noise) @ turn.T),
         "scan.ply (no grid, turned, moved 0.5 pixel)": points_ply((seen + 0.5 * noise) @ turn.T),
+        f"scan.pcd (binary) {ON_A_FLOOR}": on_floor,
     }
-    return files, cloud.points, cloud.grid
+    scan = f"{cloud.points:,} points, {cloud.grid[0]} x {cloud.grid[1]}"
+    floor_scan = (
+        f"{floor.points:,} points and {floor.support:,} of the floor, "
+        f"{floor.grid[0]} x {floor.grid[1]}"
+    )
+    return files, scan, floor_scan
 
 
 def main() -> None:
@@ -88,7 +115,7 @@ def main() -> None:
     print("| scan | file | load ms | total s | total / mesh's |")
     print("|---|---|---:|---:|---:|")
     for pixels in args.pixels:
-        files, points, (width, height) = scan_files(pixels)
+        files, scan, floor_scan = scan_files(pixels)
         load: dict[str, list[float]] = {name: [] for name in files}
         total: dict[str, list[float]] = {name: [] for name in files}
         for repeat in range(args.repeats):
@@ -98,13 +125,14 @@ def main() -> None:
                 descriptor = describe_file(files[name], preset, name.split(" ")[0])
                 total[name].append(time.perf_counter() - start)
                 load[name].append(descriptor.timings["load"])
-        mesh_total = statistics.median(total["mesh.off"])
         for name in files:
             seconds = statistics.median(total[name])
+            floor = name.endswith(ON_A_FLOOR)
+            mesh = f"mesh.off {ON_A_FLOOR}" if floor else "mesh.off"
             print(
-                f"| {points:,} points, {width} x {height} | {name} | "
+                f"| {floor_scan if floor else scan} | {name.removesuffix(f' {ON_A_FLOOR}')} | "
                 f"{1000 * statistics.median(load[name]):.1f} | {seconds:.3f} | "
-                f"{seconds / mesh_total:.2f} |"
+                f"{seconds / statistics.median(total[mesh]):.2f} |"
             )
 
 
