@@ -166,9 +166,9 @@ def query_notes(
     facts: dict[str, bool | int | float | list[int]], partial: PartialQuery | None
 ) -> list[str]:
     """What the answer says of its query (:func:`query_facts`) in sentences for a person,
-    as the command line and the web page print them: the point cloud it was, the part of
-    the file left out, and how partial it looks (:attr:`PartialQuery.note`) or, a whole,
-    that it was smoothed."""
+    as the command line and the web page print them: the point cloud it was and the floor
+    or wall left out of it, the part of the file left out, and how partial it looks
+    (:attr:`PartialQuery.note`) or, a whole, that it was smoothed."""
     notes = []
     points = facts.get("input_points")
     grid = facts.get("input_grid")
@@ -322,8 +322,9 @@ def parse_options(
 def query_facts(descriptor: ShapeDescriptor) -> dict[str, bool | int | float | list[int]]:
     """What the answer says of the query's mesh: its size as cleaned and as described,
     (when known) the described part's share of the file's surface area and the share of
-    its surface facing one way, the points (and grid, when organized) of the point cloud
-    it was, and whether it was smoothed of a scanner's noise."""
+    its surface facing one way, the points (and grid and the support's points left out,
+    when organized) of the point cloud it was, and whether it was smoothed of a scanner's
+    noise."""
     facts: dict[str, bool | int | float | list[int]] = {
         "input_vertices": descriptor.input_vertices,
         "input_faces": descriptor.input_faces,
