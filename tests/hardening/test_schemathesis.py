@@ -82,11 +82,18 @@ def key_unless_left_out(case: Case, keyed: bool) -> dict[str, str]:
 #:   sent as text, where "4954289617627" is a valid name; its changelog calls such
 #:   wire-identical mutations false positives and fixed them for form-urlencoded and XML
 #:   bodies (pull request 3761), not yet for multipart fields;
+#: * a text field mutated to an array: requests sends an empty array as no field at all
+#:   (the optional field left out: the file's name taken, no metadata), one item as the
+#:   field itself, and two or more as the field repeated, which the service refuses
+#:   (``repeated_field``, tests/service/test_service_api.py), so one it accepted was
+#:   valid on the wire (seen with the open suite once ``input_support`` joined the
+#:   schema: ``name`` and ``metadata`` "became array", answered as if left out);
 #: * a name or label "violating" its pattern, TEXT_PATTERN (no NUL): the service refuses
 #:   every NUL there (tests/service/conftest.py nul_refusals), so one it accepted carried
 #:   none, the mutation lost on the way (seen with seed 8: "became <the same text>*").
 NOT_A_VIOLATION = re.compile(
-    r"violates `type` at /properties/\w+ \(was string, became (integer|number|boolean|null)\)"
+    r"violates `type` at /properties/\w+(/anyOf/\d+)? \(was string, became "
+    r"(integer|number|boolean|null|array)\)"
     r"|violates `pattern` at /properties/(name|label) "
 )
 
