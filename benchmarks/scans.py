@@ -33,13 +33,13 @@ import trimesh
 from worker.engine.pipeline import describe_file
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.engine.scans import read_pcd
-from worker.evaluation.partial import far_viewpoint, floor_frame, random_rotation
+from worker.evaluation.partial import random_rotation
 from worker.evaluation.samples import (
     DEPTH_DIRECTION,
-    FLOOR_ELEVATION,
     PARTIAL_SOURCE,
     depth_scan,
     e57_bytes,
+    floor_scan,
     pcd_bytes,
     sample_mesh,
 )
@@ -78,9 +78,7 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], str, str]:
     turn = random_rotation(np.random.default_rng(1))  # out of the camera's frame
     pitch = float(np.nanmedian(np.linalg.norm(np.diff(points, axis=1), axis=2)))
     noise = np.random.default_rng(2).normal(scale=pitch / np.sqrt(3), size=seen.shape)
-    angle = np.radians(FLOOR_ELEVATION)
-    above = np.array([0.0, np.cos(angle), np.sin(angle)])
-    on_floor = pcd_bytes(floor_frame(whole, above, pitch), far_viewpoint(whole, above), "binary")
+    on_floor = pcd_bytes(*floor_scan(whole, pitch), "binary")
     floor_vertices, floor_faces, floor = read_pcd(on_floor)
     assert floor.grid is not None
     files = {
@@ -98,11 +96,11 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], str, str]:
         f"scan.pcd (binary) {ON_A_FLOOR}": on_floor,
     }
     scan = f"{cloud.points:,} points, {cloud.grid[0]} x {cloud.grid[1]}"
-    floor_scan = (
+    floor_label = (
         f"{floor.points:,} points and {floor.support:,} of the floor, "
         f"{floor.grid[0]} x {floor.grid[1]}"
     )
-    return files, scan, floor_scan
+    return files, scan, floor_label
 
 
 def main() -> None:
@@ -115,7 +113,7 @@ def main() -> None:
     print("| scan | file | load ms | total s | total / mesh's |")
     print("|---|---|---:|---:|---:|")
     for pixels in args.pixels:
-        files, scan, floor_scan = scan_files(pixels)
+        files, scan, floor_label = scan_files(pixels)
         load: dict[str, list[float]] = {name: [] for name in files}
         total: dict[str, list[float]] = {name: [] for name in files}
         for repeat in range(args.repeats):
@@ -130,7 +128,7 @@ def main() -> None:
             floor = name.endswith(ON_A_FLOOR)
             mesh = f"mesh.off {ON_A_FLOOR}" if floor else "mesh.off"
             print(
-                f"| {floor_scan if floor else scan} | {name.removesuffix(f' {ON_A_FLOOR}')} | "
+                f"| {floor_label if floor else scan} | {name.removesuffix(f' {ON_A_FLOOR}')} | "
                 f"{1000 * statistics.median(load[name]):.1f} | {seconds:.3f} | "
                 f"{seconds / statistics.median(total[mesh]):.2f} |"
             )

@@ -19,7 +19,7 @@ from worker.evaluation.partial import (
     floor_frame,
     grid_points,
 )
-from worker.evaluation.samples import pcd_bytes
+from worker.evaluation.samples import pcd_bytes, seen_from_left
 from worker.evaluation.samples import sample_mesh as made_sample
 
 FIGURES = [("quadruped", 3), ("biped", 1), ("hand", 2), ("spider", 0)]
@@ -31,20 +31,13 @@ def sample_mesh(name: str, pose: int) -> Mesh:
     return made_sample(name, pose)
 
 
-def seen_from(elevation: float) -> np.ndarray:
-    """The direction (3,) towards a camera on the figure's left (+y), ``elevation``
-    degrees above the floor."""
-    angle = np.radians(elevation)
-    return np.array([0.0, np.cos(angle), np.sin(angle)])
-
-
 def scene_frame(
     name: str, pose: int, elevation: float, wall: bool
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A figure on a floor (and against a wall) seen from ``elevation``: the organized
     cloud, its viewpoint, and which of its pixels saw the figure."""
     mesh = sample_mesh(name, pose)
-    direction = seen_from(elevation)
+    direction = seen_from_left(elevation)
     pitch = float(np.ptp(mesh.vertices, axis=0).max()) / 40
     low = mesh.vertices.min(axis=0)
     # A wall behind it, a twentieth of its size away.
@@ -78,7 +71,7 @@ def test_a_framed_figure_keeps_every_point(name, pose, elevation):
     """The figure alone, framed by pixels that saw nothing: its own largest planes hold
     most of a coarse view, but none runs out of the frame."""
     mesh = sample_mesh(name, pose)
-    direction = seen_from(elevation)
+    direction = seen_from_left(elevation)
     image, origin = depth_grid(mesh, direction, float(np.ptp(mesh.vertices, axis=0).max()) / 40)
     points = grid_points(image, origin, direction, float(np.ptp(mesh.vertices)) / 40)
     kept, support = without_support(points, far_viewpoint(mesh, direction))

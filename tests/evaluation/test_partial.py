@@ -201,7 +201,7 @@ def test_range_floor_reads_the_scan_without_its_floor(sphere, monkeypatch):
     supports = []
     left_out = scans.without_support
     monkeypatch.setattr(
-        partial,
+        scans,
         "without_support",
         lambda *a: supports.append(left_out(*a)[1]) or left_out(*a),
     )

@@ -240,10 +240,8 @@ def without_support(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarr
     if np.count_nonzero(valid & border) < reaches:
         return points, 0  # a framed object: no plane runs out of the frame
     # The finer of the grid's two directions: a floor seen at a slant is coarse along one.
-    steps = [
-        np.linalg.norm(a - b, axis=-1)[np.isfinite(a - b).all(axis=-1)]
-        for a, b in ((points[:, 1:], points[:, :-1]), (points[1:], points[:-1]))
-    ]
+    differences = (points[:, 1:] - points[:, :-1], points[1:] - points[:-1])
+    steps = [np.linalg.norm(d[np.isfinite(d).all(axis=-1)], axis=-1) for d in differences]
     if count < 3 or not any(len(s) for s in steps):
         return points, 0  # no two neighbouring pixels saw the surface
     band = SUPPORT_BAND * min(float(np.median(s)) for s in steps if len(s))
@@ -300,9 +298,9 @@ def _largest_plane(
     ``reach`` (distance from the sensor) (:data:`SUPPORT_SIGMAS` .. :data:`SUPPORT_REFITS`);
     None when every triple drawn lies (nearly) on a line, or no sampled point lies near
     the plane."""
-    near_border, pool = points[candidates & ring], int(np.count_nonzero(candidates))
-    drawn = rng.choice(pool, size=min(SUPPORT_SAMPLE, pool), replace=False)
-    sample, sample_reach = points[candidates][drawn], reach[candidates][drawn]
+    near_border, pool, pool_reach = points[candidates & ring], points[candidates], reach[candidates]
+    drawn = rng.choice(len(pool), size=min(SUPPORT_SAMPLE, len(pool)), replace=False)
+    sample, sample_reach = pool[drawn], pool_reach[drawn]
     a, b, c = (near_border[rng.integers(len(near_border), size=SUPPORT_TRIALS)] for _ in range(3))
     normals = np.cross(b - a, c - a)
     size = np.linalg.norm(normals, axis=1)
@@ -329,10 +327,11 @@ def _largest_plane(
     held = residual < band
     if not held.any():
         return None
-    order = np.argsort(sample_reach[held])
+    residual, held_reach = residual[held], sample_reach[held]
+    order = np.argsort(held_reach)
     parts = np.array_split(order, min(SUPPORT_RANGES, len(order)))
-    spreads = np.array([np.median(residual[held][k]) for k in parts]) / 0.6745
-    ranges = np.searchsorted(sample_reach[held][[k[0] for k in parts[1:]]], reach, side="right")
+    spreads = np.array([np.median(residual[k]) for k in parts]) / 0.6745
+    ranges = np.searchsorted(held_reach[[k[0] for k in parts[1:]]], reach, side="right")
     own = np.clip(SUPPORT_SIGMAS * spreads[ranges], SUPPORT_LEAST * band, band)
     return normal, offset, own
 
@@ -345,6 +344,18 @@ def view_frame(direction: np.ndarray) -> np.ndarray:
     across = np.cross(view, helper)
     across /= np.linalg.norm(across, axis=-1, keepdims=True)
     return np.stack([across, np.cross(view, across), view], axis=-2)
+
+
+def organized_scan(
+    points: np.ndarray, viewpoint: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, Cloud]:
+    """An organized cloud (H, W, 3) as a file's is read: the planes its object stands on
+    or against left out (:func:`without_support`), then its surface
+    (:func:`organized_surface`), and the cloud it was."""
+    height, width = points.shape[:2]
+    kept, support = without_support(points, viewpoint)
+    vertices, faces = organized_surface(kept, viewpoint)
+    return vertices, faces, Cloud(len(vertices), (width, height), support)
 
 
 def organized_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1157,9 +1168,7 @@ def read_pcd(
     if height <= 1 or width <= 1:  # no grid: one view seen from its viewpoint
         points, faces = one_view(xyz, viewpoint, _rotation(pose[3:]))
         return points, faces, Cloud(len(points))
-    grid, support = without_support(xyz.reshape(height, width, 3), viewpoint)
-    points, faces = organized_surface(grid, viewpoint)
-    return points, faces, Cloud(len(points), (width, height), support)
+    return organized_scan(xyz.reshape(height, width, 3), viewpoint)
 
 
 def _pcd_viewpoint(header: dict[str, list[str]]) -> np.ndarray:
@@ -1270,9 +1279,7 @@ def _structured_scan(e57: Any, max_bytes: int) -> tuple[np.ndarray, np.ndarray, 
     # A pixel with several returns keeps the last one listed.
     grid[rows, columns] = np.stack([scan[f"cartesian{a}"] for a in "XYZ"], axis=1)
     viewpoint = np.asarray(e57.scan_position(0), dtype=np.float64).reshape(3)
-    grid, support = without_support(grid, viewpoint)
-    points, faces = organized_surface(grid, viewpoint)
-    return points, faces, Cloud(len(points), (width, height), support)
+    return organized_scan(grid, viewpoint)
 
 
 def _bounds(header: Any, axis: str, indices: np.ndarray) -> tuple[int, int]:

@@ -55,10 +55,10 @@ from worker.engine.geodesic import farthest_point_samples
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
 from worker.engine.scans import (
     grid_faces,
+    organized_scan,
     organized_surface,
     view_frame,
     viewed_surface,
-    without_support,
 )
 from worker.engine.topology import edge_keys
 
@@ -411,14 +411,12 @@ def range_floor(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     """:func:`range_cloud`'s scan (its generator drawn from that variant's seed) of the
     whole standing on a floor, the camera above it (the elevation's sign made positive;
     :func:`floor_frame`), read as the service reads a depth camera's organized cloud: the
-    floor left out (:func:`worker.engine.scans.without_support`), then triangulated
-    (:func:`~worker.engine.scans.organized_surface`), its largest piece in the same
-    random similarity."""
+    floor left out, then triangulated (:func:`worker.engine.scans.organized_scan`), its
+    largest piece in the same random similarity."""
     _, direction, pitch = range_image(mesh, rng, up)
     direction["xyz".index(up)] = abs(direction["xyz".index(up)])
     viewpoint = far_viewpoint(mesh, direction)
-    frame, _ = without_support(floor_frame(mesh, direction, pitch, up), viewpoint)
-    vertices, faces = organized_surface(frame, viewpoint)
+    vertices, faces, _ = organized_scan(floor_frame(mesh, direction, pitch, up), viewpoint)
     return similarity(clean_mesh(vertices, faces), rng)
 
 

@@ -451,14 +451,22 @@ def depth_scan(mesh: Mesh, direction: np.ndarray, pixels: int) -> tuple[np.ndarr
     return grid_points(image, origin, direction, pitch), far_viewpoint(mesh, direction)
 
 
-def floor_scan(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
-    """``mesh`` on a floor as :data:`FLOOR_SAMPLE` sees it: the organized cloud (h, w, 3)
-    and a viewpoint far along the camera's direction (3,)."""
+def seen_from_left(elevation: float) -> np.ndarray:
+    """The direction (3,) towards a camera on a figure's left (+y), ``elevation`` degrees
+    above the floor (z up)."""
+    angle = np.radians(elevation)
+    return np.array([0.0, np.cos(angle), np.sin(angle)])
+
+
+def floor_scan(mesh: Mesh, pitch: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``mesh`` on a floor as :data:`FLOOR_SAMPLE` sees it (its pixels ``pitch`` apart, by
+    default a :data:`FLOOR_PIXELS`-th of its extent): the organized cloud (h, w, 3) and a
+    viewpoint far along the camera's direction (3,)."""
     from .partial import far_viewpoint, floor_frame
 
-    angle = np.radians(FLOOR_ELEVATION)
-    direction = np.array([0.0, np.cos(angle), np.sin(angle)])
-    pitch = float(np.ptp(mesh.vertices, axis=0).max()) / FLOOR_PIXELS
+    direction = seen_from_left(FLOOR_ELEVATION)
+    if pitch is None:
+        pitch = float(np.ptp(mesh.vertices, axis=0).max()) / FLOOR_PIXELS
     return floor_frame(mesh, direction, pitch), far_viewpoint(mesh, direction)
 
 
