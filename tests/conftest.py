@@ -250,3 +250,19 @@ def noisy_depth_scan(share: float) -> bytes:
     sigma = share * float(np.linalg.norm(np.ptp(points[seen], axis=0)))
     points[seen] += rays * np.random.default_rng(0).normal(scale=sigma, size=(len(rays), 1))
     return pcd_bytes(points, viewpoint)
+
+
+def floor_points_ply() -> bytes:
+    """The floor example's frame (:func:`~worker.evaluation.samples.floor_scan`) as a depth
+    camera's software exports it without its grid: a binary PLY of float32 vertices, the
+    points that saw something, in the camera's frame (the camera at the origin, looking
+    along z)."""
+    from worker.engine.scans import view_frame
+    from worker.evaluation.samples import PARTIAL_SOURCE, floor_scan
+
+    points, viewpoint = floor_scan(sample_mesh(*PARTIAL_SOURCE))
+    seen = points[np.isfinite(points).all(axis=2)]
+    ply: bytes = trimesh.PointCloud((seen - viewpoint) @ view_frame(viewpoint).T).export(
+        file_type="ply"
+    )
+    return ply

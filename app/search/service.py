@@ -178,16 +178,16 @@ def query_notes(
             f"The query is a scanner's point cloud: {points:,} points on a {width} x {height} "
             "grid, triangulated by it."
         )
-        support = facts.get("input_support")
-        if isinstance(support, int) and support > 0:
-            notes.append(
-                f"{support:,} other points were left out: they lie on a plane the object "
-                "stood on or against (a floor, a table or a wall, running out of the frame "
-                "with everything else in front of it)."
-            )
     elif points is not None:
         notes.append(
             f"The query is a scanner's point cloud: {points:,} points, triangulated as one view."
+        )
+    support = facts.get("input_support")
+    if isinstance(support, int) and support > 0:
+        notes.append(
+            f"{support:,} other points were left out: they lie on a plane the object "
+            "stood on or against (a floor, a table or a wall, running out of the frame "
+            "with everything else in front of it)."
         )
     kept = facts.get("kept_area_fraction")
     if isinstance(kept, float) and kept < PARTIAL_SURFACE:

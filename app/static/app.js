@@ -222,12 +222,14 @@ function partial(kept) {
 function pointCloud(facts) {
   if (!facts || facts.input_points == null) return null;
   const points = `a scanner's point cloud: ${facts.input_points.toLocaleString("en")} points`;
-  if (!facts.input_grid) return `${points}, triangulated as one view`;
-  const [width, height] = facts.input_grid;
-  const grid = `${points} on a ${width} x ${height} grid, triangulated by it`;
-  if (!facts.input_support) return grid;
+  let read = `${points}, triangulated as one view`;
+  if (facts.input_grid) {
+    const [width, height] = facts.input_grid;
+    read = `${points} on a ${width} x ${height} grid, triangulated by it`;
+  }
+  if (!facts.input_support) return read;
   const support = facts.input_support.toLocaleString("en");
-  return `${grid} (${support} points of a floor, table or wall it stood on or against left out)`;
+  return `${read} (${support} points of a floor, table or wall it stood on or against left out)`;
 }
 
 function percent(value) {

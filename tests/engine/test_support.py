@@ -11,15 +11,29 @@ import pytest
 import trimesh
 from conftest import e57_scan
 
+from worker.engine import scans
+from worker.engine.errors import PointCloudError
 from worker.engine.mesh_io import Mesh, read_mesh
-from worker.engine.scans import Cloud, organized_surface, read_e57, read_pcd, without_support
+from worker.engine.pipeline import describe_file
+from worker.engine.presets import DEFAULT_PRESET, get_preset
+from worker.engine.scans import (
+    Cloud,
+    one_view,
+    organized_scan,
+    organized_surface,
+    read_e57,
+    read_pcd,
+    view_frame,
+    without_support,
+)
 from worker.evaluation.partial import (
     depth_grid,
     far_viewpoint,
     floor_frame,
     grid_points,
+    voxel_means,
 )
-from worker.evaluation.samples import pcd_bytes, seen_from_left
+from worker.evaluation.samples import PARTIAL_SOURCE, floor_scan, pcd_bytes, seen_from_left
 from worker.evaluation.samples import sample_mesh as made_sample
 
 FIGURES = [("quadruped", 3), ("biped", 1), ("hand", 2), ("spider", 0)]
@@ -32,13 +46,14 @@ def sample_mesh(name: str, pose: int) -> Mesh:
 
 
 def scene_frame(
-    name: str, pose: int, elevation: float, wall: bool
+    name: str, pose: int, elevation: float, wall: bool, pixels: int = 40
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A figure on a floor (and against a wall) seen from ``elevation``: the organized
-    cloud, its viewpoint, and which of its pixels saw the figure."""
+    """A figure on a floor (and against a wall) seen from ``elevation``, its pixels a
+    ``pixels``-th of its size apart: the organized cloud, its viewpoint, and which of its
+    pixels saw the figure."""
     mesh = sample_mesh(name, pose)
     direction = seen_from_left(elevation)
-    pitch = float(np.ptp(mesh.vertices, axis=0).max()) / 40
+    pitch = float(np.ptp(mesh.vertices, axis=0).max()) / pixels
     low = mesh.vertices.min(axis=0)
     # A wall behind it, a twentieth of its size away.
     behind = [("y", low[1] - 0.05 * float(np.ptp(mesh.vertices, axis=0).max()))]
@@ -150,3 +165,183 @@ def test_an_organized_file_is_read_without_its_floor():
     described = read_mesh(pcd_bytes(points, viewpoint, "binary"), "scene.pcd")
     assert described.cloud is not None and described.cloud.support == support
     assert described.mesh.vertices[:, 2].min() > sample_mesh("quadruped", 3).vertices[:, 2].min()
+
+
+def without_grid(points: np.ndarray, viewpoint: np.ndarray, frame: str) -> np.ndarray:
+    """An organized cloud's points that saw something, in another order, without the
+    grid: in the camera's frame (the sensor at the origin, looking along z), as a depth
+    camera's software exports them, or in the points' own frame (no sensor placed)."""
+    seen = points[np.isfinite(points).all(axis=2)]
+    seen = seen[np.random.default_rng(0).permutation(len(seen))]
+    if frame == "mesh's":
+        return seen
+    return (seen - viewpoint) @ view_frame(viewpoint).T  # the viewpoint is far along its ray
+
+
+#: The scenes read without their grid: every figure in the camera's frame; in the mesh's
+#: (no sensor placed), the quadruped and the biped on a floor, whose silhouettes say which
+#: side their camera stood on (the spider's, and the others' before a wall seen from 20
+#: degrees, say the wrong one: seen from there, the floor is no support and stays, and the
+#: view is described as its mirror image, as without a floor).
+WITHOUT_GRID = [
+    *[
+        (*figure, "camera's", elevation, wall)
+        for figure in FIGURES
+        for elevation in (20.0, 90.0)
+        for wall in (False, True)
+    ],
+    *[
+        (*figure, "mesh's", elevation, False)
+        for figure in FIGURES[:2]
+        for elevation in (20.0, 45.0)
+    ],
+]
+
+
+@pytest.mark.parametrize("name, pose, frame, elevation, wall", WITHOUT_GRID)
+def test_a_view_s_points_without_their_grid_are_read_without_their_floor(
+    name, pose, frame, elevation, wall
+):
+    """The scenes' points without the grid, on the camera's pixel lattice (found directly
+    in its frame, found from the points in theirs, the sensor's side the one the object
+    stands in front of its support from, where the silhouette may say otherwise): the
+    points' rectangle is the frame, the floor and the wall go as from the organized
+    cloud, and the figure's every point stays. (Seen from straight above, in the mesh's
+    frame the camera looks along one of the file's axes, and the points are taken for
+    a view from the file's origin, which is no sensor: the floor stays.)"""
+    points, viewpoint, figure = scene_frame(name, pose, elevation, wall)
+    seen = np.isfinite(points).all(axis=2)
+    cloud_points = without_grid(points, viewpoint, frame)
+    vertices, _, cloud = one_view(cloud_points, np.zeros(3))
+    assert cloud == Cloud(np.count_nonzero(figure & seen), None, np.count_nonzero(seen & ~figure))
+    kept = without_grid(np.where(figure[..., None], points, np.nan), viewpoint, frame)
+    assert {tuple(p) for p in vertices.round(6).tolist()} == {
+        tuple(p) for p in kept.round(6).tolist()
+    }
+
+
+@pytest.mark.parametrize("elevation", [0.0, 45.0])
+@pytest.mark.parametrize("name, pose", FIGURES)
+def test_a_framed_figure_s_points_without_their_grid_keep_every_point(name, pose, elevation):
+    """The figure alone, its points without the grid: its rectangle hugs it, but none of
+    its planes runs along the rectangle's border with everything else in front of it."""
+    mesh = sample_mesh(name, pose)
+    direction = seen_from_left(elevation)
+    pitch = float(np.ptp(mesh.vertices, axis=0).max()) / 40
+    image, origin = depth_grid(mesh, direction, pitch)
+    points = grid_points(image, origin, direction, pitch)
+    viewpoint = far_viewpoint(mesh, direction)
+    vertices, _, cloud = one_view(without_grid(points, viewpoint, "camera's"), np.zeros(3))
+    assert cloud == Cloud(int(np.isfinite(points).all(axis=2).sum()), None, 0)
+    assert len(vertices) == cloud.points
+
+
+def moved_or_filtered(points: np.ndarray, pitch: float, kind: str) -> np.ndarray:
+    """``points`` (n, 3) moved at random by half a pixel ``pitch``, or voxel filtered at two
+    pixels (each voxel's mean): on no pixel lattice."""
+    if kind == "voxels":
+        return voxel_means(points, 2 * pitch)
+    moved: np.ndarray = points + np.random.default_rng(2).normal(
+        scale=0.5 * pitch / np.sqrt(3), size=points.shape
+    )
+    return moved
+
+
+@pytest.mark.parametrize("kind", ["moved", "voxels"])
+@pytest.mark.parametrize("wall", [False, True], ids=["floor", "floor and wall"])
+@pytest.mark.parametrize("elevation", [20.0, 45.0])
+@pytest.mark.parametrize("name, pose", FIGURES[:2])
+def test_points_on_no_lattice_are_read_without_most_of_their_floor(
+    name, pose, elevation, wall, kind
+):
+    """The scenes' points (at three times the pixels) in the camera's frame moved half a pixel,
+    or voxel filtered, lie on no lattice and are read by Delaunay's triangulation of
+    their image; binned in cells of their spacing, the image is searched for the floor
+    and the wall as a frame is: at most 5% of their points stay (in cells the figure's
+    nearest point held), and at most 3% of the figure's go (in the floor's cells, where it
+    stands)."""
+    points, viewpoint, figure = scene_frame(name, pose, elevation, wall, pixels=120)
+    seen = np.isfinite(points).all(axis=2)
+    pitch = float(np.ptp(sample_mesh(name, pose).vertices, axis=0).max()) / 120
+    camera = view_frame(viewpoint)
+    figure_points = moved_or_filtered((points[seen & figure] - viewpoint) @ camera.T, pitch, kind)
+    plane_points = moved_or_filtered((points[seen & ~figure] - viewpoint) @ camera.T, pitch, kind)
+    cloud_points = np.vstack([figure_points, plane_points])
+    assert scans.sensor_grid(cloud_points, np.zeros(3)) is None
+    vertices, _, cloud = one_view(cloud_points, np.zeros(3))
+    read = {tuple(p) for p in vertices.tolist()}
+    stayed = sum(tuple(p) in read for p in plane_points.tolist())
+    went = sum(tuple(p) not in read for p in figure_points.tolist())
+    assert cloud.grid is None and cloud.support == len(cloud_points) - len(vertices)
+    assert stayed <= 0.05 * len(plane_points) and went <= 0.03 * len(figure_points)
+
+
+def test_a_grazing_floor_once_left_out_leaves_one_view(monkeypatch):
+    """The quadruped on a floor seen from 10 degrees above it, voxel filtered: the far
+    floor's voxels, smeared along the rays, join few of their points, so that read whole
+    the cloud is refused as no view from its camera; its floor left out, the rest is one
+    view, read from the camera (every figure point kept but for 3%)."""
+    points, viewpoint, figure = scene_frame("quadruped", 3, 10.0, False, pixels=120)
+    seen = np.isfinite(points).all(axis=2)
+    pitch = float(np.ptp(sample_mesh("quadruped", 3).vertices, axis=0).max()) / 120
+    camera = view_frame(viewpoint)
+    figure_points = moved_or_filtered(
+        (points[seen & figure] - viewpoint) @ camera.T, pitch, "voxels"
+    )
+    plane_points = moved_or_filtered(
+        (points[seen & ~figure] - viewpoint) @ camera.T, pitch, "voxels"
+    )
+    cloud_points = np.vstack([figure_points, plane_points])
+    vertices, _, cloud = scans.viewed_surface(cloud_points, np.zeros(3))  # from its camera
+    read = {tuple(p) for p in vertices.tolist()}
+    assert cloud.support == len(cloud_points) - len(vertices)
+    assert sum(tuple(p) not in read for p in figure_points.tolist()) <= 0.03 * len(figure_points)
+    monkeypatch.setattr(scans, "_binned_support", lambda *args: None)
+    with pytest.raises(PointCloudError, match="hide behind others"):
+        scans.viewed_surface(cloud_points, np.zeros(3))
+
+
+def test_a_view_too_coarse_to_tell_a_plane_is_not_looked_at_for_a_floor():
+    """The quadruped's scene (its pixels an 80th of its size) seen from 20 degrees, voxel
+    filtered at three of its pixels: one view from its camera, but its image fills 704
+    cells, fewer than ``SUPPORT_LEAST_CELLS``, too coarse to tell a floor from a curved
+    side within the band of two cells: the cloud's support None, every point read. At two
+    of its pixels (1,584 cells) its floor goes."""
+    points, viewpoint, _ = scene_frame("quadruped", 3, 20.0, False, pixels=80)
+    seen = (points[np.isfinite(points).all(axis=2)] - viewpoint) @ view_frame(viewpoint).T
+    pitch = float(np.ptp(sample_mesh("quadruped", 3).vertices, axis=0).max()) / 80
+    finer = moved_or_filtered(seen, pitch, "voxels")
+    assert scans.viewed_surface(finer, np.zeros(3))[2].support
+    filtered = moved_or_filtered(seen, 1.5 * pitch, "voxels")
+    vertices, _, cloud = scans.viewed_surface(filtered, np.zeros(3))  # from its camera
+    assert cloud == Cloud(len(filtered), None, None) and len(vertices) == len(filtered)
+
+
+def test_a_view_seen_from_a_guessed_sensor_is_not_looked_at_for_a_floor():
+    """Points on no lattice written where no sensor is placed (in their mesh's frame) are
+    read from afar along the direction they overlap themselves least in: a guess, its side
+    unknown, from which an object's own face could pass for a support. Nothing is left out
+    (the cloud's support None) and the floor stays."""
+    points, viewpoint, figure = scene_frame("hand", 2, 20.0, True)
+    seen = np.isfinite(points).all(axis=2)
+    vertices, _, cloud = one_view(without_grid(points, viewpoint, "mesh's"), np.zeros(3))
+    assert cloud == Cloud(np.count_nonzero(seen), None, None)
+    assert len(vertices) == np.count_nonzero(seen) > np.count_nonzero(figure)
+
+
+def test_points_written_without_their_grid_are_described_without_their_floor():
+    """Through the reader and the pipeline: a binary PLY of the floor example's points in
+    the camera's frame (float32) says how many were left out."""
+    points, viewpoint = floor_scan(sample_mesh(*PARTIAL_SOURCE))
+    _, _, organized = organized_scan(points, viewpoint)
+    seen = without_grid(points, viewpoint, "camera's")
+    data = trimesh.PointCloud(seen).export(file_type="ply")
+    assert b"property float x" in data
+    read = read_mesh(data, "scene.ply")
+    assert read.cloud == Cloud(organized.points, None, organized.support)
+    described = describe_file(data, get_preset(DEFAULT_PRESET), "scene.ply")
+    assert (described.input_points, described.input_grid, described.input_support) == (
+        organized.points,
+        None,
+        organized.support,
+    )

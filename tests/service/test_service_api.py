@@ -8,7 +8,14 @@ import re
 import numpy as np
 import pytest
 import trimesh
-from conftest import EXAMPLES, e57_scan, example, noisy_depth_scan, with_a_far_half_copy
+from conftest import (
+    EXAMPLES,
+    e57_scan,
+    example,
+    floor_points_ply,
+    noisy_depth_scan,
+    with_a_far_half_copy,
+)
 
 from app.client import format_matches
 from app.search.service import smoothed_sentence
@@ -363,6 +370,21 @@ def test_a_depth_frame_with_the_floor_finds_its_object(service: Service, gallery
     assert enrolled.status_code == 202, enrolled.text
     stored = service.wait_mesh(enrolled.json()["id"], collection="rooms")["descriptor"]
     assert (stored["input_points"], stored["input_support"]) == (cloud.points, cloud.support)
+    # The same frame's points without its grid, as a depth camera's software exports them
+    # (a PLY of float32 vertices in the camera's frame): on its pixel lattice, read alike.
+    response = service.client.post(
+        "/query", files={"file": ("floor.ply", floor_points_ply())}, data={"k": "1"}
+    )
+    assert response.status_code == 200, response.text
+    unorganized = response.json()
+    assert unorganized["matches"][0]["name"] == "quadruped-1"
+    assert unorganized["matches"][0]["fitness"] > 0.85
+    assert unorganized["query"]["input_support"] == cloud.support
+    assert "input_grid" not in unorganized["query"]
+    assert unorganized["notes"][:2] == [
+        f"The query is a scanner's point cloud: {cloud.points:,} points, triangulated as one view.",
+        body["notes"][1],
+    ]
     # The depth example frames its quadruped alone: nothing is left out, and nothing said.
     framed = service.client.post(
         "/query", files={"file": (DEPTH_SAMPLE.name, (EXAMPLES / DEPTH_SAMPLE).read_bytes())}

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
-from conftest import example, noisy_depth_scan, with_a_far_half_copy
+from conftest import example, floor_points_ply, noisy_depth_scan, with_a_far_half_copy
 
 from app.search.service import smoothed_sentence
 from benchmarks.common import EXAMPLES, Service
@@ -630,6 +630,27 @@ def test_an_enrolled_scan_says_it_was_a_point_cloud(page, site):
     page.locator("#detail").wait_for(state="visible")
     facts = page.locator("#detail-meta").inner_text()
     assert (
+        f"({cloud.support:,} points of a floor, table or wall it stood on or against left out)"
+        in facts
+    ), facts
+    # Its points without the grid, as a depth camera's software exports them: the same.
+    enrolled = site.client.post(
+        "/collections/scans/meshes", files={"file": ("floor.ply", floor_points_ply())}
+    )
+    assert enrolled.status_code == 202, enrolled.text
+    mesh_id = enrolled.json()["id"]
+    assert site.wait_mesh(mesh_id, collection="scans")["status"] == "ready"
+    page.reload()
+    page.locator('#collection option[value="scans"]').wait_for(state="attached")
+    page.select_option("#collection", "scans")
+    page.click("#tab-gallery")
+    card = page.locator(f'#gallery-grid .card[data-mesh-id="{mesh_id}"]')
+    card.wait_for()
+    card.press("Enter")
+    page.locator("#detail").wait_for(state="visible")
+    facts = page.locator("#detail-meta").inner_text()
+    assert (
+        f"a scanner's point cloud: {cloud.points:,} points, triangulated as one view "
         f"({cloud.support:,} points of a floor, table or wall it stood on or against left out)"
         in facts
     ), facts

@@ -547,8 +547,7 @@ def _read_arrays(
                 f"The cloud has {len(vertices):,} points; the limit is {max_faces // 2:,}. "
                 "Subsample it before uploading."
             )
-        vertices, faces = one_view(vertices, np.zeros(3))
-        cloud = Cloud(len(vertices))
+        vertices, faces, cloud = one_view(vertices, np.zeros(3))
     if len(faces) > max_faces:
         raise TooManyFacesError(
             f"The mesh has {len(faces):,} triangles; the limit is {max_faces:,}. "

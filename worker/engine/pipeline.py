@@ -334,8 +334,7 @@ def load_and_describe(
     if cleaned.cloud is not None:
         descriptor.input_points = cleaned.cloud.points
         descriptor.input_grid = cleaned.cloud.grid
-        if cleaned.cloud.grid is not None:  # only a grid's border tells a support
-            descriptor.input_support = cleaned.cloud.support
+        descriptor.input_support = cleaned.cloud.support
     descriptor.timings = {"load": load_seconds, **descriptor.timings}
     descriptor.timings["total"] = sum(descriptor.timings.values())
     return cleaned.mesh, descriptor

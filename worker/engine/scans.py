@@ -85,11 +85,11 @@ class Cloud:
     surface, its sensor ``grid``, (width, height) pixels (None: a cloud without one,
     triangulated as seen from its sensor, :func:`viewed_surface`), and the points of the
     floor, table or wall its object stood on or against, left out
-    (:func:`without_support`; an organized cloud's)."""
+    (:func:`without_support`; None: not looked for, :func:`viewed_surface` says when)."""
 
     points: int
     grid: tuple[int, int] | None = None
-    support: int = 0
+    support: int | None = None
 
 
 def grid_faces(valid: np.ndarray) -> np.ndarray:
@@ -383,9 +383,10 @@ def viewed_surface(
     *,
     find_frame: bool = True,
     start: Callable[[], np.ndarray] | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
+    sensor_known: bool = True,
+) -> tuple[np.ndarray, np.ndarray, Cloud]:
     """A cloud without a grid read as one view: (n, 3) its finite points and (m, 3) the
-    triangles of the surface its sensor saw, facing the sensor.
+    triangles of the surface its sensor saw, facing the sensor, and the cloud it was.
 
     Seen from ``viewpoint`` (3,), each point of one view lies on its own ray, and the
     rays' directions are the pixels of the sensor's image: the points' central (pinhole)
@@ -405,7 +406,13 @@ def viewed_surface(
     (:func:`organized_surface`), each triangle facing the sensor; an orthographic grid is
     seen along its own line of sight, from ``viewpoint`` if it stands on that line
     (:func:`_seen_along`), else from afar on the side its silhouette says
-    (:func:`sensor_side`).
+    (:func:`sensor_side`). The planes its object stands on or against are left out
+    (:func:`without_support`), the points' rectangle in the image taken for the frame:
+    on a lattice the view is an organized frame; else its image binned in cells of about
+    its points' median spacing is (:func:`_binned_support`, not when too coarse). Not from a
+    ``viewpoint`` that is not ``sensor_known`` (guessed from afar along a direction the
+    points overlap themselves least in): seen from the wrong side, an object's face with
+    the rest of it behind passes for one. Not looked for, the cloud's ``support`` is None.
 
     Raises
     ------
@@ -429,10 +436,16 @@ def viewed_surface(
             guessed = frame[:, 2]
             sensor = guessed_viewpoint(finite, guessed)
     if lattice is not None:
-        vertices, faces = organized_surface(lattice, sensor)
+        seen_from = sensor
+        vertices, faces = organized_surface(lattice, seen_from)
         if guessed is not None:
             sensor = guessed_viewpoint(finite, sensor_side(vertices, faces, guessed) * guessed)
-        return _facing(vertices, faces, sensor)
+        support: int | None = None
+        if sensor_known:  # an organized frame, the points' rectangle its border
+            kept, support = without_support(lattice, sensor)
+        if support:
+            vertices, faces = organized_surface(kept, seen_from)
+        return *_facing(vertices, faces, sensor), Cloud(len(vertices), support=support)
     where = ", ".join(f"{c:g}" for c in viewpoint)
     rays = finite - viewpoint
     length = np.linalg.norm(rays, axis=1)
@@ -461,19 +474,77 @@ def viewed_surface(
     kept &= unshadowed(finite, faces, viewpoint)
     faces = faces[kept]
     seen = np.unique(faces).size / len(finite)
+    left_out = (
+        _binned_support(finite, image, float(np.median(spacing)), viewpoint)
+        if sensor_known
+        else None
+    )
+    if left_out is not None and left_out.any():
+        faces = faces[~left_out[faces].any(axis=1)]
+        # One view, or one once its support is left out (a floor seen at a grazing
+        # angle and voxel filtered joins few of its points along the rays).
+        seen = max(seen, np.unique(faces).size / np.count_nonzero(~left_out))
     if seen < VIEW_SHARE:
         raise PointCloudError(
             f"The file holds points but no triangles, and they are not one view from the "
             f"sensor at ({where}): {100 * (1 - seen):.0f}% of them hide behind others, as "
             f"a whole object's points do. {UPLOAD_A_VIEW}"
         )
+    if left_out is not None and left_out.any():  # the rest renumbered
+        faces = (np.cumsum(~left_out) - 1)[faces]
+        finite, image = finite[~left_out], image[~left_out]
     # Wound clockwise in the image (whose third axis points away from the sensor), a
     # triangle's normal faces the sensor.
     first, second, third = (image[faces[:, k]] for k in range(3))
     (ax, ay), (bx, by) = (second - first).T, (third - first).T
     turn = ax * by - ay * bx
     faces[turn > 0] = faces[turn > 0][:, ::-1]
-    return finite, faces
+    support = None if left_out is None else int(np.count_nonzero(left_out))
+    return finite, faces, Cloud(len(finite), support=support)
+
+
+#: :func:`_binned_support`: a view's image is binned in cells ``SUPPORT_CELL`` times its
+#: points' median spacing (at one, the image of points moved half a pixel left 60% of its
+#: border's cells empty, and a floor seemed not to run out of it), and must fill
+#: ``SUPPORT_LEAST_CELLS`` of them to be searched for a support: coarser, a curved side
+#: passes for a plane within the band of two cells (of 923 views of TOSCA's and SCAPE's
+#: wholes alone, moved half a pixel or voxel filtered, three of 189, 265 and 483 cells
+#: lost a sixth to a third of their points, none of the 859 of 500 cells or more:
+#: docs/decisions.md; the bound is twice the largest that lost any).
+SUPPORT_CELL = 1.25
+SUPPORT_LEAST_CELLS = 1000
+
+
+def _binned_support(
+    points: np.ndarray, image: np.ndarray, spacing: float, viewpoint: np.ndarray
+) -> np.ndarray | None:
+    """(n,) bool: which of a view's ``points`` (n, 3), on no lattice, lie on a plane its
+    object stands on or against: its ``image`` (n, 2) binned in cells
+    :data:`SUPPORT_CELL` times its points' ``spacing`` apart,
+    each cell holding the point nearest ``viewpoint`` (a z-buffer's), is the organized
+    frame :func:`without_support` searches; every point in a support's cell is its.
+    None (not searched) when the cells would outnumber the points ``LATTICE_MAX_FILL``
+    times, or the points fill fewer than :data:`SUPPORT_LEAST_CELLS`."""
+    if not np.isfinite(spacing) or spacing <= 0.0:
+        return None
+    cells = np.floor((image - image.min(axis=0)) / (SUPPORT_CELL * spacing)).astype(np.int64)
+    width, height = cells.max(axis=0) + 1
+    if width * height > LATTICE_MAX_FILL * len(points):
+        return None
+    cell = cells[:, 1] * width + cells[:, 0]
+    order = np.lexsort((np.linalg.norm(points - viewpoint, axis=1), cell))
+    nearest = order[np.r_[True, cell[order][1:] != cell[order][:-1]]]
+    if len(nearest) < SUPPORT_LEAST_CELLS:
+        return None
+    frame = np.full((height * width, 3), np.nan)
+    frame[cell[nearest]] = points[nearest]
+    frame = frame.reshape(height, width, 3)
+    kept, support = without_support(frame, viewpoint)
+    if not support:
+        return np.zeros(len(points), dtype=bool)
+    left = (np.isfinite(frame).all(axis=2) & ~np.isfinite(kept).all(axis=2)).ravel()
+    in_support: np.ndarray = left[cell]
+    return in_support
 
 
 def median_edges(image: np.ndarray, neighbours: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
@@ -558,7 +629,7 @@ GUESSED_SENSOR_EXTENTS = 1e3
 
 def one_view(
     points: np.ndarray, viewpoint: np.ndarray, axes: np.ndarray | None = None
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, Cloud]:
     """:func:`viewed_surface` from ``viewpoint``; points that are not one view from there
     (one view written in another frame than its sensor's, the sensor elsewhere) are tried
     once more from afar along the direction they overlap themselves least in
@@ -581,17 +652,21 @@ def one_view(
             # The first try searched the points' frames already (sensor_axes: where no
             # lattice was found from there, none is from afar).
             guess = guessed_viewpoint(finite, start())
-            vertices, faces = viewed_surface(finite, guess, find_frame=False)
+            vertices, faces, cloud = viewed_surface(
+                finite, guess, find_frame=False, sensor_known=False
+            )
             sight = grid_sight(vertices, faces)
             if sight is not None:
                 guess = guessed_viewpoint(finite, sight)
-                vertices, faces = viewed_surface(finite, guess, find_frame=False)
+                vertices, faces, cloud = viewed_surface(
+                    finite, guess, find_frame=False, sensor_known=False
+                )
         except PointCloudError:
             raise refusal from None
         direction = guess - vertices.mean(axis=0)
         if sensor_side(vertices, faces, direction) < 0.0:
             faces = faces[:, ::-1]  # its sensor stands the other way: each triangle faces it
-        return vertices, faces
+        return vertices, faces, cloud
 
 
 def written_once(points: np.ndarray) -> np.ndarray:
@@ -1166,8 +1241,7 @@ def read_pcd(
     with np.errstate(invalid="ignore"):  # a signalling NaN (a damaged file's) is a NaN too
         xyz = xyz.astype(np.float64)
     if height <= 1 or width <= 1:  # no grid: one view seen from its viewpoint
-        points, faces = one_view(xyz, viewpoint, _rotation(pose[3:]))
-        return points, faces, Cloud(len(points))
+        return one_view(xyz, viewpoint, _rotation(pose[3:]))
     return organized_scan(xyz.reshape(height, width, 3), viewpoint)
 
 

@@ -428,7 +428,7 @@ def view_points(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     points, direction, _ = range_image(mesh, rng, up)
     seen = points.reshape(-1, 3)[np.isfinite(points).all(axis=2).ravel()]
     shuffled = seen[np.random.default_rng(0).permutation(len(seen))]
-    vertices, faces = viewed_surface(shuffled, far_viewpoint(mesh, direction))
+    vertices, faces, _ = viewed_surface(shuffled, far_viewpoint(mesh, direction))
     return similarity(clean_mesh(vertices, faces), rng)
 
 
@@ -456,7 +456,7 @@ def view_voxels(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     seen = points.reshape(-1, 3)[np.isfinite(points).all(axis=2).ravel()]
     means = voxel_means(seen, VOXEL_PIXELS * pitch)
     shuffled = means[np.random.default_rng(0).permutation(len(means))]
-    vertices, faces = viewed_surface(shuffled, far_viewpoint(mesh, direction))
+    vertices, faces, _ = viewed_surface(shuffled, far_viewpoint(mesh, direction))
     return similarity(clean_mesh(vertices, faces), rng)
 
 
