@@ -13,7 +13,9 @@ a pixel (near none)), and
 its surface (what :func:`~worker.engine.scans.read_pcd` makes of the binary file) as an
 OFF mesh: a mesh of the same size. Beside them, the quadruped on a floor seen from 35
 degrees above at the same pitch (as ``examples/partial/quadruped-3-floor`` was made) as a
-binary PCD, the floor left out as it is read, against that surface as an OFF mesh. Each
+binary PCD, and as its points without the grid in the camera's frame (a binary PLY; also
+each point moved half a pixel, on no lattice), the floor left out as it is read, against
+that surface as an OFF mesh. Each
 file is described by
 :func:`~worker.engine.pipeline.describe_file` ``--repeats`` times, the files' order
 alternated, in one process; the table gives the median load (read, triangulate, clean)
@@ -32,7 +34,7 @@ import trimesh
 
 from worker.engine.pipeline import describe_file
 from worker.engine.presets import DEFAULT_PRESET, get_preset
-from worker.engine.scans import read_pcd
+from worker.engine.scans import read_pcd, view_frame
 from worker.evaluation.partial import random_rotation
 from worker.evaluation.samples import (
     DEPTH_DIRECTION,
@@ -78,9 +80,14 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], str, str]:
     turn = random_rotation(np.random.default_rng(1))  # out of the camera's frame
     pitch = float(np.nanmedian(np.linalg.norm(np.diff(points, axis=1), axis=2)))
     noise = np.random.default_rng(2).normal(scale=pitch / np.sqrt(3), size=seen.shape)
-    on_floor = pcd_bytes(*floor_scan(whole, pitch), "binary")
+    floor_grid, floor_viewpoint = floor_scan(whole, pitch)
+    on_floor = pcd_bytes(floor_grid, floor_viewpoint, "binary")
     floor_vertices, floor_faces, floor = read_pcd(on_floor)
     assert floor.grid is not None
+    floor_seen = floor_grid[np.isfinite(floor_grid).all(axis=2)] - floor_viewpoint
+    floor_seen = floor_seen[np.random.default_rng(0).permutation(len(floor_seen))]
+    floor_camera = floor_seen @ view_frame(floor_viewpoint).T  # as the camera's software writes
+    floor_noise = np.random.default_rng(2).normal(scale=pitch / np.sqrt(3), size=floor_seen.shape)
     files = {
         "mesh.off": off_bytes(vertices, faces),
         f"mesh.off {ON_A_FLOOR}": off_bytes(floor_vertices, floor_faces),
@@ -94,6 +101,10 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], str, str]:
         "scan.ply (no grid, turned, moved 0.1 pixel)": points_ply((seen + 0.1 * noise) @ turn.T),
         "scan.ply (no grid, turned, moved 0.5 pixel)": points_ply((seen + 0.5 * noise) @ turn.T),
         f"scan.pcd (binary) {ON_A_FLOOR}": on_floor,
+        f"scan.ply (no grid) {ON_A_FLOOR}": points_ply(floor_camera),
+        f"scan.ply (no grid, moved 0.5 pixel) {ON_A_FLOOR}": points_ply(
+            floor_camera + 0.5 * floor_noise
+        ),
     }
     scan = f"{cloud.points:,} points, {cloud.grid[0]} x {cloud.grid[1]}"
     floor_label = (
