@@ -214,3 +214,28 @@ def test_range_floor_reads_the_scan_without_its_floor(sphere, monkeypatch):
         assert floor.vertices[:, 2].min() > low + 1e-9
         area = face_areas(floor.vertices, floor.faces).sum()
         assert area == pytest.approx(face_areas(grid.vertices, grid.faces).sum(), rel=0.02)
+
+
+def test_floor_voxels_reads_the_thinned_frame_without_its_floor(sphere, monkeypatch):
+    """``floor-voxels`` thins ``range-floor``'s very frames (the same seed) by
+    ``view-voxels``' filter and reads their points as the service reads a PCD of them
+    with its camera's viewpoint: on no lattice, their image binned, the floor is left out
+    (every point of it: none stays at its height) and the sphere's view is
+    ``view-voxels``' but for the cells it shares with the floor (within 5% of its area)."""
+    monkeypatch.setattr(partial, "similarity", lambda mesh, rng: mesh)
+    supports = []
+    left_out = scans.without_support
+    monkeypatch.setattr(
+        scans,
+        "without_support",
+        lambda *a: supports.append(left_out(*a)[1]) or left_out(*a),
+    )
+    low = float(sphere.vertices[:, 2].min())
+    for name in ("sphere.off", "other.off"):
+        supports.clear()
+        floor = make_variant(sphere, "floor-voxels", name)
+        assert len(supports) == 1 and supports[0] > 0  # the floor's cells
+        assert floor.vertices[:, 2].min() > low + 1e-9
+        alone = make_variant(sphere, "view-voxels", name)
+        area = face_areas(floor.vertices, floor.faces).sum()
+        assert area == pytest.approx(face_areas(alone.vertices, alone.faces).sum(), rel=0.05)

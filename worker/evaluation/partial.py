@@ -29,6 +29,9 @@ here keeps a part of the surface, its largest connected piece:
 * ``range-floor``: ``range-cloud``'s scans (drawn from its seed) of the whole standing
   on a floor, the camera above it, the frame cropped so that the floor runs out of it,
   read as the service reads a depth camera's organized cloud (the floor left out first);
+* ``floor-voxels``: ``range-floor``'s very frames without their grid, thinned by
+  ``view-voxels``' filter, read as ``view-voxels`` (the floor left out of their binned
+  image);
 * ``shrec-holes``: SHREC'17's holes: geodesic discs of random radius (up to 20% of the
   diameter) eroded around some of 70 farthest samples, the rest decimated to a random
   resolution (300 vertices .. as many as the mesh has), in a random similarity transform;
@@ -55,6 +58,7 @@ from worker.engine.geodesic import farthest_point_samples
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
 from worker.engine.scans import (
     grid_faces,
+    one_view,
     organized_scan,
     organized_surface,
     view_frame,
@@ -407,16 +411,24 @@ def floor_frame(
     return points[first[1] : last[1] + 1, first[0] : last[0] + 1]
 
 
-def range_floor(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
-    """:func:`range_cloud`'s scan (its generator drawn from that variant's seed) of the
-    whole standing on a floor, the camera above it (the elevation's sign made positive;
-    :func:`floor_frame`), read as the service reads a depth camera's organized cloud: the
-    floor left out, then triangulated (:func:`worker.engine.scans.organized_scan`), its
-    largest piece in the same random similarity."""
+def floor_shot(
+    mesh: Mesh, rng: np.random.Generator, up: str = "z"
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """:func:`range_cloud`'s scan (drawn from ``rng``) of the whole standing on a floor,
+    the camera above it (the elevation's sign made positive; :func:`floor_frame`): the
+    organized cloud (h, w, 3), the camera's far viewpoint (3,) and the pixels' pitch."""
     _, direction, pitch = range_image(mesh, rng, up)
     direction["xyz".index(up)] = abs(direction["xyz".index(up)])
-    viewpoint = far_viewpoint(mesh, direction)
-    vertices, faces, _ = organized_scan(floor_frame(mesh, direction, pitch, up), viewpoint)
+    return floor_frame(mesh, direction, pitch, up), far_viewpoint(mesh, direction), pitch
+
+
+def range_floor(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
+    """:func:`floor_shot`'s frame (its generator drawn from ``range-cloud``'s seed), read
+    as the service reads a depth camera's organized cloud: the floor left out, then
+    triangulated (:func:`worker.engine.scans.organized_scan`), its largest piece in the
+    same random similarity."""
+    points, viewpoint, _ = floor_shot(mesh, rng, up)
+    vertices, faces, _ = organized_scan(points, viewpoint)
     return similarity(clean_mesh(vertices, faces), rng)
 
 
@@ -457,6 +469,22 @@ def view_voxels(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     means = voxel_means(seen, VOXEL_PIXELS * pitch)
     shuffled = means[np.random.default_rng(0).permutation(len(means))]
     vertices, faces, _ = viewed_surface(shuffled, far_viewpoint(mesh, direction))
+    return similarity(clean_mesh(vertices, faces), rng)
+
+
+def floor_voxels(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
+    """:func:`floor_shot`'s frame (its generator drawn from ``range-cloud``'s seed)
+    without its grid, thinned by :func:`view_voxels`' filter and read as the service
+    reads a PCD of such points with its camera's ``VIEWPOINT``
+    (:func:`worker.engine.scans.one_view`: on no lattice, the floor left out of their
+    binned image; not one view from the camera, as a floor seen at a grazing angle and so
+    filtered may be, seen once more from afar, the floor kept), its largest piece in the
+    same random similarity."""
+    points, viewpoint, pitch = floor_shot(mesh, rng, up)
+    seen = points.reshape(-1, 3)[np.isfinite(points).all(axis=2).ravel()]
+    means = voxel_means(seen, VOXEL_PIXELS * pitch)
+    shuffled = means[np.random.default_rng(0).permutation(len(means))]
+    vertices, faces, _ = one_view(shuffled, viewpoint)
     return similarity(clean_mesh(vertices, faces), rng)
 
 
@@ -511,6 +539,7 @@ DRAWN_AS = {
     "view-points": "range-cloud",
     "view-voxels": "range-cloud",
     "range-floor": "range-cloud",
+    "floor-voxels": "range-cloud",
     "view-noise-0.25": "view",
     "view-noise-0.5": "view",
 }
@@ -523,6 +552,7 @@ ORBITING: dict[str, Callable[[Mesh, np.random.Generator, str], Mesh]] = {
     "view-points": view_points,
     "view-voxels": view_voxels,
     "range-floor": range_floor,
+    "floor-voxels": floor_voxels,
 }
 
 #: name -> how to make it from a mesh and a random generator, in report order.
@@ -538,6 +568,7 @@ PARTIAL_VARIANTS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
     "view-points": view_points,
     "view-voxels": view_voxels,
     "range-floor": range_floor,
+    "floor-voxels": floor_voxels,
     "shrec-holes": shrec_holes,
     "noise-0.25": lambda mesh, rng: noisy_surface(mesh, 0.25, rng),
     "noise-0.5": lambda mesh, rng: noisy_surface(mesh, 0.5, rng),
