@@ -81,7 +81,7 @@ def main() -> None:
                     refused += 1
                 seconds.append(time.perf_counter() - start)
                 try:
-                    _, faces = scans.one_view(means, np.zeros(3))
+                    _, faces, _ = scans.one_view(means, np.zeros(3))
                     on.append(np.unique(faces).size / len(means))
                 except PointCloudError:
                     voxels_refused += 1

@@ -192,36 +192,19 @@ def test_a_noisy_view_is_the_view_moved_along_its_rays(sphere):
         assert abs(np.mean(np.sign(normals @ ray))) > 0.95
 
 
-def test_range_floor_reads_the_scan_without_its_floor(sphere, monkeypatch):
+@pytest.mark.parametrize(
+    "variant, alone, within",
+    [("range-floor", "range-cloud", 0.02), ("floor-voxels", "view-voxels", 0.05)],
+)
+def test_a_floor_frame_is_read_without_its_floor(sphere, monkeypatch, variant, alone, within):
     """``range-floor`` shoots ``range-cloud``'s scans (its seed) of the whole on a floor
-    from above it, the frame cut so that the floor runs out of it: read as the service
-    reads a depth camera's organized cloud, no floor is left and the sphere's view is
-    whole (a hemisphere seen from anywhere: as ``range-cloud``'s, within 2% of its area)."""
-    monkeypatch.setattr(partial, "similarity", lambda mesh, rng: mesh)
-    supports = []
-    left_out = scans.without_support
-    monkeypatch.setattr(
-        scans,
-        "without_support",
-        lambda *a: supports.append(left_out(*a)[1]) or left_out(*a),
-    )
-    low = float(sphere.vertices[:, 2].min())
-    for name in ("sphere.off", "other.off"):
-        grid = make_variant(sphere, "range-cloud", name)
-        supports.clear()
-        floor = make_variant(sphere, "range-floor", name)
-        assert len(supports) == 1 and supports[0] > floor.n_vertices  # the floor's points
-        assert floor.vertices[:, 2].min() > low + 1e-9
-        area = face_areas(floor.vertices, floor.faces).sum()
-        assert area == pytest.approx(face_areas(grid.vertices, grid.faces).sum(), rel=0.02)
-
-
-def test_floor_voxels_reads_the_thinned_frame_without_its_floor(sphere, monkeypatch):
-    """``floor-voxels`` thins ``range-floor``'s very frames (the same seed) by
-    ``view-voxels``' filter and reads their points as the service reads a PCD of them
-    with its camera's viewpoint: on no lattice, their image binned, the floor is left out
-    (every point of it: none stays at its height) and the sphere's view is
-    ``view-voxels``' but for the cells it shares with the floor (within 5% of its area)."""
+    from above it, the frame cut so that the floor runs out of it, and reads them as the
+    service reads a depth camera's organized cloud; ``floor-voxels`` thins those very
+    frames by ``view-voxels``' filter and reads their points as the service reads a PCD
+    of them with its camera's viewpoint (on no lattice: their image binned). No floor
+    point is left (none at its height), and the sphere's view is the same scan's without
+    a floor: ``range-cloud``'s within 2% of its area, ``view-voxels``' within 5% (the
+    cells it shares with the floor go too)."""
     monkeypatch.setattr(partial, "similarity", lambda mesh, rng: mesh)
     supports = []
     left_out = scans.without_support
@@ -233,9 +216,9 @@ def test_floor_voxels_reads_the_thinned_frame_without_its_floor(sphere, monkeypa
     low = float(sphere.vertices[:, 2].min())
     for name in ("sphere.off", "other.off"):
         supports.clear()
-        floor = make_variant(sphere, "floor-voxels", name)
-        assert len(supports) == 1 and supports[0] > 0  # the floor's cells
+        floor = make_variant(sphere, variant, name)
+        assert len(supports) == 1 and supports[0] > 0  # the floor's points, or cells
         assert floor.vertices[:, 2].min() > low + 1e-9
-        alone = make_variant(sphere, "view-voxels", name)
+        without = make_variant(sphere, alone, name)
         area = face_areas(floor.vertices, floor.faces).sum()
-        assert area == pytest.approx(face_areas(alone.vertices, alone.faces).sum(), rel=0.05)
+        assert area == pytest.approx(face_areas(without.vertices, without.faces).sum(), rel=within)

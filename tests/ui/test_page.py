@@ -593,6 +593,25 @@ def depth_cloud_phrase() -> str:
     )
 
 
+def enrolled_facts(page, site, name: str, data: bytes) -> str:
+    """Enroll ``data`` as ``name`` in the collection ``scans`` and open its card on the
+    gallery: the facts its detail shows."""
+    enrolled = site.client.post("/collections/scans/meshes", files={"file": (name, data)})
+    assert enrolled.status_code == 202, enrolled.text
+    mesh_id = enrolled.json()["id"]
+    assert site.wait_mesh(mesh_id, collection="scans")["status"] == "ready"
+    page.reload()
+    page.locator('#collection option[value="scans"]').wait_for(state="attached")
+    page.select_option("#collection", "scans")
+    page.click("#tab-gallery")
+    card = page.locator(f'#gallery-grid .card[data-mesh-id="{mesh_id}"]')
+    card.wait_for()
+    card.press("Enter")
+    page.locator("#detail").wait_for(state="visible")
+    facts: str = page.locator("#detail-meta").inner_text()
+    return facts
+
+
 def test_an_enrolled_scan_says_it_was_a_point_cloud(page, site):
     assert site.client.post("/collections", json={"name": "scans"}).status_code == 201
     data = (EXAMPLES / DEPTH_SAMPLE).read_bytes()
@@ -614,41 +633,13 @@ def test_an_enrolled_scan_says_it_was_a_point_cloud(page, site):
     # The same quadruped on a floor, seen from above: the card says the floor was left out.
     data = (EXAMPLES / FLOOR_SAMPLE).read_bytes()
     cloud = read_pcd(gzip.decompress(data))[2]
-    enrolled = site.client.post(
-        "/collections/scans/meshes", files={"file": (FLOOR_SAMPLE.name, data)}
-    )
-    assert enrolled.status_code == 202, enrolled.text
-    mesh_id = enrolled.json()["id"]
-    assert site.wait_mesh(mesh_id, collection="scans")["status"] == "ready"
-    page.reload()
-    page.locator('#collection option[value="scans"]').wait_for(state="attached")
-    page.select_option("#collection", "scans")
-    page.click("#tab-gallery")
-    card = page.locator(f'#gallery-grid .card[data-mesh-id="{mesh_id}"]')
-    card.wait_for()
-    card.press("Enter")
-    page.locator("#detail").wait_for(state="visible")
-    facts = page.locator("#detail-meta").inner_text()
+    facts = enrolled_facts(page, site, FLOOR_SAMPLE.name, data)
     assert (
         f"({cloud.support:,} points of a floor, table or wall it stood on or against left out)"
         in facts
     ), facts
     # Its points without the grid, as a depth camera's software exports them: the same.
-    enrolled = site.client.post(
-        "/collections/scans/meshes", files={"file": ("floor.ply", floor_points_ply())}
-    )
-    assert enrolled.status_code == 202, enrolled.text
-    mesh_id = enrolled.json()["id"]
-    assert site.wait_mesh(mesh_id, collection="scans")["status"] == "ready"
-    page.reload()
-    page.locator('#collection option[value="scans"]').wait_for(state="attached")
-    page.select_option("#collection", "scans")
-    page.click("#tab-gallery")
-    card = page.locator(f'#gallery-grid .card[data-mesh-id="{mesh_id}"]')
-    card.wait_for()
-    card.press("Enter")
-    page.locator("#detail").wait_for(state="visible")
-    facts = page.locator("#detail-meta").inner_text()
+    facts = enrolled_facts(page, site, "floor.ply", floor_points_ply())
     assert (
         f"a scanner's point cloud: {cloud.points:,} points, triangulated as one view "
         f"({cloud.support:,} points of a floor, table or wall it stood on or against left out)"
