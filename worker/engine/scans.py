@@ -437,13 +437,12 @@ def viewed_surface(
             sensor = guessed_viewpoint(finite, guessed)
     if lattice is not None:
         seen_from = sensor
-        vertices, faces = organized_surface(lattice, seen_from)
-        if guessed is not None:
+        if guessed is not None:  # the grid's silhouette says which side its sensor stood on
+            vertices, faces = organized_surface(lattice, seen_from)
             sensor = guessed_viewpoint(finite, sensor_side(vertices, faces, guessed) * guessed)
-        support: int | None = None
-        if sensor_known:  # an organized frame, the points' rectangle its border
-            kept, support = without_support(lattice, sensor)
-        if support:
+        # An organized frame, the points' rectangle its border.
+        kept, support = without_support(lattice, sensor) if sensor_known else (lattice, None)
+        if guessed is None or support:
             vertices, faces = organized_surface(kept, seen_from)
         return *_facing(vertices, faces, sensor), Cloud(len(vertices), support=support)
     where = ", ".join(f"{c:g}" for c in viewpoint)
