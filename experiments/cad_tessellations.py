@@ -6,9 +6,10 @@ The robustness protocol (``shapes robustness``) re-tessellates TOSCA's organic,
 finely triangulated files. Files exported from CAD tools look different: a cylinder
 is a few dozen long strips and two fans, a box twelve triangles. This script takes
 eight simple solids (cylinders of two proportions, a cone, two boxes, a capsule, a
-torus, a sphere), each as trimesh builds it at two or three facet counts and as the
+torus, a sphere), each as trimesh builds it at two or three facet counts, as the
 protocol's isotropic remesh of the finest one (about 12,000 vertices, MeshLab's
-filter: needs the ``eval`` extra), describes every file with the preset, and prints
+filter: needs the ``eval`` extra) and, for the round ones, as a fine chordal tolerance
+exports it (thousands of slivers), describes every file with the preset, and prints
 per modality and for the preset's fused score (on a product's scale, as the protocol):
 
 * **gap**: for every file, the median distance to the other files of its solid over
@@ -36,14 +37,17 @@ from worker.evaluation.variants import remeshed
 #: Vertices of the isotropic remesh each solid is also described as.
 REMESH_VERTICES = 12_000
 
+#: The sides of a round solid's coarse files: a few dozen strips.
+FACETS = (24, 48, 96)
+
 
 def solids() -> dict[str, list[tuple[str, trimesh.Trimesh]]]:
     """Solid -> its CAD-style tessellations (label, mesh), coarse to fine."""
     c = trimesh.creation
     return {
-        "cylinder 1:2": [(f"{s} sides", c.cylinder(0.5, 2.0, sections=s)) for s in (24, 48, 96)],
-        "cylinder 1:3": [(f"{s} sides", c.cylinder(0.5, 3.0, sections=s)) for s in (24, 48, 96)],
-        "cone": [(f"{s} sides", c.cone(0.5, 2.0, sections=s)) for s in (24, 48, 96)],
+        "cylinder 1:2": [(f"{s} sides", c.cylinder(0.5, 2.0, sections=s)) for s in FACETS],
+        "cylinder 1:3": [(f"{s} sides", c.cylinder(0.5, 3.0, sections=s)) for s in FACETS],
+        "cone": [(f"{s} sides", c.cone(0.5, 2.0, sections=s)) for s in FACETS],
         "box 1:2:3": [("12 triangles", c.box((1.0, 2.0, 3.0)))],
         "box 1:1:3": [("12 triangles", c.box((1.0, 1.0, 3.0)))],
         "capsule": [(f"{k} x {k}", c.capsule(2.0, 0.5, count=[k, k])) for k in (8, 16, 32)],
@@ -59,13 +63,30 @@ def solids() -> dict[str, list[tuple[str, trimesh.Trimesh]]]:
     }
 
 
+def fine_exports() -> dict[str, tuple[str, trimesh.Trimesh]]:
+    """Solid -> its file as a fine chordal tolerance exports it (label, mesh): thousands
+    of slivers, which quadric decimation cannot thin."""
+    c = trimesh.creation
+    return {
+        "cylinder 1:2": ("2048 sides", c.cylinder(0.5, 2.0, sections=2048)),
+        "cylinder 1:3": ("2048 sides", c.cylinder(0.5, 3.0, sections=2048)),
+        "cone": ("2048 sides", c.cone(0.5, 2.0, sections=2048)),
+        "torus": ("1024 x 16", c.torus(1.0, 0.3, major_sections=1024, minor_sections=16)),
+    }
+
+
 def files() -> list[tuple[str, str, Mesh]]:
-    """(solid, tessellation, mesh) of every file the script describes."""
+    """(solid, tessellation, mesh) of every file the script describes: a solid's coarse
+    files, the isotropic remesh of the finest of them, and its fine export if it has one."""
     out = []
+    fine = fine_exports()
     for solid, tessellations in solids().items():
         for label, shape in tessellations:
             out.append((solid, label, clean_mesh(shape.vertices, shape.faces)))
         out.append((solid, "isotropic remesh", remeshed(out[-1][2], REMESH_VERTICES)))
+        if solid in fine:
+            label, shape = fine[solid]
+            out.append((solid, label, clean_mesh(shape.vertices, shape.faces)))
     return out
 
 
@@ -103,10 +124,14 @@ def main() -> None:
         ratio, hit = gaps(d, solid)
         print(f"| {name} | {np.median(ratio):.2f} | {ratio.max():.2f} | {hit.mean():.0%} |")
     ratio, _ = gaps(rows["fused"], solid)
-    print("\n| solid | tessellation | input vertices | resampled vertices | fused gap |")
-    print("|---|---|---:|---:|---:|")
+    print("\n| solid | tessellation | input vertices | resampled vertices | fused gap | seconds |")
+    print("|---|---|---:|---:|---:|---:|")
     for (s, label, mesh), descriptor, r in zip(meshes, described, ratio, strict=True):
-        print(f"| {s} | {label} | {mesh.n_vertices:,} | {descriptor.vertices:,} | {r:.2f} |")
+        seconds = sum(descriptor.timings.values())
+        print(
+            f"| {s} | {label} | {mesh.n_vertices:,} | {descriptor.vertices:,} | {r:.2f} "
+            f"| {seconds:.2f} |"
+        )
 
 
 if __name__ == "__main__":

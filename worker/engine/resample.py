@@ -29,12 +29,18 @@ import numpy as np
 
 from .intrinsic import IntrinsicMesh
 from .mesh_io import Mesh, canonical_frame, clean_mesh, face_areas, tiling_edge
-from .topology import edge_keys, euler_and_boundary
+from .topology import edge_keys, euler_and_boundary, unique_rows
 
 #: The edge-length bound stops refining before a mesh would pass this many times the
 #: resampling target (a file of long thin strips, such as a finely faceted long
 #: cylinder, would otherwise grow without bound); the longest edges go first.
 MAX_REFINED_VERTICES = 4
+
+#: Quadric decimation has stalled when it leaves more than this many times its target.
+#: It refuses every collapse that would give a triangle a needle corner (under 2.6
+#: degrees), so a surface made of slivers (a finely faceted CAD cylinder's strips and
+#: fans) keeps nearly every vertex; any other file lands within a few percent.
+STALLED_DECIMATION = 1.25
 
 
 def split_edges(
@@ -114,23 +120,54 @@ def split_long_edges(mesh: Mesh, max_length: float, max_vertices: int) -> Mesh:
     return Mesh(vertices=vertices, faces=faces)
 
 
-def _decimate(mesh: Mesh, n_vertices: int) -> Mesh:
-    """Quadric decimation to about ``n_vertices`` (midpoint subdivision first below it)."""
+def _quadric(vertices: np.ndarray, faces: np.ndarray, n_vertices: int) -> Mesh:
+    """Quadric decimation (``fast_simplification``) to the face count that gives about
+    ``n_vertices``: by Euler, ``F = 2V - 2chi`` for a closed surface, so the target is
+    reckoned for this surface's own characteristic and boundary."""
     import fast_simplification
 
-    vertices, faces = mesh.vertices, mesh.faces
-    while len(vertices) < n_vertices:
-        vertices, faces = _subdivide(vertices, faces)
-    if len(vertices) == n_vertices:
-        return Mesh(vertices=vertices, faces=faces)
-    # Euler: F = 2V - 2chi for a closed surface, so aim at the face count that
-    # gives n_vertices for this surface's own characteristic and boundary.
     euler, boundary = euler_and_boundary(faces, len(vertices))
     target_faces = max(2 * n_vertices - 2 * euler - boundary, 4)
     reduced_vertices, reduced_faces = fast_simplification.simplify(
         vertices, faces.astype(np.int32), target_count=int(target_faces)
     )
     return clean_mesh(reduced_vertices, reduced_faces)
+
+
+def _decimate(mesh: Mesh, n_vertices: int, *, unsliver: bool = True) -> Mesh:
+    """Quadric decimation to about ``n_vertices`` (midpoint subdivision first below it).
+
+    A surface of slivers, which the decimation cannot thin
+    (:data:`STALLED_DECIMATION`), is decimated again from its vertices clustered in
+    cubes of one tiling edge (:func:`clustered_vertices`): a finely faceted CAD
+    cylinder becomes the few dozen strips a coarse export of it has, and is resampled
+    as such a file is.
+    """
+    vertices, faces = mesh.vertices, mesh.faces
+    while len(vertices) < n_vertices:
+        vertices, faces = _subdivide(vertices, faces)
+    if len(vertices) == n_vertices:
+        return Mesh(vertices=vertices, faces=faces)
+    out = _quadric(vertices, faces, n_vertices)
+    if not unsliver or out.n_vertices <= STALLED_DECIMATION * n_vertices:
+        return out
+    edge = tiling_edge(float(face_areas(mesh.vertices, mesh.faces).sum()), n_vertices)
+    return _decimate(clustered_vertices(mesh, edge), n_vertices, unsliver=False)
+
+
+def clustered_vertices(mesh: Mesh, cell: float) -> Mesh:
+    """Vertex clustering (Rossignac and Borrel 1993): the vertices in one cube of side
+    ``cell`` (a grid in the mesh's frame) merged at their mean, the triangles that lose
+    a corner dropped, the largest connected piece kept
+    (:func:`~worker.engine.mesh_io.clean_mesh`)."""
+    keys = np.floor((mesh.vertices - mesh.vertices.min(axis=0)) / cell).astype(np.int64)
+    first, cluster = unique_rows(keys)
+    counts = np.bincount(cluster, minlength=len(first)).astype(np.float64)
+    means = np.stack(
+        [np.bincount(cluster, weights=mesh.vertices[:, k], minlength=len(first)) for k in range(3)],
+        axis=1,
+    )
+    return clean_mesh(means / counts[:, None], cluster[mesh.faces])
 
 
 def resample_mesh(mesh: Mesh, n_vertices: int, max_edge: float | None = None) -> Mesh:
@@ -211,8 +248,6 @@ def shared_resampling(reference: Mesh, n_vertices: int) -> SharedResampling:
         which renumbers them: :func:`~worker.engine.mesh_io.read_numbered_mesh`).
     n_vertices : target vertex count; a pose with no more vertices keeps them all.
     """
-    import fast_simplification
-
     vertices, faces = reference.vertices, np.asarray(reference.faces, dtype=np.int64)
     n = len(vertices)
     if n <= n_vertices:
@@ -220,12 +255,7 @@ def shared_resampling(reference: Mesh, n_vertices: int) -> SharedResampling:
         weights = np.tile([1.0, 0.0, 0.0], (n, 1))
         return SharedResampling(corners, weights, faces, n)
     surface = canonical_frame(reference)  # the decimation's thresholds are absolute
-    euler, boundary = euler_and_boundary(faces, n)
-    target_faces = max(2 * n_vertices - 2 * euler - boundary, 4)
-    points, reduced_faces = fast_simplification.simplify(
-        surface.vertices, faces.astype(np.int32), target_count=int(target_faces)
-    )
-    reduced = clean_mesh(points, reduced_faces)
+    reduced = _quadric(surface.vertices, faces, n_vertices)
     face, weights = _nearest_surface_points(reduced.vertices, surface.vertices, faces)
     return SharedResampling(faces[face], weights, reduced.faces, n)
 
