@@ -42,6 +42,11 @@ MAX_REFINED_VERTICES = 4
 #: fans) keeps nearly every vertex; any other file lands within a few percent.
 STALLED_DECIMATION = 1.25
 
+#: The share of its area a stalled surface's clustered vertices must keep to be decimated
+#: instead (a CAD cylinder's keep 0.998-1.0; a wire thinner than a cube folds into a line:
+#: a spring of wire 0.6 tiling edges thick keeps 0.22).
+CLUSTERED_AREA = 0.95
+
 
 def split_edges(
     vertices: np.ndarray, faces: np.ndarray, keys: np.ndarray
@@ -141,7 +146,8 @@ def _decimate(mesh: Mesh, n_vertices: int, *, unsliver: bool = True) -> Mesh:
     (:data:`STALLED_DECIMATION`), is decimated again from its vertices clustered in
     cubes of one tiling edge (:func:`clustered_vertices`): a finely faceted CAD
     cylinder becomes the few dozen strips a coarse export of it has, and is resampled
-    as such a file is.
+    as such a file is. Not when the clustering loses more of the area than
+    :data:`CLUSTERED_AREA` allows: the decimation's result stands.
     """
     vertices, faces = mesh.vertices, mesh.faces
     while len(vertices) < n_vertices:
@@ -151,8 +157,11 @@ def _decimate(mesh: Mesh, n_vertices: int, *, unsliver: bool = True) -> Mesh:
     out = _quadric(vertices, faces, n_vertices)
     if not unsliver or out.n_vertices <= STALLED_DECIMATION * n_vertices:
         return out
-    edge = tiling_edge(float(face_areas(mesh.vertices, mesh.faces).sum()), n_vertices)
-    return _decimate(clustered_vertices(mesh, edge), n_vertices, unsliver=False)
+    area = float(face_areas(mesh.vertices, mesh.faces).sum())
+    clustered = clustered_vertices(mesh, tiling_edge(area, n_vertices))
+    if face_areas(clustered.vertices, clustered.faces).sum() < CLUSTERED_AREA * area:
+        return out  # parts thinner than a cube (a spring's wire) would fold to nothing
+    return _decimate(clustered, n_vertices, unsliver=False)
 
 
 def clustered_vertices(mesh: Mesh, cell: float) -> Mesh:
