@@ -164,19 +164,25 @@ def _decimate(mesh: Mesh, n_vertices: int, *, unsliver: bool = True) -> Mesh:
     return _decimate(clustered, n_vertices, unsliver=False)
 
 
+def cell_means(
+    points: np.ndarray, cell: float, origin: np.ndarray | float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """The mean of ``points`` (n, 3) in each cube of side ``cell`` that holds any (a grid
+    from ``origin``, as a voxel filter thins a cloud): (k, 3), in the cubes'
+    lexicographic order, and (n,) each point's cube."""
+    _, cube = unique_rows(np.floor((points - origin) / cell))
+    sums = np.stack([np.bincount(cube, weights=points[:, k]) for k in range(3)], axis=1)
+    means: np.ndarray = sums / np.bincount(cube)[:, None]
+    return means, cube
+
+
 def clustered_vertices(mesh: Mesh, cell: float) -> Mesh:
     """Vertex clustering (Rossignac and Borrel 1993): the vertices in one cube of side
-    ``cell`` (a grid in the mesh's frame) merged at their mean, the triangles that lose
-    a corner dropped, the largest connected piece kept
-    (:func:`~worker.engine.mesh_io.clean_mesh`)."""
-    keys = np.floor((mesh.vertices - mesh.vertices.min(axis=0)) / cell).astype(np.int64)
-    first, cluster = unique_rows(keys)
-    counts = np.bincount(cluster, minlength=len(first)).astype(np.float64)
-    means = np.stack(
-        [np.bincount(cluster, weights=mesh.vertices[:, k], minlength=len(first)) for k in range(3)],
-        axis=1,
-    )
-    return clean_mesh(means / counts[:, None], cluster[mesh.faces])
+    ``cell`` (a grid from the mesh's lowest corner) merged at their mean
+    (:func:`cell_means`), the triangles that lose a corner dropped, the largest connected
+    piece kept (:func:`~worker.engine.mesh_io.clean_mesh`)."""
+    means, cube = cell_means(mesh.vertices, cell, mesh.vertices.min(axis=0))
+    return clean_mesh(means, cube[mesh.faces])
 
 
 def resample_mesh(mesh: Mesh, n_vertices: int, max_edge: float | None = None) -> Mesh:

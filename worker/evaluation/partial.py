@@ -56,6 +56,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 from worker.engine.errors import MeshError
 from worker.engine.geodesic import farthest_point_samples
 from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
+from worker.engine.resample import cell_means
 from worker.engine.scans import (
     grid_faces,
     one_view,
@@ -450,12 +451,8 @@ VOXEL_PIXELS = 2.0
 
 def voxel_means(points: np.ndarray, size: float) -> np.ndarray:
     """(k, 3) the mean of ``points`` (n, 3) in each cube of edge ``size`` that holds any
-    (the cubes aligned with the points' frame), as a voxel filter thins a cloud."""
-    _, voxel = np.unique(np.floor(points / size), axis=0, return_inverse=True)
-    voxel = voxel.ravel()
-    sums = np.stack([np.bincount(voxel, points[:, k]) for k in range(3)], axis=1)
-    means: np.ndarray = sums / np.bincount(voxel)[:, None]
-    return means
+    (:func:`worker.engine.resample.cell_means`), as a voxel filter thins a cloud."""
+    return cell_means(points, size)[0]
 
 
 def view_voxels(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
