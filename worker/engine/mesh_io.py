@@ -112,6 +112,18 @@ def tiling_edge(area: float, n_vertices: int) -> float:
     return float(np.sqrt(area / (2 * n_vertices) * 4 / np.sqrt(3)))
 
 
+def cell_means(
+    points: np.ndarray, cell: float, origin: np.ndarray | float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """The mean of ``points`` (n, 3) in each cube of side ``cell`` that holds any (a grid
+    from ``origin``, as a voxel filter thins a cloud): (k, 3), in the cubes'
+    lexicographic order, and (n,) each point's cube."""
+    _, cube = unique_rows(np.floor((points - origin) / cell))
+    sums = np.stack([np.bincount(cube, weights=points[:, k]) for k in range(3)], axis=1)
+    means: np.ndarray = sums / np.bincount(cube)[:, None]
+    return means, cube
+
+
 def _gunzip(data: bytes, limit: int) -> bytes:
     """Decompress at most ``limit`` bytes, refusing gzip bombs without expanding them."""
     decompressor = zlib.decompressobj(wbits=16 + zlib.MAX_WBITS)

@@ -28,8 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .intrinsic import IntrinsicMesh
-from .mesh_io import Mesh, canonical_frame, clean_mesh, face_areas, tiling_edge
-from .topology import edge_keys, euler_and_boundary, unique_rows
+from .mesh_io import Mesh, canonical_frame, cell_means, clean_mesh, face_areas, tiling_edge
+from .topology import edge_keys, euler_and_boundary
 
 #: The edge-length bound stops refining before a mesh would pass this many times the
 #: resampling target (a file of long thin strips, such as a finely faceted long
@@ -162,18 +162,6 @@ def _decimate(mesh: Mesh, n_vertices: int, *, unsliver: bool = True) -> Mesh:
     if face_areas(clustered.vertices, clustered.faces).sum() < CLUSTERED_AREA * area:
         return out  # parts thinner than a cube (a spring's wire) would fold to nothing
     return _decimate(clustered, n_vertices, unsliver=False)
-
-
-def cell_means(
-    points: np.ndarray, cell: float, origin: np.ndarray | float = 0.0
-) -> tuple[np.ndarray, np.ndarray]:
-    """The mean of ``points`` (n, 3) in each cube of side ``cell`` that holds any (a grid
-    from ``origin``, as a voxel filter thins a cloud): (k, 3), in the cubes'
-    lexicographic order, and (n,) each point's cube."""
-    _, cube = unique_rows(np.floor((points - origin) / cell))
-    sums = np.stack([np.bincount(cube, weights=points[:, k]) for k in range(3)], axis=1)
-    means: np.ndarray = sums / np.bincount(cube)[:, None]
-    return means, cube
 
 
 def clustered_vertices(mesh: Mesh, cell: float) -> Mesh:

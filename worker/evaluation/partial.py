@@ -55,8 +55,7 @@ from scipy.sparse.csgraph import connected_components, dijkstra
 
 from worker.engine.errors import MeshError
 from worker.engine.geodesic import farthest_point_samples
-from worker.engine.mesh_io import Mesh, clean_mesh, face_areas
-from worker.engine.resample import cell_means
+from worker.engine.mesh_io import Mesh, cell_means, clean_mesh, face_areas
 from worker.engine.scans import (
     grid_faces,
     one_view,
@@ -451,7 +450,7 @@ VOXEL_PIXELS = 2.0
 
 def voxel_means(points: np.ndarray, size: float) -> np.ndarray:
     """(k, 3) the mean of ``points`` (n, 3) in each cube of edge ``size`` that holds any
-    (:func:`worker.engine.resample.cell_means`), as a voxel filter thins a cloud."""
+    (:func:`worker.engine.mesh_io.cell_means`), as a voxel filter thins a cloud."""
     return cell_means(points, size)[0]
 
 
