@@ -386,6 +386,27 @@ def test_a_finely_faceted_cad_cylinder_is_its_coarse_exports_cylinder():
         assert facets < float(mean_normalized_manhattan(x, z)[0, 0]) / 2, modality
 
 
+def test_a_finely_faceted_thin_wire_is_its_coarse_exports_wire():
+    """A spring of wire about two tiling edges thick, 1,024 sides against 24 and a spring
+    of 3.5 turns: the fine one's slivers stalled the decimation, and clustered in cubes of
+    one tiling edge its wire folded (0.93 of the area), so it was described at all its
+    37,890 vertices, every modality as far from the coarse one as the other spring or
+    farther (0.109, 0.062, 0.483 against 0.077, 0.083, 0.153). Clustered in cubes of half
+    one: 0.016, 0.019, 0.032."""
+    preset = get_preset("smeets2010-surface")
+
+    def spring(turns: float, sides: int) -> ShapeDescriptor:
+        wire = helical_spring(turns, wire_radius=0.05, sides=sides, rings_per_turn=12)
+        return describe_mesh(clean_mesh(*wire), preset)
+
+    coarse, fine, longer = spring(3.0, 24), spring(3.0, 1024), spring(3.5, 24)
+    assert fine.vertices <= 1.25 * preset.n_vertices
+    for modality in MODALITIES:
+        x, y, z = (d.vector(modality)[None] for d in (coarse, fine, longer))
+        facets = float(mean_normalized_manhattan(x, y)[0, 0])
+        assert facets < float(mean_normalized_manhattan(x, z)[0, 0]) / 2, modality
+
+
 def test_a_single_view_describes_as_its_whole_when_its_far_side_mirrors_its_near_one():
     """An ellipsoid's upper half, as a camera above it sees it: two-sided (the default),
     every modality within a tenth of the ellipsoid's distance to a narrower one (GDM

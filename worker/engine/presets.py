@@ -323,7 +323,7 @@ PRESETS: dict[str, Preset] = {
         # objects share one scale), D1, sum rule.
         Preset(
             name="smeets2010-tosca",
-            version=5,
+            version=6,
             n_vertices=3000,
             normalize_scale=False,
             dissimilarity="D1",
@@ -334,11 +334,11 @@ PRESETS: dict[str, Preset] = {
         ),
         # Sec. 4.2: SHREC 2010, 2,500 vertices, 19 singular values, 20x20x5 core,
         # D2 and the product rule.
-        Preset(name="smeets2010-shrec", version=4, fusion_weights={SIZE: 2.0}),
+        Preset(name="smeets2010-shrec", version=5, fusion_weights={SIZE: 2.0}),
         # Beyond the paper: the Laplace-Beltrami spectrum alone (the third modality), D1.
         Preset(
             name="lb-spectrum",
-            version=4,
+            version=5,
             dissimilarity="D1",
             fusion="sum",
             fused_modalities=("spectrum",),
@@ -349,7 +349,7 @@ PRESETS: dict[str, Preset] = {
         # Its versions, what each changed and why: docs/decisions.md.
         Preset(
             name="smeets2010-surface",
-            version=19,
+            version=20,
             max_edge=3.0,
             max_hole_perimeter=0.5,
             two_sided_views=True,

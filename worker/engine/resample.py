@@ -42,10 +42,24 @@ MAX_REFINED_VERTICES = 4
 #: fans) keeps nearly every vertex; any other file lands within a few percent.
 STALLED_DECIMATION = 1.25
 
+#: A corner whose cosine is past this (under 2.56 degrees, or over 177.44) is a needle to
+#: the decimation: it refuses a collapse that leaves one at the moved vertex.
+NEEDLE_COSINE = 0.999
+
+#: The decimation stalls on a surface with more than this share of its vertices at a needle
+#: corner (:func:`needle_vertices`): a finely faceted CAD file's 0.98-1.0, the voxel-filtered
+#: scans of slivers in the partiality protocol 0.82-0.89, while every one of that
+#: protocol's decimations that did not stall had at most 0.43 (docs/engine.md).
+STALLING_NEEDLES = 0.7
+
 #: The share of its area a stalled surface's clustered vertices must keep to be decimated
-#: instead (a CAD cylinder's keep 0.998-1.0; a wire thinner than a cube folds into a line:
-#: a spring of wire 0.6 tiling edges thick keeps 0.22).
+#: instead (a CAD cylinder's keep 0.998-1.0 in cubes of one tiling edge; a wire about two
+#: tiling edges thick, 0.93 in those and 0.99 in cubes of half one).
 CLUSTERED_AREA = 0.95
+
+#: The cubes' edges tried, in tiling edges, coarsest first: the first whose clustering keeps
+#: :data:`CLUSTERED_AREA` is decimated.
+CLUSTER_CELLS: tuple[float, ...] = (1.0, 0.5, 0.25)
 
 
 def split_edges(
@@ -144,24 +158,49 @@ def _decimate(mesh: Mesh, n_vertices: int, *, unsliver: bool = True) -> Mesh:
 
     A surface of slivers, which the decimation cannot thin
     (:data:`STALLED_DECIMATION`), is decimated again from its vertices clustered in
-    cubes of one tiling edge (:func:`clustered_vertices`): a finely faceted CAD
-    cylinder becomes the few dozen strips a coarse export of it has, and is resampled
-    as such a file is. Not when the clustering loses more of the area than
-    :data:`CLUSTERED_AREA` allows: the decimation's result stands.
+    cubes (:func:`clustered_vertices`): a finely faceted CAD cylinder becomes the few
+    dozen strips a coarse export of it has, and is resampled as such a file is. The
+    cubes are of one tiling edge, or half or a quarter of one when a coarser clustering
+    loses more of the area than :data:`CLUSTERED_AREA` allows (a finely faceted wire
+    about two tiling edges thick); when every one does (a wire thinner than a quarter),
+    the decimation's result stands.
+
+    The decimation is not even tried when most vertices hold a needle corner
+    (:data:`STALLING_NEEDLES`), more than it may leave: it would stall, after a pass that
+    takes 20 s on 220,000 vertices.
     """
     vertices, faces = mesh.vertices, mesh.faces
     while len(vertices) < n_vertices:
         vertices, faces = _subdivide(vertices, faces)
     if len(vertices) == n_vertices:
         return Mesh(vertices=vertices, faces=faces)
-    out = _quadric(vertices, faces, n_vertices)
-    if not unsliver or out.n_vertices <= STALLED_DECIMATION * n_vertices:
+    if not unsliver:
+        return _quadric(vertices, faces, n_vertices)
+    stalls = needle_vertices(vertices, faces) > max(
+        STALLED_DECIMATION * n_vertices, STALLING_NEEDLES * len(vertices)
+    )
+    out = None if stalls else _quadric(vertices, faces, n_vertices)
+    if out is not None and out.n_vertices <= STALLED_DECIMATION * n_vertices:
         return out
     area = float(face_areas(mesh.vertices, mesh.faces).sum())
-    clustered = clustered_vertices(mesh, tiling_edge(area, n_vertices))
-    if face_areas(clustered.vertices, clustered.faces).sum() < CLUSTERED_AREA * area:
-        return out  # parts thinner than a cube (a spring's wire) would fold to nothing
-    return _decimate(clustered, n_vertices, unsliver=False)
+    for cell in CLUSTER_CELLS:
+        clustered = clustered_vertices(mesh, cell * tiling_edge(area, n_vertices))
+        if face_areas(clustered.vertices, clustered.faces).sum() >= CLUSTERED_AREA * area:
+            return _decimate(clustered, n_vertices, unsliver=False)
+    return out if out is not None else _quadric(vertices, faces, n_vertices)
+
+
+def needle_vertices(vertices: np.ndarray, faces: np.ndarray) -> int:
+    """How many vertices are the corner of a needle or a cap (:data:`NEEDLE_COSINE`)."""
+    needle = np.zeros(len(vertices), dtype=bool)
+    for corner in range(3):
+        at = faces[:, corner]
+        u = vertices[faces[:, (corner + 1) % 3]] - vertices[at]
+        w = vertices[faces[:, (corner + 2) % 3]] - vertices[at]
+        lengths = np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1)
+        cosine = np.einsum("ij,ij->i", u, w) / np.maximum(lengths, np.finfo(float).tiny)
+        needle[at[np.abs(cosine) > NEEDLE_COSINE]] = True
+    return int(needle.sum())
 
 
 def clustered_vertices(mesh: Mesh, cell: float) -> Mesh:
