@@ -1,0 +1,111 @@
+"""What a surface of slivers costs to describe, side by side with the resampling's
+earlier ways with it.
+
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.sliver_cost [--repeat 3]
+
+Quadric decimation cannot thin a surface made of slivers (:mod:`worker.engine.resample`).
+Each file is described ``--repeat`` times, each in a fresh process, three ways:
+
+* ``engine``: as the engine does it;
+* ``tried``: the decimation tried even when its needles say it would stall
+  (``needle_vertices`` read as 0), the reference the engine's result must equal;
+* ``one cube``: the clustering only in cubes of one tiling edge (``CLUSTER_CELLS``
+  ``(1.0,)``, the resampling of v19), the stalled decimation standing when they lose area.
+
+The files: trimesh's thin torus (radii 1 and 0.016, its ring as thick as about two tiling
+edges) faceted with 1,024 sides round its ring and 24 along it (24,576 vertices), its
+cylinder of 2,048 strips, and, when the TOSCA set is found
+(``SHAPES_DATASETS_DIR``, else ``../shared/datasets``), the partiality protocol's
+``floor-voxels`` copy of victoria12 (222,980 points of a floor and a body, voxel filtered
+and read from afar). Prints the described vertex count, the median seconds of the whole
+description and of its resample stage, and the largest peak RSS.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import statistics
+import subprocess
+import sys
+import time
+
+from worker.engine.mesh_io import Mesh
+from worker.engine.presets import DEFAULT_PRESET
+from worker.evaluation.datasets import shared_dataset
+
+FILES = ("thin torus, 1,024 sides", "cylinder 1:2, 2,048 sides", "victoria12, floor-voxels")
+SETTINGS = ("engine", "tried", "one cube")
+
+
+def _mesh(label: str) -> Mesh:
+    import trimesh
+
+    from worker.engine.mesh_io import clean_mesh, load_mesh
+
+    if label.startswith("thin torus"):
+        shape = trimesh.creation.torus(1.0, 0.016, major_sections=24, minor_sections=1024)
+        return clean_mesh(shape.vertices, shape.faces)
+    if label.startswith("cylinder"):
+        shape = trimesh.creation.cylinder(0.5, 2.0, sections=2048)
+        return clean_mesh(shape.vertices, shape.faces)
+    from worker.evaluation.variants import make_variant
+
+    name = "victoria12.off.gz"
+    return make_variant(load_mesh(shared_dataset("tosca") / name), "floor-voxels", name)
+
+
+def _measure(preset_name: str, label: str, setting: str) -> dict[str, float]:
+    from worker.engine import resample
+    from worker.engine.pipeline import describe_mesh
+    from worker.engine.presets import get_preset
+
+    if setting == "tried":
+        resample.needle_vertices = lambda vertices, faces: 0
+    elif setting == "one cube":
+        resample.CLUSTER_CELLS = (1.0,)
+    mesh = _mesh(label)
+    start = time.perf_counter()
+    descriptor = describe_mesh(mesh, get_preset(preset_name))
+    return {
+        "vertices": descriptor.vertices,
+        "seconds": time.perf_counter() - start,
+        "resample": descriptor.timings["resample"],
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--preset", default=DEFAULT_PRESET)
+    parser.add_argument("--repeat", type=int, default=3, help="runs per file and setting")
+    parser.add_argument("--child", help=argparse.SUPPRESS)
+    parser.add_argument("--setting", choices=SETTINGS, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        print(json.dumps(_measure(args.preset, args.child, args.setting)))
+        return
+    files = [f for f in FILES if not f.startswith("victoria") or shared_dataset("tosca").is_dir()]
+    print(f"preset {args.preset}, median of {args.repeat} runs per file and setting\n")
+    print("| file | resampling | vertices | seconds | of which resample | peak RSS MB |")
+    print("|---|---|---:|---:|---:|---:|")
+    for label in files:
+        for setting in SETTINGS:
+            command = [sys.executable, "-m", "benchmarks.sliver_cost", "--preset", args.preset]
+            command += ["--child", label, "--setting", setting]
+            runs = []
+            for _ in range(args.repeat):
+                out = subprocess.run(command, check=True, capture_output=True, text=True)
+                runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+            print(
+                f"| {label} | {setting} | {statistics.median(r['vertices'] for r in runs):,.0f} "
+                f"| {statistics.median(r['seconds'] for r in runs):.2f} "
+                f"| {statistics.median(r['resample'] for r in runs):.2f} "
+                f"| {max(r['peak_rss_mb'] for r in runs):,.0f} |",
+                flush=True,
+            )
+
+
+if __name__ == "__main__":
+    main()
