@@ -14,13 +14,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import statistics
-import subprocess
-import sys
-import time
 from dataclasses import replace
 
+from benchmarks.common import fresh_process_runs, timed_description
 from worker.engine.presets import DEFAULT_PRESET
 
 #: label -> (radius, height, sections) of trimesh.creation.cylinder
@@ -36,7 +33,6 @@ def _measure(preset_name: str, label: str, bounded: bool) -> dict[str, float]:
     import trimesh
 
     from worker.engine.mesh_io import clean_mesh
-    from worker.engine.pipeline import describe_mesh
     from worker.engine.presets import get_preset
 
     preset = get_preset(preset_name)
@@ -44,15 +40,7 @@ def _measure(preset_name: str, label: str, bounded: bool) -> dict[str, float]:
         preset = replace(preset, max_edge=None)
     radius, height, sections = CYLINDERS[label]
     shape = trimesh.creation.cylinder(radius, height, sections=sections)
-    mesh = clean_mesh(shape.vertices, shape.faces)
-    start = time.perf_counter()
-    descriptor = describe_mesh(mesh, preset)
-    return {
-        "vertices": descriptor.vertices,
-        "seconds": time.perf_counter() - start,
-        "gdm": descriptor.timings["gdm"],
-        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-    }
+    return timed_description(clean_mesh(shape.vertices, shape.faces), preset)
 
 
 def main() -> None:
@@ -70,14 +58,10 @@ def main() -> None:
     print("|---|---|---:|---:|---:|---:|")
     for label in CYLINDERS:
         for bounded in (False, True):
-            command = [sys.executable, "-m", "benchmarks.cad_cost", "--preset", args.preset]
-            command += ["--child", label]
+            arguments = ["--preset", args.preset, "--child", label]
             if not bounded:
-                command.append("--unbounded")
-            runs = []
-            for _ in range(args.repeat):
-                out = subprocess.run(command, check=True, capture_output=True, text=True)
-                runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+                arguments.append("--unbounded")
+            runs = fresh_process_runs("benchmarks.cad_cost", arguments, args.repeat)
             seconds = statistics.median(r["seconds"] for r in runs)
             gdm = statistics.median(r["gdm"] for r in runs)
             rss = max(r["peak_rss_mb"] for r in runs)

@@ -18,7 +18,9 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import os
+import resource
 import shutil
 import signal
 import socket
@@ -42,7 +44,7 @@ from app.client import collection_prefix
 from worker.engine.descriptor import ShapeDescriptor
 from worker.engine.intrinsic import averaged_mass, surface_operators
 from worker.engine.mesh_io import Mesh
-from worker.engine.pipeline import describe_file
+from worker.engine.pipeline import describe_file, describe_mesh
 from worker.engine.presets import DEFAULT_PRESET, MODALITIES, Preset, get_preset
 from worker.evaluation.compute import ComputedSet, compute_descriptors
 from worker.evaluation.datasets import (
@@ -547,6 +549,30 @@ def resident_mb() -> float:
         if line.startswith("VmRSS:"):
             return int(line.split()[1]) / 1024
     return float("nan")
+
+
+def timed_description(mesh: Mesh, preset: Preset) -> dict[str, float]:
+    """Describe ``mesh``: its described vertex count, the seconds, each stage's
+    (``timings``) and the process's peak resident memory so far."""
+    start = time.perf_counter()
+    descriptor = describe_mesh(mesh, preset)
+    return {
+        "vertices": descriptor.vertices,
+        "seconds": time.perf_counter() - start,
+        **descriptor.timings,
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+    }
+
+
+def fresh_process_runs(module: str, arguments: list[str], repeat: int) -> list[dict[str, float]]:
+    """``python -m module *arguments`` run ``repeat`` times, each in a fresh process (so
+    each peak memory is its own), each printing one JSON object as its last line."""
+    command = [sys.executable, "-m", module, *arguments]
+    runs = []
+    for _ in range(repeat):
+        out = subprocess.run(command, check=True, capture_output=True, text=True)
+        runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    return runs
 
 
 def synthetic_model(preset_name: str) -> dict[str, Vectors]:

@@ -25,12 +25,9 @@ from __future__ import annotations
 
 import argparse
 import json
-import resource
 import statistics
-import subprocess
-import sys
-import time
 
+from benchmarks.common import fresh_process_runs, timed_description
 from worker.engine.mesh_io import Mesh
 from worker.engine.presets import DEFAULT_PRESET
 from worker.evaluation.datasets import shared_dataset
@@ -58,22 +55,13 @@ def _mesh(label: str) -> Mesh:
 
 def _measure(preset_name: str, label: str, setting: str) -> dict[str, float]:
     from worker.engine import resample
-    from worker.engine.pipeline import describe_mesh
     from worker.engine.presets import get_preset
 
     if setting == "tried":
         resample.needle_vertices = lambda vertices, faces: 0
     elif setting == "one cube":
         resample.CLUSTER_CELLS = (1.0,)
-    mesh = _mesh(label)
-    start = time.perf_counter()
-    descriptor = describe_mesh(mesh, get_preset(preset_name))
-    return {
-        "vertices": descriptor.vertices,
-        "seconds": time.perf_counter() - start,
-        "resample": descriptor.timings["resample"],
-        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-    }
+    return timed_description(_mesh(label), get_preset(preset_name))
 
 
 def main() -> None:
@@ -92,12 +80,8 @@ def main() -> None:
     print("|---|---|---:|---:|---:|---:|")
     for label in files:
         for setting in SETTINGS:
-            command = [sys.executable, "-m", "benchmarks.sliver_cost", "--preset", args.preset]
-            command += ["--child", label, "--setting", setting]
-            runs = []
-            for _ in range(args.repeat):
-                out = subprocess.run(command, check=True, capture_output=True, text=True)
-                runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+            arguments = ["--preset", args.preset, "--child", label, "--setting", setting]
+            runs = fresh_process_runs("benchmarks.sliver_cost", arguments, args.repeat)
             print(
                 f"| {label} | {setting} | {statistics.median(r['vertices'] for r in runs):,.0f} "
                 f"| {statistics.median(r['seconds'] for r in runs):.2f} "
