@@ -10,6 +10,7 @@ changes it more than that.
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 import pytest
@@ -32,7 +33,7 @@ from worker.engine.mesh_io import (
     load_mesh,
 )
 from worker.engine.pipeline import describe_file, describe_mesh
-from worker.engine.presets import DEFAULT_PRESET, SIZE, get_preset
+from worker.engine.presets import DEFAULT_PRESET, SIZE, Preset, get_preset
 from worker.engine.scans import organized_surface
 from worker.engine.surface_points import ANCHOR_VOXEL
 from worker.evaluation.partial import far_viewpoint, grid_mesh, range_image
@@ -346,6 +347,23 @@ def test_the_surface_measure_sees_the_surface_not_the_triangles():
     assert distance(paper, "gdm", *same) > distance(paper, "gdm", *other)
 
 
+def described_cylinder(preset: Preset, height: float, sections: int) -> ShapeDescriptor:
+    """trimesh's cylinder of radius 0.5 (a CAD export of ``sections`` strips), described."""
+    c = trimesh.creation.cylinder(radius=0.5, height=height, sections=sections)
+    return describe_mesh(clean_mesh(c.vertices, c.faces), preset)
+
+
+def assert_facets_nearer(
+    coarse: ShapeDescriptor, fine: ShapeDescriptor, other: ShapeDescriptor, share: float
+) -> None:
+    """In every modality the fine export is nearer its coarse one than ``share`` of the
+    other shape's distance to it (D1)."""
+    for modality in MODALITIES:
+        x, y, z = (d.vector(modality)[None] for d in (coarse, fine, other))
+        facets = float(mean_normalized_manhattan(x, y)[0, 0])
+        assert facets < share * float(mean_normalized_manhattan(x, z)[0, 0]), modality
+
+
 def test_a_cad_cylinder_is_its_cylinder_whatever_its_facets():
     """A CAD-style cylinder at 24 and at 96 strips against a cylinder a quarter
     taller: decimation left the strips' elements a quarter of the height long, and
@@ -354,10 +372,7 @@ def test_a_cad_cylinder_is_its_cylinder_whatever_its_facets():
     v9 (the 96 strips reach the vertex budget); 0.05, 0.02, 0.03 at v19 (the bound's
     further decimation no longer stalls on the split strips: 2,788 vertices)."""
     preset = get_preset("smeets2010-surface")
-
-    def cylinder(height: float, sections: int) -> ShapeDescriptor:
-        c = trimesh.creation.cylinder(radius=0.5, height=height, sections=sections)
-        return describe_mesh(clean_mesh(c.vertices, c.faces), preset)
+    cylinder = partial(described_cylinder, preset)
 
     coarse, fine, taller = cylinder(2.0, 24), cylinder(2.0, 96), cylinder(2.5, 48)
     for modality in MODALITIES:
@@ -373,17 +388,11 @@ def test_a_finely_faceted_cad_cylinder_is_its_coarse_exports_cylinder():
     moved with the facets more than with the height (1.18, 2.65, 8.4 of it, at 10,000
     vertices). Thinned from its clustered vertices: 0.13, 0.25, 0.30."""
     preset = get_preset("smeets2010-surface")
-
-    def cylinder(height: float, sections: int) -> ShapeDescriptor:
-        c = trimesh.creation.cylinder(radius=0.5, height=height, sections=sections)
-        return describe_mesh(clean_mesh(c.vertices, c.faces), preset)
+    cylinder = partial(described_cylinder, preset)
 
     coarse, fine, taller = cylinder(2.0, 48), cylinder(2.0, 2048), cylinder(2.5, 48)
     assert fine.vertices <= 1.5 * preset.n_vertices
-    for modality in MODALITIES:
-        x, y, z = (d.vector(modality)[None] for d in (coarse, fine, taller))
-        facets = float(mean_normalized_manhattan(x, y)[0, 0])
-        assert facets < float(mean_normalized_manhattan(x, z)[0, 0]) / 2, modality
+    assert_facets_nearer(coarse, fine, taller, 0.5)
 
 
 def test_a_finely_faceted_thin_wire_is_its_coarse_exports_wire():
@@ -401,10 +410,7 @@ def test_a_finely_faceted_thin_wire_is_its_coarse_exports_wire():
 
     coarse, fine, longer = spring(3.0, 24), spring(3.0, 1024), spring(3.5, 24)
     assert fine.vertices <= 1.25 * preset.n_vertices
-    for modality in MODALITIES:
-        x, y, z = (d.vector(modality)[None] for d in (coarse, fine, longer))
-        facets = float(mean_normalized_manhattan(x, y)[0, 0])
-        assert facets < float(mean_normalized_manhattan(x, z)[0, 0]) / 2, modality
+    assert_facets_nearer(coarse, fine, longer, 0.5)
 
 
 def test_a_single_view_describes_as_its_whole_when_its_far_side_mirrors_its_near_one():
