@@ -162,8 +162,8 @@ def _decimate(mesh: Mesh, n_vertices: int, *, unsliver: bool = True) -> Mesh:
     dozen strips a coarse export of it has, and is resampled as such a file is. The
     cubes are of one tiling edge, or half or a quarter of one when a coarser clustering
     loses more of the area than :data:`CLUSTERED_AREA` allows (a finely faceted wire
-    about two tiling edges thick); when every one does (a wire thinner than a quarter),
-    the decimation's result stands.
+    about two tiling edges thick); when every one does (a wire under one tiling edge
+    thick), the decimation's result stands.
 
     The decimation is not even tried when most vertices hold a needle corner
     (:data:`STALLING_NEEDLES`), more than it may leave: it would stall, after a pass that
