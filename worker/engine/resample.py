@@ -167,7 +167,7 @@ def _decimate(mesh: Mesh, n_vertices: int, *, unsliver: bool = True) -> Mesh:
 
     The decimation is not even tried when most vertices hold a needle corner
     (:data:`STALLING_NEEDLES`), more than it may leave: it would stall, after a pass that
-    takes 20 s on 220,000 vertices.
+    takes 20-30 s on 220,000 vertices.
     """
     vertices, faces = mesh.vertices, mesh.faces
     while len(vertices) < n_vertices:
