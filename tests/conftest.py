@@ -214,6 +214,13 @@ def helical_spring(
     return swept_tube(centre, wire_radius, sides)
 
 
+def faceted_wire(turns: float = 3.0, sides: int = 1024) -> tuple[np.ndarray, np.ndarray]:
+    """A spring of wire about two tiling edges thick at 2,500 vertices (radius 0.05, 12
+    rings a turn), ``sides`` to a ring: 1,024 is as fine as a CAD export (37,890 vertices,
+    every one a needle's corner), 24 a coarse one."""
+    return helical_spring(turns, wire_radius=0.05, sides=sides, rings_per_turn=12)
+
+
 def with_a_far_half_copy(path: Path) -> tuple[trimesh.Trimesh, bytes]:
     """The mesh of a gzip'd OFF file, and an OFF file of two separate parts: the mesh
     and a copy of it at half its size, far away (the mesh is 4/5 of the surface area)."""

@@ -18,6 +18,7 @@ import trimesh
 from conftest import (
     bent_cylinder,
     example,
+    faceted_wire,
     helical_spring,
     random_rotation,
     with_a_far_half_copy,
@@ -405,8 +406,7 @@ def test_a_finely_faceted_thin_wire_is_its_coarse_exports_wire():
     preset = get_preset("smeets2010-surface")
 
     def spring(turns: float, sides: int) -> ShapeDescriptor:
-        wire = helical_spring(turns, wire_radius=0.05, sides=sides, rings_per_turn=12)
-        return describe_mesh(clean_mesh(*wire), preset)
+        return describe_mesh(clean_mesh(*faceted_wire(turns, sides)), preset)
 
     coarse, fine, longer = spring(3.0, 24), spring(3.0, 1024), spring(3.5, 24)
     assert fine.vertices <= 1.25 * preset.n_vertices

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
-from conftest import bent_cylinder, helical_spring, random_rotation
+from conftest import bent_cylinder, faceted_wire, random_rotation
 
 from worker.engine import resample
 from worker.engine.mesh_io import Mesh, canonical_frame, clean_mesh, load_mesh, tiling_edge
@@ -166,12 +166,6 @@ def test_clustering_merges_a_cubes_vertices_at_their_mean_and_drops_what_collaps
     assert area(out) == pytest.approx(1.0 - 0.5 * 0.005, rel=1e-12)
 
 
-def fine_wire() -> Mesh:
-    """A spring of wire about two tiling edges thick at 2,500 vertices, faceted as finely
-    as a CAD export (1,024 sides, 37,890 vertices, every one a needle's corner)."""
-    return clean_mesh(*helical_spring(turns=3, wire_radius=0.05, sides=1024, rings_per_turn=12))
-
-
 def test_needle_vertices_are_the_corners_the_decimation_calls_needles():
     # Angles 1, 89.5, 89.5 degrees: one needle; 0.5, 0.5, 179: two needles and a cap.
     needle = np.array([[0.0, 0.0, 0.0], [1.0, -0.0087, 0.0], [1.0, 0.0087, 0.0]])
@@ -189,7 +183,7 @@ def test_a_wire_thinner_than_a_cube_is_clustered_in_smaller_cubes():
     grid is the frame's). The bound's second decimation stalls too and clusters again
     (0.96): 0.95 of the area is left, a thinner section of the same wire, with a few
     edges where its sides met in one cube (24 of its 7,500 edges on one side only)."""
-    wire, target = canonical_frame(fine_wire()), 2500
+    wire, target = canonical_frame(clean_mesh(*faceted_wire())), 2500
     bounded = resample_mesh(wire, target, max_edge=3.0)
     assert bounded.n_vertices <= resample.STALLED_DECIMATION * target, bounded.n_vertices
     assert area(bounded) == pytest.approx(area(wire), rel=0.06)
@@ -207,7 +201,7 @@ def test_a_stall_foreseen_from_the_needles_skips_only_a_pass_that_stalls(monkeyp
         c = trimesh.creation.cylinder(radius=0.5, height=2.0, sections=sections)
         slivers, target = clean_mesh(c.vertices, c.faces), 1000
     else:
-        slivers, target = fine_wire(), 2500
+        slivers, target = clean_mesh(*faceted_wire()), 2500
     assert needle_vertices(slivers.vertices, slivers.faces) > 1.25 * target
     foreseen = resample_mesh(slivers, target, max_edge=3.0)
     monkeypatch.setattr(resample, "needle_vertices", lambda vertices, faces: 0)
