@@ -257,9 +257,10 @@ def test_points_on_no_lattice_are_read_without_most_of_their_floor(
     """The scenes' points (at three times the pixels) in the camera's frame moved half a pixel,
     or voxel filtered, lie on no lattice and are read by Delaunay's triangulation of
     their image; binned in cells of their spacing, the image is searched for the floor
-    and the wall as a frame is: at most 5% of their points stay (in cells the figure's
-    nearest point held), and at most 3% of the figure's go (in the floor's cells, where it
-    stands)."""
+    and the wall as a frame is, and every point as near them as on a frame goes: at most
+    0.2% of their points stay (1-4.4% did when only the cells the planes won went: those
+    the figure's nearest point held, beside its feet and behind its silhouette), and at
+    most 3% of the figure's go (in the floor's cells, where it stands)."""
     points, viewpoint, figure = scene_frame(name, pose, elevation, wall, pixels=120)
     seen = np.isfinite(points).all(axis=2)
     pitch = float(np.ptp(sample_mesh(name, pose).vertices, axis=0).max()) / 120
@@ -273,7 +274,7 @@ def test_points_on_no_lattice_are_read_without_most_of_their_floor(
     stayed = sum(tuple(p) in read for p in plane_points.tolist())
     went = sum(tuple(p) not in read for p in figure_points.tolist())
     assert cloud.grid is None and cloud.support == len(cloud_points) - len(vertices)
-    assert stayed <= 0.05 * len(plane_points) and went <= 0.03 * len(figure_points)
+    assert stayed <= 0.002 * len(plane_points) and went <= 0.03 * len(figure_points)
 
 
 def test_a_grazing_floor_once_left_out_leaves_one_view(monkeypatch):

@@ -207,12 +207,14 @@ def test_a_floor_frame_is_read_without_its_floor(sphere, monkeypatch, variant, a
     cells it shares with the floor go too)."""
     monkeypatch.setattr(partial, "similarity", lambda mesh, rng: mesh)
     supports = []
-    left_out = scans.without_support
-    monkeypatch.setattr(
-        scans,
-        "without_support",
-        lambda *a: supports.append(left_out(*a)[1]) or left_out(*a),
-    )
+    found = scans.support_planes
+
+    def counted(*args):
+        support, planes = found(*args)
+        supports.append(int(np.count_nonzero(support)))
+        return support, planes
+
+    monkeypatch.setattr(scans, "support_planes", counted)
     low = float(sphere.vertices[:, 2].min())
     for name in ("sphere.off", "other.off"):
         supports.clear()

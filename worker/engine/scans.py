@@ -185,7 +185,7 @@ def _sight_of(points: np.ndarray, faces: np.ndarray) -> np.ndarray | None:
     return sight
 
 
-#: :func:`without_support`: a plane is searched for among the points within
+#: :func:`support_planes`: a plane is searched for among the points within
 #: ``SUPPORT_BAND`` times the grid's spacing of it (the median distance between
 #: neighbouring pixels' points, along the finer of its rows and columns); it is the
 #: floor, a table or a wall the object stands on or against when it holds at least
@@ -222,8 +222,22 @@ SUPPORT_REFITS = 4
 
 def without_support(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarray, int]:
     """An organized cloud (H, W, 3) (non-finite where a pixel saw nothing) with the planes
-    its object stands on or against left out: (H, W, 3) those pixels made ``nan``, and how
-    many points they were.
+    its object stands on or against left out (:func:`support_planes`): (H, W, 3) those
+    pixels made ``nan``, and how many points they were."""
+    support, _ = support_planes(points, viewpoint)
+    kept = points.copy()
+    kept[support] = np.nan
+    return kept, int(np.count_nonzero(support))
+
+
+#: A plane :func:`support_planes` took: its unit normal (3,), offset, and (H, W) how near
+#: it each pixel's point must lie to be its own.
+Plane = tuple[np.ndarray, float, np.ndarray]
+
+
+def support_planes(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarray, list[Plane]]:
+    """The planes an organized cloud's (H, W, 3) object stands on or against: (H, W) bool
+    the pixels on them, and the planes taken.
 
     A depth camera's frame nearly always holds the floor or table under its object and
     often a wall behind it; read with them, the object and its support are one piece, and
@@ -238,12 +252,12 @@ def without_support(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarr
     border[[0, -1]] = border[:, [0, -1]] = True
     reaches = SUPPORT_BORDER * np.count_nonzero(border)  # the border's pixels a support holds
     if np.count_nonzero(valid & border) < reaches:
-        return points, 0  # a framed object: no plane runs out of the frame
+        return np.zeros_like(valid), []  # a framed object: no plane runs out of the frame
     # The finer of the grid's two directions: a floor seen at a slant is coarse along one.
     differences = (points[:, 1:] - points[:, :-1], points[1:] - points[:-1])
     steps = [np.linalg.norm(d[np.isfinite(d).all(axis=-1)], axis=-1) for d in differences]
     if count < 3 or not any(len(s) for s in steps):
-        return points, 0  # no two neighbouring pixels saw the surface
+        return np.zeros_like(valid), []  # no two neighbouring pixels saw the surface
     band = SUPPORT_BAND * min(float(np.median(s)) for s in steps if len(s))
     width = max(1, round(SUPPORT_RING * min(valid.shape)))
     ring = np.ones_like(valid)
@@ -252,6 +266,7 @@ def without_support(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarr
     reach = np.linalg.norm(flat - viewpoint, axis=2)
     rng = np.random.default_rng(0)
     support = np.zeros_like(valid)
+    taken: list[Plane] = []
     candidates = valid.copy()
     for _ in range(SUPPORT_PLANES):
         if np.count_nonzero(valid & ~support & border) < reaches:
@@ -275,11 +290,10 @@ def without_support(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarr
         ):
             support |= on
             candidates &= ~on
+            taken.append(plane)
         else:  # not tried again, nor anything near it
             candidates &= np.abs(distance) >= band
-    kept = points.copy()
-    kept[support] = np.nan
-    return kept, int(np.count_nonzero(support))
+    return support, taken
 
 
 def _largest_plane(
@@ -521,7 +535,9 @@ def _binned_support(
     object stands on or against: its ``image`` (n, 2) binned in cells
     :data:`SUPPORT_CELL` times its points' ``spacing`` apart,
     each cell holding the point nearest ``viewpoint`` (a z-buffer's), is the organized
-    frame :func:`without_support` searches; every point in a support's cell is its.
+    frame :func:`support_planes` searches; every point in a support's cell is its, and
+    every point as near a plane taken as its cell's must be (as on a frame: the points
+    a cell's nearest hides, beside an object's feet or behind its silhouette).
     None (not searched) when the cells would outnumber the points ``LATTICE_MAX_FILL``
     times, or the points fill fewer than :data:`SUPPORT_LEAST_CELLS`."""
     if not np.isfinite(spacing) or spacing <= 0.0:
@@ -537,12 +553,10 @@ def _binned_support(
         return None
     frame = np.full((height * width, 3), np.nan)
     frame[cell[nearest]] = points[nearest]
-    frame = frame.reshape(height, width, 3)
-    kept, support = without_support(frame, viewpoint)
-    if not support:
-        return np.zeros(len(points), dtype=bool)
-    left = (np.isfinite(frame).all(axis=2) & ~np.isfinite(kept).all(axis=2)).ravel()
-    in_support: np.ndarray = left[cell]
+    support, planes = support_planes(frame.reshape(height, width, 3), viewpoint)
+    in_support: np.ndarray = support.ravel()[cell]
+    for normal, offset, within in planes:
+        in_support |= np.abs(points @ normal - offset) < within.ravel()[cell]
     return in_support
 
 
