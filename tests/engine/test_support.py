@@ -13,7 +13,7 @@ from conftest import e57_scan
 
 from worker.engine import scans
 from worker.engine.errors import PointCloudError
-from worker.engine.mesh_io import Mesh, read_mesh
+from worker.engine.mesh_io import Mesh, face_areas, read_mesh
 from worker.engine.pipeline import describe_file
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.engine.scans import (
@@ -275,6 +275,93 @@ def test_points_on_no_lattice_are_read_without_most_of_their_floor(
     went = sum(tuple(p) not in read for p in figure_points.tolist())
     assert cloud.grid is None and cloud.support == len(cloud_points) - len(vertices)
     assert stayed <= 0.002 * len(plane_points) and went <= 0.03 * len(figure_points)
+
+
+def floor_scene_points(kind: str, elevation: float = 20.0) -> np.ndarray:
+    """The quadruped on a floor (at three times the pixels), its points in the camera's
+    frame moved half a pixel or voxel filtered (:func:`moved_or_filtered`)."""
+    points, viewpoint, figure = scene_frame("quadruped", 3, elevation, False, pixels=120)
+    seen = np.isfinite(points).all(axis=2)
+    pitch = float(np.ptp(sample_mesh("quadruped", 3).vertices, axis=0).max()) / 120
+    camera = view_frame(viewpoint)
+    return np.vstack(
+        [
+            moved_or_filtered((points[seen & part] - viewpoint) @ camera.T, pitch, kind)
+            for part in (figure, ~figure)
+        ]
+    )
+
+
+def seen_image(points: np.ndarray) -> np.ndarray:
+    """(n, 2) the image :func:`~worker.engine.scans.viewed_surface` triangulates of
+    ``points`` (n, 3) seen from the origin: their central projection on the plane across
+    their mean ray."""
+    rays = points / np.linalg.norm(points, axis=1)[:, None]
+    frame = view_frame(rays.mean(axis=0))
+    image: np.ndarray = points @ frame[:2].T / (points @ frame[2])[:, None]
+    return image
+
+
+def triangles(vertices: np.ndarray, faces: np.ndarray) -> set[frozenset[tuple[float, ...]]]:
+    """Each triangle as the set of its corners' coordinates."""
+    return {frozenset(map(tuple, vertices[face].tolist())) for face in faces}
+
+
+@pytest.mark.parametrize("windows", [False, True], ids=["whole first", "in windows"])
+@pytest.mark.parametrize("kind", ["moved", "voxels"])
+def test_points_on_no_lattice_triangulated_without_their_floor_as_with_it(
+    kind, windows, monkeypatch
+):
+    """Only the points left once the floor is out are triangulated: the triangles are
+    those of every point's triangulation (the reference) that join no floor point, but
+    for the few whose corners' median edge changes with their floor neighbours (within
+    1.5% of the triangles, 1.5% of the area); Delaunay's triangles of the rest alone
+    bridge where the floor was (2-7% more, 3-9% of the area, before their circles were
+    looked in). So whether the view's spacing was measured on its whole triangulation or,
+    as a large view's is, in windows of it."""
+    from scipy.spatial import Delaunay
+
+    if windows:
+        monkeypatch.setattr(scans, "SPACING_EXACT", 0)
+    points = floor_scene_points(kind)
+    vertices, faces, cloud = scans.viewed_surface(points, np.zeros(3))
+    image = seen_image(points)
+    every = Delaunay(image)
+    spacing = scans.image_spacing(image, None if windows else every)
+    left_out = scans._binned_support(points, image, spacing, np.zeros(3))
+    assert left_out is not None and cloud.support == np.count_nonzero(left_out) > 0
+    seen = scans._seen_triangles(points, image, np.zeros(3), every)
+    reference = seen[~left_out[seen].any(axis=1)]
+    assert {tuple(p) for p in vertices.tolist()} == {tuple(p) for p in points[~left_out].tolist()}
+    read, expected = triangles(vertices, faces), triangles(points, reference)
+    assert len(read ^ expected) <= 0.015 * len(expected)
+    area = face_areas(vertices, faces).sum()
+    assert area == pytest.approx(face_areas(points, reference).sum(), rel=0.015)
+
+
+@pytest.mark.parametrize("kind", ["grid", "moved", "voxels", "coarse voxels"])
+def test_a_view_s_spacing_is_measured_in_windows_as_on_its_triangulation(kind):
+    """A large view's spacing, measured in windows of it before it is triangulated, is the
+    median of its points' median edges in Delaunay's triangulation within 5%: as shot,
+    moved half a pixel, voxel filtered at two pixels, and at three of coarser pixels
+    (whose third nearest neighbours lie at two thirds of it: its points lie in rows)."""
+    from scipy.spatial import Delaunay
+
+    if kind == "grid":
+        frame, viewpoint, _ = scene_frame("quadruped", 3, 20.0, False, pixels=120)
+        points = (frame[np.isfinite(frame).all(axis=2)] - viewpoint) @ view_frame(viewpoint).T
+    elif kind == "coarse voxels":
+        frame, viewpoint, _ = scene_frame("quadruped", 3, 20.0, False, pixels=80)
+        seen = (frame[np.isfinite(frame).all(axis=2)] - viewpoint) @ view_frame(viewpoint).T
+        pitch = float(np.ptp(sample_mesh("quadruped", 3).vertices, axis=0).max()) / 80
+        points = moved_or_filtered(seen, 1.5 * pitch, "voxels")
+    else:
+        points = floor_scene_points(kind)
+    image = seen_image(points)
+    triangulation = Delaunay(image)
+    exact = float(np.median(scans.median_edges(image, triangulation.vertex_neighbor_vertices)))
+    assert scans.image_spacing(image, triangulation) == exact
+    assert scans.image_spacing(image) == pytest.approx(exact, rel=0.05)
 
 
 def test_a_grazing_floor_once_left_out_leaves_one_view(monkeypatch):

@@ -46,13 +46,16 @@ import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from functools import cache
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .errors import MeshError, PointCloudError, UnreadableMeshError
 from .formats import DEFAULT_MAX_DECOMPRESSED_BYTES
 from .topology import edge_keys, keys_seen_once, unique_rows
+
+if TYPE_CHECKING:
+    from scipy.spatial import Delaunay
 
 #: An edge closer than this to its sensor's viewing ray crosses a gap, not the surface.
 SHADOW_DEGREES = 12.5
@@ -436,8 +439,6 @@ def viewed_surface(
         ``VIEW_SHARE`` of the points on the surface (points hidden behind others, as a
         whole object's or several views' are, are joined to them only along the rays).
     """
-    from scipy.spatial import Delaunay, QhullError
-
     finite = points[np.isfinite(points).all(axis=1)]
     if len(finite) < 3:
         raise PointCloudError(f"The file holds too few points to make a surface. {UPLOAD_A_VIEW}")
@@ -472,48 +473,150 @@ def viewed_surface(
             f"sensor at ({where}): some lie beside or behind it. {UPLOAD_A_VIEW}"
         )
     image = rays @ frame[:2].T / depth[:, None]
-    try:
-        triangulation = Delaunay(image)
-    except QhullError as exc:
-        raise PointCloudError(
-            f"The file's points lie on one line as seen from ({where}): no surface joins "
-            f"them. {UPLOAD_A_VIEW}"
-        ) from exc
-    faces = triangulation.simplices.astype(np.int64)
-    corners = image[faces]
-    sides = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)  # (m, 3)
-    spacing = median_edges(image, triangulation.vertex_neighbor_vertices)
-    kept = sides.max(axis=1) <= GAP_SPACINGS * spacing[faces].min(axis=1)
-    kept &= unshadowed(finite, faces, viewpoint)
-    faces = faces[kept]
-    seen = np.unique(faces).size / len(finite)
+    # The support is looked for first, so that only the rest is triangulated (a floor
+    # frame's points are mostly the floor's, and Delaunay's time grows faster than them).
+    whole = _delaunay(image, where) if len(image) <= SPACING_EXACT else None
     left_out = (
-        _binned_support(finite, image, float(np.median(spacing)), viewpoint)
+        _binned_support(finite, image, image_spacing(image, whole), viewpoint)
         if sensor_known
         else None
     )
-    if left_out is not None and left_out.any():
-        faces = faces[~left_out[faces].any(axis=1)]
-        # One view, or one once its support is left out (a floor seen at a grazing
-        # angle and voxel filtered joins few of its points along the rays).
-        seen = max(seen, np.unique(faces).size / np.count_nonzero(~left_out))
+    support = None if left_out is None else int(np.count_nonzero(left_out))
+    if left_out is not None and support:
+        rest = ~left_out
+        remaining = _delaunay(image[rest], where)
+        faces = _seen_triangles(finite[rest], image[rest], viewpoint, remaining, image[left_out])
+        seen = float(np.unique(faces).size / np.count_nonzero(rest))
+        if seen < VIEW_SHARE:  # one view with its support, if not without it
+            every = whole if whole is not None else _delaunay(image, where)
+            seen_with = _seen_triangles(finite, image, viewpoint, every)
+            seen = max(seen, float(np.unique(seen_with).size / len(finite)))
+        finite, image = finite[rest], image[rest]
+    else:
+        every = whole if whole is not None else _delaunay(image, where)
+        faces = _seen_triangles(finite, image, viewpoint, every)
+        seen = float(np.unique(faces).size / len(finite))
     if seen < VIEW_SHARE:
         raise PointCloudError(
             f"The file holds points but no triangles, and they are not one view from the "
             f"sensor at ({where}): {100 * (1 - seen):.0f}% of them hide behind others, as "
             f"a whole object's points do. {UPLOAD_A_VIEW}"
         )
-    if left_out is not None and left_out.any():  # the rest renumbered
-        faces = (np.cumsum(~left_out) - 1)[faces]
-        finite, image = finite[~left_out], image[~left_out]
     # Wound clockwise in the image (whose third axis points away from the sensor), a
     # triangle's normal faces the sensor.
     first, second, third = (image[faces[:, k]] for k in range(3))
     (ax, ay), (bx, by) = (second - first).T, (third - first).T
     turn = ax * by - ay * bx
     faces[turn > 0] = faces[turn > 0][:, ::-1]
-    support = None if left_out is None else int(np.count_nonzero(left_out))
     return finite, faces, Cloud(len(finite), support=support)
+
+
+def _delaunay(image: np.ndarray, where: str) -> Delaunay:
+    """Delaunay's triangulation of a view's ``image`` (n, 2), seen from ``where``."""
+    from scipy.spatial import Delaunay, QhullError
+
+    if len(image) < 3:
+        raise PointCloudError(f"The file holds too few points to make a surface. {UPLOAD_A_VIEW}")
+    try:
+        return Delaunay(image)
+    except QhullError as exc:
+        raise PointCloudError(
+            f"The file's points lie on one line as seen from ({where}): no surface joins "
+            f"them. {UPLOAD_A_VIEW}"
+        ) from exc
+
+
+def _seen_triangles(
+    points: np.ndarray,
+    image: np.ndarray,
+    viewpoint: np.ndarray,
+    triangulation: Delaunay,
+    hidden: np.ndarray | None = None,
+) -> np.ndarray:
+    """(m, 3) the triangles of :func:`viewed_surface`'s points (n, 3) seen from
+    ``viewpoint``: the ``triangulation`` of their ``image`` (n, 2), but those with an edge
+    across a gap (longer than ``GAP_SPACINGS`` times their corners' least median edge) or
+    along a ray (:func:`unshadowed`). With the image of ``hidden`` points (k, 2) left out
+    (a support's), the triangles are those of every point's triangulation that join none
+    of them: a triangle of the rest's whose circle holds one of them is not (it bridges
+    where they were), nor are its edges measured."""
+    from scipy.spatial import cKDTree
+
+    faces = triangulation.simplices.astype(np.int64)
+    neighbours = triangulation.vertex_neighbor_vertices
+    if hidden is not None and len(hidden):
+        centre, radius = _circumcircles(image[faces])
+        nearest, _ = cKDTree(hidden).query(centre)
+        faces = faces[~(np.asarray(nearest) < radius * (1.0 - 1e-9))]
+        neighbours = _edge_neighbours(faces, len(image))
+    corners = image[faces]
+    sides = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)  # (m, 3)
+    spacing = median_edges(image, neighbours)
+    kept = sides.max(axis=1) <= GAP_SPACINGS * spacing[faces].min(axis=1)
+    kept &= unshadowed(points, faces, viewpoint)
+    seen: np.ndarray = faces[kept]
+    return seen
+
+
+def _circumcircles(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(m, 2) the centres and (m,) the radii of triangles' circumscribed circles, their
+    ``corners`` (m, 3, 2) (a degenerate one's infinite)."""
+    a = corners[:, 0]
+    b, c = corners[:, 1] - a, corners[:, 2] - a
+    det = 2.0 * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0])
+    bb, cc = (b**2).sum(axis=1), (c**2).sum(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        offset = np.stack([c[:, 1] * bb - b[:, 1] * cc, b[:, 0] * cc - c[:, 0] * bb], axis=1)
+        offset /= det[:, None]
+    radius = np.linalg.norm(offset, axis=1)
+    radius[~np.isfinite(radius)] = np.inf
+    return np.nan_to_num(a + offset), radius
+
+
+def _edge_neighbours(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The edges of ``faces`` (m, 3) as a CSR pair ``(indptr, indices)`` of each of ``n``
+    points' neighbours (as :func:`median_edges` takes them)."""
+    start, end = np.divmod(np.unique(edge_keys(faces, n).ravel()), n)
+    owner, other = np.concatenate([start, end]), np.concatenate([end, start])
+    order = np.argsort(owner, kind="stable")
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(owner, minlength=n))])
+    return indptr, other[order]
+
+
+#: :func:`viewed_surface`: a view of at most ``SPACING_EXACT`` points is triangulated
+#: whole before its support is looked for (its spacing exact, the triangulation kept when
+#: it has none: about as long as :func:`image_spacing`'s windows at that size); of a
+#: larger one, only the rest is. :func:`image_spacing` measures such a view in
+#: ``SPACING_WINDOWS`` windows of ``SPACING_WINDOW`` points each, pooling the median
+#: edges of each window's ``SPACING_INNER`` points nearest its centre (whose neighbours
+#: the window holds).
+SPACING_EXACT = 50_000
+SPACING_WINDOWS = 32
+SPACING_WINDOW = 200
+SPACING_INNER = 50
+
+
+def image_spacing(image: np.ndarray, triangulation: Delaunay | None = None) -> float:
+    """The median of a view's ``image`` points' (n, 2) median edges (:func:`median_edges`)
+    in their Delaunay ``triangulation``; without it, in windows of the image evenly spread
+    over its points (:data:`SPACING_WINDOWS`), each triangulated alone (0.95-1.0 of it on
+    the partiality protocol's floor frames, as shot or voxel filtered; the distance to
+    each point's third nearest is two thirds of it in a view voxel filtered coarsely,
+    whose points lie in rows). ``nan`` when a window's points lie on one line."""
+    from scipy.spatial import Delaunay, QhullError, cKDTree
+
+    if triangulation is not None:
+        return float(np.median(median_edges(image, triangulation.vertex_neighbor_vertices)))
+    centres = np.linspace(0, len(image) - 1, SPACING_WINDOWS).astype(np.int64)
+    _, windows = cKDTree(image).query(image[centres], k=min(SPACING_WINDOW, len(image)))
+    try:
+        edges = [
+            median_edges(image[window], Delaunay(image[window]).vertex_neighbor_vertices)
+            for window in np.asarray(windows)
+        ]
+    except QhullError:
+        return float("nan")
+    return float(np.median(np.concatenate([e[:SPACING_INNER] for e in edges])))
 
 
 #: :func:`_binned_support`: a view's image is binned in cells ``SUPPORT_CELL`` times its
