@@ -339,6 +339,36 @@ def test_points_on_no_lattice_triangulated_without_their_floor_as_with_it(
     assert area == pytest.approx(face_areas(points, reference).sum(), rel=0.015)
 
 
+def test_a_triangle_s_circle():
+    """The circle through a triangle's corners: a right triangle's centred on its
+    hypotenuse; three points on a line have none (an infinite radius)."""
+    centre, radius = scans._circumcircles(
+        np.array([[[0.0, 0.0], [2.0, 0.0], [0.0, 2.0]], [[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]])
+    )
+    np.testing.assert_allclose(centre[0], [1.0, 1.0])
+    assert radius[0] == pytest.approx(np.sqrt(2.0)) and radius[1] == np.inf
+
+
+def test_a_triangulation_s_edges_are_its_neighbours():
+    """The triangles' edges as each point's neighbours (measured once some triangles are
+    dropped) are Delaunay's own neighbours when none is: the same median edges."""
+    from scipy.spatial import Delaunay
+
+    image = np.random.default_rng(0).random((500, 2))
+    triangulation = Delaunay(image)
+    indptr, indices = scans._edge_neighbours(triangulation.simplices.astype(np.int64), 500)
+    expected_indptr, expected = triangulation.vertex_neighbor_vertices
+    np.testing.assert_array_equal(indptr, expected_indptr)
+    for point in range(500):
+        ours = indices[indptr[point] : indptr[point + 1]]
+        theirs = expected[expected_indptr[point] : expected_indptr[point + 1]]
+        assert sorted(ours) == sorted(theirs)
+    np.testing.assert_array_equal(
+        scans.median_edges(image, (indptr, indices)),
+        scans.median_edges(image, (expected_indptr, expected)),
+    )
+
+
 @pytest.mark.parametrize("kind", ["grid", "moved", "voxels", "coarse voxels"])
 def test_a_view_s_spacing_is_measured_in_windows_as_on_its_triangulation(kind):
     """A large view's spacing, measured in windows of it before it is triangulated, is the
