@@ -312,10 +312,10 @@ def triangles(vertices: np.ndarray, faces: np.ndarray) -> set[frozenset[tuple[fl
 def test_points_on_no_lattice_triangulated_without_their_floor_as_with_it(
     kind, windows, monkeypatch
 ):
-    """Only the points left once the floor is out are triangulated: the triangles are
-    those of every point's triangulation (the reference) that join no floor point, but
-    for the few whose corners' median edge changes with their floor neighbours (within
-    1.5% of the triangles, 1.5% of the area); Delaunay's triangles of the rest alone
+    """Only the points left once the floor is out are triangulated: the quadruped's
+    triangles are those of every point's triangulation (the reference) that join no floor
+    point, but for the few whose corners' median edge changes with their floor neighbours
+    (within 1.5% of the triangles, 1.5% of the area); Delaunay's triangles of the rest alone
     bridge where the floor was (2-7% more, 3-9% of the area, before their circles were
     looked in). So whether the view's spacing was measured on its whole triangulation or,
     as a large view's is, in windows of it."""
