@@ -426,7 +426,8 @@ def viewed_surface(
     (:func:`sensor_side`). The planes its object stands on or against are left out
     (:func:`without_support`), the points' rectangle in the image taken for the frame:
     on a lattice the view is an organized frame; else its image binned in cells of about
-    its points' median spacing is (:func:`_binned_support`, not when too coarse). Not from a
+    its points' median spacing is (:func:`_binned_support`, not when too coarse), and only
+    the rest is triangulated (:func:`_seen_triangles`). Not from a
     ``viewpoint`` that is not ``sensor_known`` (guessed from afar along a direction the
     points overlap themselves least in): seen from the wrong side, an object's face with
     the rest of it behind passes for one. Not looked for, the cloud's ``support`` is None.
@@ -584,9 +585,9 @@ def _edge_neighbours(faces: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]
 
 
 #: :func:`viewed_surface`: a view of at most ``SPACING_EXACT`` points is triangulated
-#: whole before its support is looked for (its spacing exact, the triangulation kept when
-#: it has none: about as long as :func:`image_spacing`'s windows at that size); of a
-#: larger one, only the rest is. :func:`image_spacing` measures such a view in
+#: whole before its support is looked for (its spacing exact, and the triangulation kept
+#: when it has none, so that a view without a floor is triangulated once: about 0.3 s at
+#: that size); of a larger one, only the rest is. :func:`image_spacing` measures such a view in
 #: ``SPACING_WINDOWS`` windows of ``SPACING_WINDOW`` points each, pooling the median
 #: edges of each window's ``SPACING_INNER`` points nearest its centre (whose neighbours
 #: the window holds).
