@@ -31,8 +31,8 @@ from worker.engine.compare import dissimilarity
 from worker.engine.mesh_io import Mesh, clean_mesh
 from worker.engine.pipeline import describe_mesh
 from worker.engine.presets import DEFAULT_PRESET, MODALITIES, get_preset
+from worker.evaluation.remesh import remeshed
 from worker.evaluation.robustness import protocol_distance
-from worker.evaluation.variants import remeshed
 
 #: Vertices of the isotropic remesh each solid is also described as.
 REMESH_VERTICES = 12_000

@@ -40,10 +40,11 @@ def test_fingerprint_covers_every_engine_module_the_baseline_and_the_variants_on
     # linalg and tol are reached only through other engine modules' imports
     assert engine <= set(modules), engine - set(modules)
     outside = {m for m in modules if not m.startswith("worker.engine.")}
-    # the variants' makers: the re-tessellations and the partial copies
+    # the variants' makers: the re-tessellations (MeshLab's remeshing) and the partial copies
     assert outside == {
         "worker.evaluation.shapedna",
         "worker.evaluation.variants",
+        "worker.evaluation.remesh",
         "worker.evaluation.partial",
     }
     assert all(path.is_file() for path in modules.values())
@@ -81,12 +82,21 @@ def test_fingerprint_keeps_through_comments_and_docstrings(monkeypatch):
 
 
 def test_variant_meshes_depend_on_how_they_are_made_not_on_the_pipeline(monkeypatch):
+    """The stored remeshes (166 for TOSCA and SCAPE, 20-40 s each on a loaded machine) are
+    remade when MeshLab's remeshing, the reading and cleaning of the file (scans' reading
+    among it) or the variants' own code is edited, and kept when the resampling or a
+    partial copy is."""
     modules = worker_modules(["worker.evaluation.variants"])
-    assert {"worker.evaluation.variants", "worker.engine.mesh_io"} <= set(modules)
+    assert {"worker.evaluation.remesh", "worker.engine.mesh_io"} <= set(modules)
     assert not {"worker.engine.resample", "worker.engine.pipeline"} & set(modules)
     before = variant_mesh_fingerprint()
-    resample = engine_modules()["worker.engine.resample"]
-    _edited_reads(monkeypatch, {resample: b"\nEDITED = 1\n"})
-    assert variant_mesh_fingerprint() == before  # the resampling edited: meshes kept
-    _edited_reads(monkeypatch, {modules["worker.engine.mesh_io"]: b"\nEDITED = 1\n"})
-    assert variant_mesh_fingerprint() != before  # reading and cleaning edited: remade
+    for kept in ("worker.engine.resample", "worker.evaluation.partial"):
+        _edited_reads(monkeypatch, {engine_modules()[kept]: b"\nEDITED = 1\n"})
+        assert variant_mesh_fingerprint() == before, kept  # meshes kept
+    for remade in (
+        "worker.engine.mesh_io",
+        "worker.evaluation.remesh",
+        "worker.evaluation.variants",
+    ):
+        _edited_reads(monkeypatch, {modules[remade]: b"\nEDITED = 1\n"})
+        assert variant_mesh_fingerprint() != before, remade  # remade

@@ -132,10 +132,16 @@ def engine_fingerprint() -> str:
 
 
 def variant_mesh_fingerprint() -> str:
-    """sha256 of the code a variant mesh is made by: :mod:`.variants` and what it
-    imports (reading and cleaning the file), not the descriptor pipeline, so editing
-    the resampling or the operators keeps the stored variant meshes."""
-    return _code_digest(worker_modules(["worker.evaluation.variants"]))
+    """sha256 of the code a stored variant mesh (:data:`.variants.STORED_VARIANTS`, the
+    remeshes) is made by: :mod:`.remesh` and what it imports (reading and cleaning the
+    file), and :mod:`.variants`' own code (which variant is which), not the descriptor
+    pipeline nor the partial copies, so editing the resampling, the operators or a
+    partial copy keeps the stored remeshes."""
+    modules = worker_modules(["worker.evaluation.remesh"])
+    variants = _module_file("worker.evaluation.variants")
+    if variants is not None:
+        modules["worker.evaluation.variants"] = variants
+    return _code_digest(modules)
 
 
 def cache_namespace(preset: Preset) -> str:

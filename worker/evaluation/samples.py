@@ -31,7 +31,7 @@ from scipy.spatial.transform import Rotation
 
 from worker.engine.mesh_io import Mesh, clean_mesh
 
-from .variants import import_pymeshlab
+from .remesh import import_pymeshlab
 
 #: The figures, in the order of ``labels.csv``.
 SAMPLE_CLASSES = ("biped", "quadruped", "spider", "bird", "hand")
