@@ -57,18 +57,13 @@ def _mesh(label: str) -> Mesh:
     import numpy as np
 
     from worker.engine.scans import one_view
-    from worker.evaluation.partial import DRAWN_AS, VOXEL_PIXELS, floor_shot, voxel_means
+    from worker.evaluation.partial import DRAWN_AS, floor_voxel_points
     from worker.evaluation.variants import variant_seed
 
     name = "victoria12.off.gz"
-    seed = variant_seed(name, DRAWN_AS["floor-voxels"])
-    points, _, pitch = floor_shot(
-        load_mesh(shared_dataset("tosca") / name), np.random.default_rng(seed)
-    )
-    seen = points.reshape(-1, 3)[np.isfinite(points).all(axis=2).ravel()]
-    means = voxel_means(seen, VOXEL_PIXELS * pitch)
-    shuffled = means[np.random.default_rng(0).permutation(len(means))]
-    vertices, faces, _ = one_view(shuffled, np.zeros(3))  # no sensor placed: from afar
+    rng = np.random.default_rng(variant_seed(name, DRAWN_AS["floor-voxels"]))
+    points, _ = floor_voxel_points(load_mesh(shared_dataset("tosca") / name), rng)
+    vertices, faces, _ = one_view(points, np.zeros(3))  # no sensor placed: from afar
     return clean_mesh(vertices, faces)
 
 

@@ -476,12 +476,19 @@ def floor_voxels(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     binned image; not one view from the camera, as a floor seen at a grazing angle and so
     filtered may be, seen once more from afar, the floor kept), its largest piece in the
     same random similarity."""
+    vertices, faces, _ = one_view(*floor_voxel_points(mesh, rng, up))
+    return similarity(clean_mesh(vertices, faces), rng)
+
+
+def floor_voxel_points(
+    mesh: Mesh, rng: np.random.Generator, up: str = "z"
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`floor_voxels`' points (k, 3), its frame's finite points thinned by
+    ``view-voxels``' filter in a fixed random order, and its camera's viewpoint (3,)."""
     points, viewpoint, pitch = floor_shot(mesh, rng, up)
     seen = points.reshape(-1, 3)[np.isfinite(points).all(axis=2).ravel()]
     means = voxel_means(seen, VOXEL_PIXELS * pitch)
-    shuffled = means[np.random.default_rng(0).permutation(len(means))]
-    vertices, faces, _ = one_view(shuffled, viewpoint)
-    return similarity(clean_mesh(vertices, faces), rng)
+    return means[np.random.default_rng(0).permutation(len(means))], viewpoint
 
 
 def single_view(mesh: Mesh, direction: np.ndarray) -> Mesh:
