@@ -327,7 +327,8 @@ def test_points_on_no_lattice_triangulated_without_their_floor_as_with_it(
     vertices, faces, cloud = scans.viewed_surface(points, np.zeros(3))
     image = seen_image(points)
     every = Delaunay(image)
-    spacing = scans.image_spacing(image, None if windows else every)
+    edges = scans.median_edges(image, every.vertex_neighbor_vertices)
+    spacing = scans.image_spacing(image, None if windows else edges)
     left_out = scans._binned_support(points, image, spacing, np.zeros(3))
     assert left_out is not None and cloud.support == np.count_nonzero(left_out) > 0
     seen = scans._seen_triangles(points, image, np.zeros(3), every)
@@ -389,8 +390,9 @@ def test_a_view_s_spacing_is_measured_in_windows_as_on_its_triangulation(kind):
         points = floor_scene_points(kind)
     image = seen_image(points)
     triangulation = Delaunay(image)
-    exact = float(np.median(scans.median_edges(image, triangulation.vertex_neighbor_vertices)))
-    assert scans.image_spacing(image, triangulation) == exact
+    edges = scans.median_edges(image, triangulation.vertex_neighbor_vertices)
+    exact = float(np.median(edges))
+    assert scans.image_spacing(image, edges) == exact
     assert scans.image_spacing(image) == pytest.approx(exact, rel=0.05)
 
 

@@ -477,8 +477,9 @@ def viewed_surface(
     # The support is looked for first, so that only the rest is triangulated (a floor
     # frame's points are mostly the floor's, and Delaunay's time grows faster than them).
     whole = _delaunay(image, where) if len(image) <= SPACING_EXACT else None
+    edges = None if whole is None else median_edges(image, whole.vertex_neighbor_vertices)
     left_out = (
-        _binned_support(finite, image, image_spacing(image, whole), viewpoint)
+        _binned_support(finite, image, image_spacing(image, edges), viewpoint)
         if sensor_known
         else None
     )
@@ -490,12 +491,12 @@ def viewed_surface(
         seen = float(np.unique(faces).size / np.count_nonzero(rest))
         if seen < VIEW_SHARE:  # one view with its support, if not without it
             every = whole if whole is not None else _delaunay(image, where)
-            seen_with = _seen_triangles(finite, image, viewpoint, every)
+            seen_with = _seen_triangles(finite, image, viewpoint, every, edges=edges)
             seen = max(seen, float(np.unique(seen_with).size / len(finite)))
         finite, image = finite[rest], image[rest]
     else:
         every = whole if whole is not None else _delaunay(image, where)
-        faces = _seen_triangles(finite, image, viewpoint, every)
+        faces = _seen_triangles(finite, image, viewpoint, every, edges=edges)
         seen = float(np.unique(faces).size / len(finite))
     if seen < VIEW_SHARE:
         raise PointCloudError(
@@ -533,6 +534,7 @@ def _seen_triangles(
     viewpoint: np.ndarray,
     triangulation: Delaunay,
     hidden: np.ndarray | None = None,
+    edges: np.ndarray | None = None,
 ) -> np.ndarray:
     """(m, 3) the triangles of :func:`viewed_surface`'s points (n, 3) seen from
     ``viewpoint``: the ``triangulation`` of their ``image`` (n, 2), but those with an edge
@@ -540,19 +542,22 @@ def _seen_triangles(
     along a ray (:func:`unshadowed`). With the image of ``hidden`` points (k, 2) left out
     (a support's), the triangles are those of every point's triangulation that join none
     of them: a triangle of the rest's whose circle holds one of them is not (it bridges
-    where they were), nor are its edges measured."""
+    where they were), nor are its edges measured. ``edges`` (n,): the points' median edges
+    in ``triangulation`` (:func:`median_edges`), when already measured."""
     from scipy.spatial import cKDTree
 
     faces = triangulation.simplices.astype(np.int64)
-    neighbours = triangulation.vertex_neighbor_vertices
     if hidden is not None and len(hidden):
         centre, radius = _circumcircles(image[faces])
         nearest, _ = cKDTree(hidden).query(centre)
         faces = faces[~(np.asarray(nearest) < radius * (1.0 - 1e-9))]
-        neighbours = _edge_neighbours(faces, len(image))
+        spacing = median_edges(image, _edge_neighbours(faces, len(image)))
+    elif edges is not None:
+        spacing = edges
+    else:
+        spacing = median_edges(image, triangulation.vertex_neighbor_vertices)
     corners = image[faces]
     sides = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)  # (m, 3)
-    spacing = median_edges(image, neighbours)
     kept = sides.max(axis=1) <= GAP_SPACINGS * spacing[faces].min(axis=1)
     kept &= unshadowed(points, faces, viewpoint)
     seen: np.ndarray = faces[kept]
@@ -597,27 +602,28 @@ SPACING_WINDOW = 200
 SPACING_INNER = 50
 
 
-def image_spacing(image: np.ndarray, triangulation: Delaunay | None = None) -> float:
-    """The median of a view's ``image`` points' (n, 2) median edges (:func:`median_edges`)
-    in their Delaunay ``triangulation``; without it, in windows of the image evenly spread
-    over its points (:data:`SPACING_WINDOWS`), each triangulated alone (0.95-1.0 of it on
-    the partiality protocol's floor frames, as shot or voxel filtered; the distance to
-    each point's third nearest is two thirds of it in a view voxel filtered coarsely,
-    whose points lie in rows). ``nan`` when a window's points lie on one line."""
+def image_spacing(image: np.ndarray, edges: np.ndarray | None = None) -> float:
+    """The median of a view's ``image`` points' (n, 2) median ``edges`` (n,) in their
+    Delaunay triangulation (:func:`median_edges`); without them, in windows of the image
+    evenly spread over its points (:data:`SPACING_WINDOWS`), each triangulated alone
+    (0.95-1.0 of it on the partiality protocol's floor frames, as shot or voxel filtered;
+    the distance to each point's third nearest is two thirds of it in a view voxel
+    filtered coarsely, whose points lie in rows). ``nan`` when a window's points lie on
+    one line."""
     from scipy.spatial import Delaunay, QhullError, cKDTree
 
-    if triangulation is not None:
-        return float(np.median(median_edges(image, triangulation.vertex_neighbor_vertices)))
+    if edges is not None:
+        return float(np.median(edges))
     centres = np.linspace(0, len(image) - 1, SPACING_WINDOWS).astype(np.int64)
     _, windows = cKDTree(image).query(image[centres], k=min(SPACING_WINDOW, len(image)))
     try:
-        edges = [
+        inner = [
             median_edges(image[window], Delaunay(image[window]).vertex_neighbor_vertices)
             for window in np.asarray(windows)
         ]
     except QhullError:
         return float("nan")
-    return float(np.median(np.concatenate([e[:SPACING_INNER] for e in edges])))
+    return float(np.median(np.concatenate([e[:SPACING_INNER] for e in inner])))
 
 
 #: :func:`_binned_support`: a view's image is binned in cells ``SUPPORT_CELL`` times its
