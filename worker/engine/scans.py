@@ -45,7 +45,7 @@ import tempfile
 import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, cached_property
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -443,9 +443,10 @@ def viewed_surface(
     finite = points[np.isfinite(points).all(axis=1)]
     if len(finite) < 3:
         raise PointCloudError(f"The file holds too few points to make a surface. {UPLOAD_A_VIEW}")
-    lattice, sensor, guessed = sensor_grid(finite, viewpoint, axes), viewpoint, None
+    trials = LatticeTrials(finite)
+    lattice, sensor, guessed = sensor_grid(finite, viewpoint, axes, trials=trials), viewpoint, None
     searched = find_frame and lattice is None
-    found = _found_lattice(finite, viewpoint, start) if searched else None
+    found = _found_lattice(finite, viewpoint, trials, start) if searched else None
     if found is not None:
         lattice, frame, orthographic = found
         if orthographic and not _seen_along(finite, viewpoint, frame[:, 2]):
@@ -689,24 +690,26 @@ def median_edges(image: np.ndarray, neighbours: tuple[np.ndarray, np.ndarray]) -
 
 
 def _found_lattice(
-    points: np.ndarray, viewpoint: np.ndarray, start: Callable[[], np.ndarray] | None = None
+    points: np.ndarray,
+    viewpoint: np.ndarray,
+    trials: LatticeTrials,
+    start: Callable[[], np.ndarray] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, bool] | None:
     """:func:`sensor_grid`'s organized cloud of ``points`` (n, 3) in a frame found from them
     (:func:`sensor_axes`), that frame (3, 3) and whether it is an orthographic grid's; or
     None. A lattice the points lie on in any frame goes first; else one they lie near
     (:func:`snapped_steps`), tried in the last orthographic frame first (the most refined)
     and the pinhole camera's last: a far orthographic grid lies near a pinhole camera's
-    lattice too, a little sheared, its squares' diagonals the other way. ``start``: as
-    :func:`sensor_axes`'."""
+    lattice too, a little sheared, its squares' diagonals the other way. ``trials``: the
+    points', tried in every frame; ``start``: as :func:`sensor_axes`'."""
     frames = []
-    rounding = float32_rounding(points)
     for frame, orthographic, steps in sensor_axes(points, viewpoint, start):
-        lattice = sensor_grid(points, viewpoint, frame, along=(2,), rounding=rounding)
+        lattice = sensor_grid(points, viewpoint, frame, along=(2,), trials=trials)
         if lattice is not None:
             return lattice, frame, orthographic
         frames.append((frame, orthographic, steps))
     for frame, orthographic, steps in sorted(frames[::-1], key=lambda tried: not tried[1]):
-        lattice = sensor_grid(points, viewpoint, frame, along=(2,), steps=steps)
+        lattice = sensor_grid(points, viewpoint, frame, along=(2,), steps=steps, trials=trials)
         if lattice is not None:
             return lattice, frame, orthographic
     return None
@@ -984,7 +987,7 @@ def sensor_grid(
     axes: np.ndarray | None = None,
     along: tuple[int, ...] = (2, 0, 1),
     steps: Pairs | None = None,
-    rounding: float | None = None,
+    trials: LatticeTrials | None = None,
 ) -> np.ndarray | None:
     """The organized cloud (h, w, 3) (``nan`` where no point is) of ``points`` (n, 3) that
     lie on a camera's pixel lattice, or None.
@@ -996,34 +999,38 @@ def sensor_grid(
     ``(x, y)`` (:func:`lattice_steps`, allowing for float32's rounding of the points as
     written, :data:`FLOAT32_SPREAD`; ``axes``' columns are unit vectors). Tried looking
     along each axis in turn (those numbered in ``along``), as a pinhole camera when every
-    point lies on one side of the viewpoint along it, then as an orthographic one (on a
-    sample of the points first, :data:`LATTICE_TRIAL`); the first lattice on which every
+    point lies on one side of the viewpoint along it, then as an orthographic one (on
+    ``trials``' sample of the points first, their image of every point only made for a
+    frame the sample passes); the first lattice on which every
     point has its own pixel is the grid (its empty rows and columns closed up,
     :func:`closed_up`), and triangulating it needs no Delaunay triangulation. Given
     ``steps`` between neighbouring pixels (the (first, second) indices of pairs of the
     points, :func:`sensor_axes`'), whose median lengths along the image's two axes are
     its pitches, the lattice sought is instead one the points lie near, each within
     :data:`SNAP_RESIDUAL` of a pitch of its node (:func:`snapped_steps`; points on a
-    lattice lie near it too). ``rounding``: the points' :func:`float32_rounding`, when
-    already measured (a search tries many frames of the same points).
+    lattice lie near it too; tried first on ``trials``' patch of the points nearest their
+    middle). ``trials``: the points' :class:`LatticeTrials`, made once for a search that
+    tries many frames.
     """
+    trials = LatticeTrials(points) if trials is None else trials
     rays = points - viewpoint
     if axes is not None:
         rays = rays @ axes
-    if rounding is None:
-        rounding = float32_rounding(points)
-    trial = np.random.default_rng(0).permutation(len(points))[:LATTICE_TRIAL]
     for axis in along:
         across = [k for k in (0, 1, 2) if k != axis]
         depth = rays[:, axis]
-        images = [(rays[:, across], rounding)]  # orthographic: the rounding of the points
+        # A pinhole camera's image divides by the depth; an orthographic grid's allows for
+        # the points' rounding.
+        images: list[tuple[np.ndarray | None, float]] = [(None, trials.rounding)]
         if (depth > 0.0).all() or (depth < 0.0).all():
-            images.insert(0, (rays[:, across] / depth[:, None], 0.0))
-        for image, spread in images:
-            pitches = None if steps is None else _pitches(image, steps)
-            if steps is not None and pitches is None:
-                continue
-            pixels = _pixels(image, trial, spread, pitches)
+            images.insert(0, (depth, 0.0))
+        for divisor, spread in images:
+            image = _Image(rays[:, across], divisor)
+            if steps is None:
+                pixels = _pixels(image, trials.sample, spread)
+            else:
+                pitches = _pitches(image, steps)
+                pixels = None if pitches is None else _pixels(image, trials.middle, 0, pitches)
             if pixels is None:
                 continue
             rows, columns = (closed_up(steps) for steps in pixels)
@@ -1041,10 +1048,57 @@ def sensor_grid(
     return None
 
 
-def float32_rounding(points: np.ndarray) -> float:
-    """How far float32's rounding can spread one pixel's values of ``points`` (n, 3)
-    along a unit direction (:data:`FLOAT32_SPREAD` at their farthest from the origin)."""
-    return FLOAT32_SPREAD * float(np.linalg.norm(points, axis=1).max())
+class LatticeTrials:
+    """What :func:`sensor_grid` measures of ``points`` (n, 3) whatever the frame, each
+    when first needed: a search for their lattice tries many frames."""
+
+    def __init__(self, points: np.ndarray) -> None:
+        self.points = points
+
+    @cached_property
+    def rounding(self) -> float:
+        """How far float32's rounding can spread one pixel's values along a unit
+        direction (:data:`FLOAT32_SPREAD` at the points' farthest from the origin)."""
+        return FLOAT32_SPREAD * float(np.linalg.norm(self.points, axis=1).max())
+
+    @cached_property
+    def sample(self) -> np.ndarray:
+        """(:data:`LATTICE_TRIAL`,) a seeded sample of the points (indices): a sample of
+        a lattice is one, a few columns missing."""
+        trial: np.ndarray = np.random.default_rng(0).permutation(len(self.points))
+        return trial[:LATTICE_TRIAL]
+
+    @cached_property
+    def middle(self) -> np.ndarray:
+        """(:data:`LATTICE_TRIAL`,) the points (indices) nearest the one nearest their
+        median: a patch of the view, every point of it, as dense in any frame's image (a
+        sample's few values in each column, moved off their lattice, could lie farther
+        apart than two columns)."""
+        points = self.points
+        median = np.array([np.median(points[:, k]) for k in range(3)])
+        centre = points[np.argmin(((points - median) ** 2).sum(axis=1))]
+        distance = ((points - centre) ** 2).sum(axis=1)
+        size = min(LATTICE_TRIAL, len(points))
+        patch: np.ndarray = np.argpartition(distance, size - 1)[:size]
+        return patch
+
+
+class _Image:
+    """A frame's image of a view's points: the ``flat`` (n, 2) coordinates across the
+    line of sight, each row over its ``divisor`` (n,) (a pinhole camera's depth) when
+    given; made for the rows asked only (the same numbers as the whole image's rows)."""
+
+    def __init__(self, flat: np.ndarray, divisor: np.ndarray | None) -> None:
+        self.flat, self.divisor = flat, divisor
+
+    def __call__(self, rows: np.ndarray | None = None) -> np.ndarray:
+        """(k, 2) the image of the points ``rows`` (indices), of every point by default."""
+        flat = self.flat if rows is None else self.flat[rows]
+        if self.divisor is None:
+            return flat
+        divisor = self.divisor if rows is None else self.divisor[rows]
+        image: np.ndarray = flat / divisor[:, None]
+        return image
 
 
 #: :func:`closed_up`: how far (in columns) the columns that hold values may lie from the
@@ -1247,11 +1301,11 @@ def _joined(rows: Pairs, columns: Pairs) -> Pairs:
     return np.concatenate([rows[0], columns[0]]), np.concatenate([rows[1], columns[1]])
 
 
-def _pitches(image: np.ndarray, steps: Pairs) -> tuple[float, float] | None:
-    """The pitches (across columns, across rows) of the lattice ``image`` (n, 2) may lie
-    on: the median length of the ``steps`` that run along each of its axes (at least
-    twice as far along it as across), or None when fewer than ten do."""
-    delta = np.abs(image[steps[1]] - image[steps[0]])
+def _pitches(image: _Image, steps: Pairs) -> tuple[float, float] | None:
+    """The pitches (across columns, across rows) of the lattice ``image`` may lie on: the
+    median length of the ``steps`` that run along each of its axes (at least twice as
+    far along it as across), or None when fewer than ten do."""
+    delta = np.abs(image(steps[1]) - image(steps[0]))
     pitches = []
     for axis in (0, 1):
         along = delta[:, axis] > 2.0 * delta[:, 1 - axis]
@@ -1262,25 +1316,17 @@ def _pitches(image: np.ndarray, steps: Pairs) -> tuple[float, float] | None:
 
 
 def _pixels(
-    image: np.ndarray,
+    image: _Image,
     trial: np.ndarray,
     rounding: float,
     pitches: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """(rows, columns) (n,) int of the points whose ``image`` (n, 2) lies on a lattice
+    """(rows, columns) (n,) int of the points whose ``image`` lies on a lattice
     (:func:`lattice_steps`, ``rounding`` allowed for; near one of about ``pitches``,
     :func:`snapped_steps`, when given), or None. Most frames hold no lattice: the
-    ``trial`` sample of the points (indices) tells first; near a lattice, as many points
-    around the image's median instead (a sample's few values in each column, moved,
-    could lie farther apart than two columns)."""
-    if pitches is not None:
-        # Column by column: numpy's median and max across a strided (n, 2) array take
-        # twice and fourteen times as long.
-        x, y = image[:, 0], image[:, 1]
-        middle = np.maximum(np.abs(x - np.median(x)), np.abs(y - np.median(y)))
-        trial = np.argpartition(middle, len(trial) - 1)[: len(trial)]
+    ``trial`` points (indices) tell first, and only then is every point's image made."""
     pixels = None
-    for part in (image[trial], image):
+    for part in (image(trial), image()):
         if pitches is None:
             rows = lattice_steps(part[:, 1], rounding)
             columns = None if rows is None else lattice_steps(part[:, 0], rounding)
