@@ -34,7 +34,7 @@ import trimesh
 
 from worker.engine.pipeline import describe_file
 from worker.engine.presets import DEFAULT_PRESET, get_preset
-from worker.engine.scans import read_pcd, view_frame
+from worker.engine.scans import grid_sight, organized_surface, read_pcd
 from worker.evaluation.partial import random_rotation
 from worker.evaluation.samples import (
     DEPTH_DIRECTION,
@@ -68,6 +68,22 @@ def off_bytes(vertices: np.ndarray, faces: np.ndarray) -> bytes:
     ).encode()
 
 
+def camera_frame(grid: np.ndarray, viewpoint: np.ndarray) -> np.ndarray:
+    """(3, 3) the frame an orthographic depth grid (h, w, 3) seen from ``viewpoint`` (3,)
+    writes its points in, its axes as rows: x along its rows, y along its columns (or
+    against them), z its line of sight (:func:`grid_sight`), away from the camera."""
+    vertices, faces = organized_surface(grid, viewpoint)
+    sight = grid_sight(vertices, faces)
+    assert sight is not None
+    step = np.nanmedian(np.diff(grid, axis=1).reshape(-1, 3), axis=0)
+    x = step - (step @ sight) * sight  # a step along a row, less the depth it climbs
+    x /= np.linalg.norm(x)
+    frame = np.stack([x, np.cross(sight, x), sight])
+    if float(np.nanmean((grid - viewpoint).reshape(-1, 3) @ sight)) < 0.0:
+        frame[1:] *= -1.0  # turned half a turn about its rows: the camera looks along +z
+    return frame
+
+
 def scan_files(pixels: int) -> tuple[dict[str, bytes], str, str]:
     """The scan's files by name (the meshes first), and the scan and the floor scan as
     the table names them (their points and grids)."""
@@ -86,7 +102,7 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], str, str]:
     assert floor.grid is not None
     floor_seen = floor_grid[np.isfinite(floor_grid).all(axis=2)] - floor_viewpoint
     floor_seen = floor_seen[np.random.default_rng(0).permutation(len(floor_seen))]
-    floor_camera = floor_seen @ view_frame(floor_viewpoint).T  # as the camera's software writes
+    floor_camera = floor_seen @ camera_frame(floor_grid, floor_viewpoint).T
     floor_noise = np.random.default_rng(2).normal(scale=pitch / np.sqrt(3), size=floor_seen.shape)
     files = {
         "mesh.off": off_bytes(vertices, faces),
