@@ -999,11 +999,11 @@ def sensor_grid(
     ``(x, y)`` (:func:`lattice_steps`, allowing for float32's rounding of the points as
     written, :data:`FLOAT32_SPREAD`; ``axes``' columns are unit vectors). Tried looking
     along each axis in turn (those numbered in ``along``), as a pinhole camera when every
-    point lies on one side of the viewpoint along it, then as an orthographic one (on
-    ``trials``' sample of the points first, their image of every point only made for a
-    frame the sample passes); the first lattice on which every
-    point has its own pixel is the grid (its empty rows and columns closed up,
-    :func:`closed_up`), and triangulating it needs no Delaunay triangulation. Given
+    point lies on one side of the viewpoint along it, then as an orthographic one (each
+    tried on ``trials``' sample of the points first: every point's image is made only
+    when the sample's lies on a lattice); the first lattice on which every point has its
+    own pixel is the grid (its empty rows and columns closed up, :func:`closed_up`), and
+    triangulating it needs no Delaunay triangulation. Given
     ``steps`` between neighbouring pixels (the (first, second) indices of pairs of the
     points, :func:`sensor_axes`'), whose median lengths along the image's two axes are
     its pitches, the lattice sought is instead one the points lie near, each within
@@ -1030,7 +1030,7 @@ def sensor_grid(
                 pixels = _pixels(image, trials.sample, spread)
             else:
                 pitches = _pitches(image, steps)
-                pixels = None if pitches is None else _pixels(image, trials.middle, 0, pitches)
+                pixels = None if pitches is None else _pixels(image, trials.middle, 0.0, pitches)
             if pixels is None:
                 continue
             rows, columns = (closed_up(steps) for steps in pixels)
