@@ -1,6 +1,8 @@
-"""A scan as a scanner's file against the same surface as a mesh: describe seconds.
+"""A scan as a scanner's file against the same surface as a mesh: describe seconds, or
+query seconds through the service.
 
     OPENBLAS_NUM_THREADS=1 python -m benchmarks.scans [--pixels 1500 30000] [--repeats 5]
+        [--service]
 
 For each size, the walk-through's quadruped-3 seen from its left side by an orthographic
 depth grid of about ``--pixels`` pixels on it (as ``examples/partial/quadruped-3-depth``
@@ -19,19 +21,29 @@ that surface as an OFF mesh. Each
 file is described by
 :func:`~worker.engine.pipeline.describe_file` ``--repeats`` times, the files' order
 alternated, in one process; the table gives the median load (read, triangulate, clean)
-and total seconds, and each total over the mesh's of its surface.
+and total seconds, and each total over the mesh's of its surface. With ``--service``, each
+file is instead the query of ``POST /query`` (``k`` 1) of the service as a user runs it
+(``python -m app`` on a fresh data directory, the 15 examples ``examples/*-[012]``
+enrolled with their labels), one request at a time: the median seconds of the round trip
+(upload, read, describe, search, a view's verification, the answer), each over the
+mesh's, and the class the first answer is.
 """
 
 from __future__ import annotations
 
 import argparse
+import io
 import statistics
 import time
+from contextlib import ExitStack
 from typing import cast
 
+import httpx
 import numpy as np
 import trimesh
 
+from app.client import import_files, read_labels
+from benchmarks.common import EXAMPLES, TIMEOUT, free_port, serving
 from worker.engine.pipeline import describe_file
 from worker.engine.presets import DEFAULT_PRESET, get_preset
 from worker.engine.scans import grid_sight, organized_surface, read_pcd
@@ -130,35 +142,89 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], str, str]:
     return files, scan, floor_label
 
 
+def described(files: dict[str, bytes], repeats: int) -> dict[str, tuple[list[float], str]]:
+    """Each file's describe seconds (``repeats``, the files' order alternated) and its
+    median load milliseconds."""
+    preset = get_preset(DEFAULT_PRESET)
+    load: dict[str, list[float]] = {name: [] for name in files}
+    total: dict[str, list[float]] = {name: [] for name in files}
+    for repeat in range(repeats):
+        for name in list(files) if repeat % 2 == 0 else list(files)[::-1]:
+            start = time.perf_counter()
+            descriptor = describe_file(files[name], preset, name.split(" ")[0])
+            total[name].append(time.perf_counter() - start)
+            load[name].append(descriptor.timings["load"])
+    return {name: (total[name], f"{1000 * statistics.median(load[name]):.1f}") for name in files}
+
+
+def queried(
+    client: httpx.Client, files: dict[str, bytes], repeats: int
+) -> dict[str, tuple[list[float], str]]:
+    """Each file's ``POST /query`` seconds (``repeats``, the files' order alternated, after
+    a round not timed: the service's query processes load what each format needs once)
+    and the class of its first answer."""
+    seconds: dict[str, list[float]] = {name: [] for name in files}
+    first: dict[str, str] = {}
+    for repeat in range(-1, repeats):
+        for name in list(files) if repeat % 2 == 0 else list(files)[::-1]:
+            start = time.perf_counter()
+            response = client.post(
+                "/query", files={"file": (name.split(" ")[0], files[name])}, data={"k": "1"}
+            )
+            if repeat >= 0:
+                seconds[name].append(time.perf_counter() - start)
+            if response.status_code != 200:
+                raise SystemExit(f"{name}: HTTP {response.status_code} {response.text[:300]}")
+            matches = response.json()["matches"]
+            first[name] = matches[0]["label"] if matches else "-"
+    return {name: (seconds[name], first[name]) for name in files}
+
+
+def print_table(timed: dict[str, tuple[list[float], str]], scan: str, floor_label: str) -> None:
+    """One row a file: its label's column, its median seconds, and those over its
+    mesh's."""
+    for name, (seconds, column) in timed.items():
+        floor = name.endswith(ON_A_FLOOR)
+        mesh = f"mesh.off {ON_A_FLOOR}" if floor else "mesh.off"
+        median = statistics.median(seconds)
+        print(
+            f"| {floor_label if floor else scan} | {name.removesuffix(f' {ON_A_FLOOR}')} | "
+            f"{column} | {median:.3f} | {median / statistics.median(timed[mesh][0]):.2f} |"
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pixels", type=int, nargs="+", default=[1500, 30000])
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument(
+        "--service", action="store_true", help="time POST /query through a fresh service"
+    )
     args = parser.parse_args()
-    preset = get_preset(DEFAULT_PRESET)
-    print(f"preset {preset.name}; medians of {args.repeats} describes, files alternated\n")
-    print("| scan | file | load ms | total s | total / mesh's |")
-    print("|---|---|---:|---:|---:|")
-    for pixels in args.pixels:
-        files, scan, floor_label = scan_files(pixels)
-        load: dict[str, list[float]] = {name: [] for name in files}
-        total: dict[str, list[float]] = {name: [] for name in files}
-        for repeat in range(args.repeats):
-            order = list(files) if repeat % 2 == 0 else list(files)[::-1]
-            for name in order:
-                start = time.perf_counter()
-                descriptor = describe_file(files[name], preset, name.split(" ")[0])
-                total[name].append(time.perf_counter() - start)
-                load[name].append(descriptor.timings["load"])
-        for name in files:
-            seconds = statistics.median(total[name])
-            floor = name.endswith(ON_A_FLOOR)
-            mesh = f"mesh.off {ON_A_FLOOR}" if floor else "mesh.off"
-            print(
-                f"| {floor_label if floor else scan} | {name.removesuffix(f' {ON_A_FLOOR}')} | "
-                f"{1000 * statistics.median(load[name]):.1f} | {seconds:.3f} | "
-                f"{seconds / statistics.median(total[mesh]):.2f} |"
+    with ExitStack() as stack:
+        client = None
+        if args.service:
+            url = stack.enter_context(serving(free_port()))
+            client = stack.enter_context(httpx.Client(base_url=url, timeout=TIMEOUT))
+            examples = sorted(EXAMPLES.glob("*-[012].off.gz"))
+            labels = read_labels(EXAMPLES / "labels.csv")
+            done = import_files(examples, url=url, labels=labels, wait=True, stream=io.StringIO())
+            if done.failed:
+                raise SystemExit(f"enrollment failed: {done.failed}")
+            print(f"{len(examples)} examples enrolled; medians of {args.repeats} queries each")
+            print("\n| scan | file | first answer | query s | query / mesh's |")
+        else:
+            print(f"{DEFAULT_PRESET}; medians of {args.repeats} describes, files alternated")
+            print("\n| scan | file | load ms | total s | total / mesh's |")
+        print(f"|---|---|{'---' if client else '---:'}|---:|---:|")
+        for pixels in args.pixels:
+            files, scan, floor_label = scan_files(pixels)
+            timed = (
+                described(files, args.repeats)
+                if client is None
+                else queried(client, files, args.repeats)
             )
+            print_table(timed, scan, floor_label)
 
 
 if __name__ == "__main__":
