@@ -30,10 +30,13 @@ from worker.engine.scans import (
 from worker.evaluation.partial import range_image, voxel_means
 from worker.evaluation.samples import (
     DEPTH_DIRECTION,
+    FLOOR_ELEVATION,
     PARTIAL_SOURCE,
     depth_scan,
+    floor_scan,
     pcd_gz_bytes,
     sample_mesh,
+    seen_from_left,
 )
 
 HEIGHT, WIDTH = 30, 40
@@ -235,6 +238,35 @@ def test_a_pcd_file_is_read_as_its_grid_triangulated_from_its_viewpoint(data):
     faces_aside = read_pcd(pcd(points, data, viewpoint=aside))[1]
     np.testing.assert_array_equal(faces_aside, organized_surface(points, aside)[1])
     assert len(faces_aside) != len(faces)
+
+
+def test_pixels_that_saw_nothing_written_at_the_sensor_are_left_out():
+    """Cameras' software writes a pixel that saw nothing as the point (0, 0, 0), the
+    sensor itself in its frame (Kinect's and RealSense's point clouds): no surface it saw
+    lies there. The floor scene in its camera's frame, a tenth of its pixels missing,
+    written so, as an organized PCD and as a PLY of every pixel's point, is read as it is
+    with those pixels not a number and left out: the same points, triangles and floor
+    (not, from the PLY, points partly behind the sensor read from afar with their
+    floor)."""
+    grid, viewpoint = floor_scan(sample_mesh(*PARTIAL_SOURCE))
+    grid = (grid - viewpoint) @ view_frame(seen_from_left(FLOOR_ELEVATION)).T
+    grid[np.random.default_rng(0).uniform(size=grid.shape[:2]) < 0.1] = np.nan
+    missing = ~np.isfinite(grid).all(axis=2)
+    zeros = np.where(missing[..., None], 0.0, grid)
+    zeros_read, missing_read = read_pcd(pcd(zeros, "binary")), read_pcd(pcd(grid, "binary"))
+    assert zeros_read[2] == missing_read[2] and missing_read[2].support
+    assert triangles(*zeros_read[:2]) == triangles(*missing_read[:2])
+
+    def ply(points: np.ndarray) -> bytes:
+        return trimesh.PointCloud(points).export(file_type="ply")
+
+    zeros_read, missing_read = (
+        read_mesh(ply(points), "scan.ply") for points in (zeros.reshape(-1, 3), grid[~missing])
+    )
+    assert zeros_read.cloud == missing_read.cloud and missing_read.cloud.support
+    assert triangles(zeros_read.mesh.vertices, zeros_read.mesh.faces) == triangles(
+        missing_read.mesh.vertices, missing_read.mesh.faces
+    )
 
 
 def test_lzf_decompresses_what_liblzf_compressed():

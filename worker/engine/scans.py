@@ -366,13 +366,24 @@ def view_frame(direction: np.ndarray) -> np.ndarray:
 def organized_scan(
     points: np.ndarray, viewpoint: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, Cloud]:
-    """An organized cloud (H, W, 3) as a file's is read: the planes its object stands on
-    or against left out (:func:`without_support`), then its surface
-    (:func:`organized_surface`), and the cloud it was."""
+    """An organized cloud (H, W, 3) as a file's is read: its pixels that saw nothing left
+    out (:func:`at_the_sensor`), the planes its object stands on or against too
+    (:func:`without_support`), then its surface (:func:`organized_surface`), and the
+    cloud it was."""
     height, width = points.shape[:2]
+    points = np.where(at_the_sensor(points, viewpoint)[..., None], np.nan, points)
     kept, support = without_support(points, viewpoint)
     vertices, faces = organized_surface(kept, viewpoint)
     return vertices, faces, Cloud(len(vertices), (width, height), support)
+
+
+def at_the_sensor(points: np.ndarray, viewpoint: np.ndarray) -> np.ndarray:
+    """(...) bool: which of ``points`` (..., 3) lie exactly at the sensor's ``viewpoint``
+    (3,): no surface it saw does, and cameras' software writes a pixel that saw nothing so
+    (Kinect's and RealSense's point clouds give it as (0, 0, 0), the sensor in its own
+    frame)."""
+    at: np.ndarray = (points == viewpoint).all(axis=-1)
+    return at
 
 
 def organized_surface(points: np.ndarray, viewpoint: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -766,8 +777,10 @@ def one_view(
     be degrees off), on the side the view's silhouette says its sensor stood
     (:func:`sensor_side`). When that fails too, the first refusal stands: it names the
     sensor the file gave. A point written more than once (frames merged, an export's
-    repeats) is read once: its copies would hide behind one another, and share a pixel."""
-    finite = written_once(points[np.isfinite(points).all(axis=1)])
+    repeats) is read once: its copies would hide behind one another, and share a pixel;
+    one written at the sensor itself is a pixel that saw nothing (:func:`at_the_sensor`)."""
+    seen = np.isfinite(points).all(axis=1) & ~at_the_sensor(points, viewpoint)
+    finite = written_once(points[seen])
     # Computed once, when the frame search's rounds or the second try first need it.
     start = cache(lambda: unfolded_sight(finite))
     try:
