@@ -24,15 +24,17 @@ alternated, in one process; the table gives the median load (read, triangulate, 
 and total seconds, and each total over the mesh's of its surface. With ``--service``, each
 file is instead the query of ``POST /query`` (``k`` 1) of the service as a user runs it
 (``python -m app`` on a fresh data directory, the 15 examples ``examples/*-[012]``
-enrolled with their labels), one request at a time: the median seconds of the round trip
-(upload, read, describe, search, a view's verification, the answer), each over the
-mesh's, and the class the first answer is.
+enrolled with their labels; no recent query's descriptor kept, so that every query is
+described afresh), one request at a time: the median seconds of the round trip (upload,
+read, describe, search, a view's verification, the answer), each over the mesh's, and
+the class the first answer is.
 """
 
 from __future__ import annotations
 
 import argparse
 import io
+import os
 import statistics
 import time
 from contextlib import ExitStack
@@ -175,7 +177,9 @@ def queried(
                 seconds[name].append(time.perf_counter() - start)
             if response.status_code != 200:
                 raise SystemExit(f"{name}: HTTP {response.status_code} {response.text[:300]}")
-            matches = response.json()["matches"]
+            answer = response.json()
+            assert answer["descriptor_source"] == "computed", "a query answered from a cache"
+            matches = answer["matches"]
             first[name] = matches[0]["label"] if matches else "-"
     return {name: (seconds[name], first[name]) for name in files}
 
@@ -204,6 +208,8 @@ def main() -> None:
     with ExitStack() as stack:
         client = None
         if args.service:
+            # Every query described afresh, as a file the service has not seen is.
+            os.environ["SHAPES_QUERY_CACHE_SIZE"] = "0"
             url = stack.enter_context(serving(free_port()))
             client = stack.enter_context(httpx.Client(base_url=url, timeout=TIMEOUT))
             examples = sorted(EXAMPLES.glob("*-[012].off.gz"))
