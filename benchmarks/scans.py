@@ -48,16 +48,18 @@ from app.client import import_files, read_labels
 from benchmarks.common import EXAMPLES, TIMEOUT, free_port, serving
 from worker.engine.pipeline import describe_file
 from worker.engine.presets import DEFAULT_PRESET, get_preset
-from worker.engine.scans import grid_sight, organized_surface, read_pcd
+from worker.engine.scans import read_pcd, view_frame
 from worker.evaluation.partial import random_rotation
 from worker.evaluation.samples import (
     DEPTH_DIRECTION,
+    FLOOR_ELEVATION,
     PARTIAL_SOURCE,
     depth_scan,
     e57_bytes,
     floor_scan,
     pcd_bytes,
     sample_mesh,
+    seen_from_left,
 )
 
 
@@ -82,22 +84,6 @@ def off_bytes(vertices: np.ndarray, faces: np.ndarray) -> bytes:
     ).encode()
 
 
-def camera_frame(grid: np.ndarray, viewpoint: np.ndarray) -> np.ndarray:
-    """(3, 3) the frame an orthographic depth grid (h, w, 3) seen from ``viewpoint`` (3,)
-    writes its points in, its axes as rows: x along its rows, y along its columns (or
-    against them), z its line of sight (:func:`grid_sight`), away from the camera."""
-    vertices, faces = organized_surface(grid, viewpoint)
-    sight = grid_sight(vertices, faces)
-    assert sight is not None
-    step = np.nanmedian(np.diff(grid, axis=1).reshape(-1, 3), axis=0)
-    x = step - (step @ sight) * sight  # a step along a row, less the depth it climbs
-    x /= np.linalg.norm(x)
-    frame = np.stack([x, np.cross(sight, x), sight])
-    if float(np.nanmean((grid - viewpoint).reshape(-1, 3) @ sight)) < 0.0:
-        frame[1:] *= -1.0  # turned half a turn about its rows: the camera looks along +z
-    return frame
-
-
 def scan_files(pixels: int) -> tuple[dict[str, bytes], str, str]:
     """The scan's files by name (the meshes first), and the scan and the floor scan as
     the table names them (their points and grids)."""
@@ -116,7 +102,10 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], str, str]:
     assert floor.grid is not None
     floor_seen = floor_grid[np.isfinite(floor_grid).all(axis=2)] - floor_viewpoint
     floor_seen = floor_seen[np.random.default_rng(0).permutation(len(floor_seen))]
-    floor_camera = floor_seen @ camera_frame(floor_grid, floor_viewpoint).T
+    # As the camera's software writes them: in its frame (floor_scan's, rows along x),
+    # looking along +z (view_frame's z points back at the camera).
+    camera = view_frame(seen_from_left(FLOOR_ELEVATION)) * np.array([[1.0], [-1.0], [-1.0]])
+    floor_camera = floor_seen @ camera.T
     floor_noise = np.random.default_rng(2).normal(scale=pitch / np.sqrt(3), size=floor_seen.shape)
     files = {
         "mesh.off": off_bytes(vertices, faces),

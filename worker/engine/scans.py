@@ -1038,7 +1038,7 @@ def sensor_grid(
         if (depth > 0.0).all() or (depth < 0.0).all():
             images.insert(0, (depth, 0.0))
         for divisor, spread in images:
-            image = _Image(rays[:, across], divisor)
+            image = _Image(rays, across, divisor)
             if steps is None:
                 pixels = _pixels(image, trials.sample, spread)
             else:
@@ -1097,16 +1097,17 @@ class LatticeTrials:
 
 
 class _Image:
-    """A frame's image of a view's points: the ``flat`` (n, 2) coordinates across the
-    line of sight, each row over its ``divisor`` (n,) (a pinhole camera's depth) when
-    given; made for the rows asked only (the same numbers as the whole image's rows)."""
+    """A frame's image of a view's points: their ``rays`` (n, 3) in the frame, the two
+    coordinates ``across`` its line of sight, each row over its ``divisor`` (n,) (a
+    pinhole camera's depth) when given; made for the rows asked only (the same numbers
+    as the whole image's rows)."""
 
-    def __init__(self, flat: np.ndarray, divisor: np.ndarray | None) -> None:
-        self.flat, self.divisor = flat, divisor
+    def __init__(self, rays: np.ndarray, across: list[int], divisor: np.ndarray | None) -> None:
+        self.rays, self.across, self.divisor = rays, across, divisor
 
     def __call__(self, rows: np.ndarray | None = None) -> np.ndarray:
         """(k, 2) the image of the points ``rows`` (indices), of every point by default."""
-        flat = self.flat if rows is None else self.flat[rows]
+        flat = self.rays[:, self.across] if rows is None else self.rays[rows][:, self.across]
         if self.divisor is None:
             return flat
         divisor = self.divisor if rows is None else self.divisor[rows]
