@@ -732,7 +732,7 @@ def test_a_lattice_s_trials_only_refuse_sooner(moved):
     points = (seen @ turn.T).astype(np.float32).astype(float)
     points = points[np.random.default_rng(0).permutation(len(points))]
     frames = list(scans.sensor_axes(points, np.zeros(3)))
-    trials = scans.LatticeTrials(points)
+    trials = scans.LatticeTrials(points, np.zeros(3))
     found = 0
     for frame, _, steps in frames:
         for given in (None, steps):
