@@ -82,6 +82,8 @@ ON_A_FLOOR = "(on a floor)"
 #: that surface as an OFF mesh is named so before the cloud's name, and the cloud is
 #: timed against it too (its reading's cost alone).
 OF_ITS_SURFACE = "mesh.off of"
+#: The last column's title.
+OWN = "/ its surface's mesh"
 
 
 def off_bytes(vertices: np.ndarray, faces: np.ndarray) -> bytes:
@@ -132,16 +134,18 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], str, str]:
             floor_camera + 0.5 * floor_noise
         ),
     }
-    for name in [name for name in files if "moved" in name]:  # each after its cloud
-        surface = load_mesh(files[name], name.split(" ")[0])
-        files[f"{OF_ITS_SURFACE} {name}"] = off_bytes(surface.vertices, surface.faces)
-    files = dict(sorted(files.items(), key=lambda item: list(files).index(own_cloud(item[0]))))
+    with_surfaces = {}
+    for name, data in files.items():
+        with_surfaces[name] = data
+        if "moved" in name:  # the mesh of its surface right after it
+            surface = load_mesh(data, name.split(" ")[0])
+            with_surfaces[f"{OF_ITS_SURFACE} {name}"] = off_bytes(surface.vertices, surface.faces)
     scan = f"{cloud.points:,} points, {cloud.grid[0]} x {cloud.grid[1]}"
     floor_label = (
         f"{floor.points:,} points and {floor.support:,} of the floor, "
         f"{floor.grid[0]} x {floor.grid[1]}"
     )
-    return files, scan, floor_label
+    return with_surfaces, scan, floor_label
 
 
 def described(files: dict[str, bytes], repeats: int) -> dict[str, tuple[list[float], str]]:
@@ -184,11 +188,6 @@ def queried(
     return {name: (seconds[name], first[name]) for name in files}
 
 
-def own_cloud(name: str) -> str:
-    """The cloud whose surface the file ``name`` is, if it is one (else ``name``)."""
-    return name.removeprefix(f"{OF_ITS_SURFACE} ")
-
-
 def print_table(timed: dict[str, tuple[list[float], str]], scan: str, floor_label: str) -> None:
     """One row a file: its label's column, its median seconds, those over its mesh's,
     and a moved cloud's over the mesh of its own surface."""
@@ -203,10 +202,6 @@ def print_table(timed: dict[str, tuple[list[float], str]], scan: str, floor_labe
             f"{column} | {median:.3f} | {median / statistics.median(timed[mesh][0]):.2f} | "
             f"{over_own} |"
         )
-
-
-#: The last column's title.
-OWN = "/ its surface's mesh"
 
 
 def main() -> None:
