@@ -37,6 +37,9 @@ def _queue_errors() -> tuple[type[Exception], ...]:
 #: What an unreachable queue raises: a request answers 503 with ``Retry-After``
 #: (:func:`app.errors.install_error_handlers`); the collector tries again next round.
 QUEUE_ERRORS = _queue_errors()
+#: How often a query looks for its describe's result (Huey polls the result store; an
+#: indexed read a look): the answer's user waits on it.
+RESULT_POLL_SECONDS = 0.01
 
 
 class QueryMeshError(MeshError):
@@ -113,7 +116,7 @@ class DescriptorQueue:
                 task_id,
                 blocking=True,
                 timeout=self.settings.query_timeout_seconds,
-                max_delay=0.1,
+                max_delay=RESULT_POLL_SECONDS,
                 revoke_on_timeout=True,
             )
         except ResultTimeout:

@@ -57,6 +57,11 @@ FILE_GONE_MESSAGE = (
     "first (or the worker does not see the service's uploads)."
 )
 QUEUE_FILE = "queue.sqlite3"
+#: How soon an idle consumer looks for a task again, per queue: (first, last) seconds of
+#: Huey's backoff between looks. A query's user waits for its describe, so its queue is
+#: looked at every 20 ms (on SQLite one indexed read a look; Redis's consumers block on
+#: the queue instead); an enrollment can wait half a second.
+POLL_SECONDS: dict[str, tuple[float, float]] = {"query": (0.005, 0.02), "enroll": (0.1, 0.5)}
 
 
 def heartbeat_key(task_id: str) -> str:
@@ -209,7 +214,8 @@ def run_consumer(
         if stale:
             log.info("removed %d copies left by killed workers", stale)
     huey = make_huey(settings, queue)
+    first, last = POLL_SECONDS[queue]
     consumer = huey.create_consumer(
-        workers=workers, worker_type="thread", initial_delay=0.1, backoff=1.15, max_delay=0.5
+        workers=workers, worker_type="thread", initial_delay=first, backoff=1.15, max_delay=last
     )
     consumer.run()
