@@ -61,7 +61,7 @@ QUEUE_FILE = "queue.sqlite3"
 #: Huey's backoff between looks. A query's user waits for its describe, so its queue is
 #: looked at every 20 ms (on SQLite one indexed read a look; Redis's consumers block on
 #: the queue instead); an enrollment can wait half a second.
-POLL_SECONDS: dict[str, tuple[float, float]] = {"query": (0.005, 0.02), "enroll": (0.1, 0.5)}
+POLL_SECONDS: dict[Queue, tuple[float, float]] = {"query": (0.005, 0.02), "enroll": (0.1, 0.5)}
 
 
 def heartbeat_key(task_id: str) -> str:
