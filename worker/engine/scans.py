@@ -1024,17 +1024,17 @@ def sensor_grid(
     for a search that tries many frames.
     """
     trials = LatticeTrials(points, viewpoint) if trials is None else trials
-    rays = trials.rays if axes is None else trials.rays @ axes
+    rays = trials.rays
     for axis in along:
         across = [k for k in (0, 1, 2) if k != axis]
-        depth = rays[:, axis]
+        depth = rays[:, axis] if axes is None else rays @ axes[:, axis]
         # A pinhole camera's image divides by the depth; an orthographic grid's allows for
         # the points' rounding.
         images: list[tuple[np.ndarray | None, float]] = [(None, trials.rounding)]
         if (depth > 0.0).all() or (depth < 0.0).all():
             images.insert(0, (depth, 0.0))
         for divisor, spread in images:
-            image = _Image(rays, across, divisor)
+            image = _Image(rays, axes, across, divisor)
             if steps is None:
                 pixels = _pixels(image, trials.sample, spread)
             else:
@@ -1091,7 +1091,7 @@ class LatticeTrials:
         sample's few values in each column, moved off their lattice, could lie farther
         apart than two columns)."""
         points = self.points
-        median = np.array([np.median(points[:, k]) for k in range(3)])
+        median = np.median(points, axis=0)
         centre = points[np.argmin(((points - median) ** 2).sum(axis=1))]
         distance = ((points - centre) ** 2).sum(axis=1)
         size = min(LATTICE_TRIAL, len(points))
@@ -1100,17 +1100,25 @@ class LatticeTrials:
 
 
 class _Image:
-    """A frame's image of a view's points: their ``rays`` (n, 3) in the frame, the two
-    coordinates ``across`` its line of sight, each row over its ``divisor`` (n,) (a
-    pinhole camera's depth) when given; made for the rows asked only (the same numbers
-    as the whole image's rows)."""
+    """A frame's image of a view's points: their ``rays`` (n, 3) turned into the frame
+    ``axes`` (3, 3) (columns; the points' own frame when None), the two coordinates
+    ``across`` its line of sight, each row over its ``divisor`` (n,) (a pinhole camera's
+    depth) when given; made for the rows asked only, so that a frame refused by a trial
+    turns none of the other points."""
 
-    def __init__(self, rays: np.ndarray, across: list[int], divisor: np.ndarray | None) -> None:
-        self.rays, self.across, self.divisor = rays, across, divisor
+    def __init__(
+        self,
+        rays: np.ndarray,
+        axes: np.ndarray | None,
+        across: list[int],
+        divisor: np.ndarray | None,
+    ) -> None:
+        self.rays, self.axes, self.across, self.divisor = rays, axes, across, divisor
 
     def __call__(self, rows: np.ndarray | None = None) -> np.ndarray:
         """(k, 2) the image of the points ``rows`` (indices), of every point by default."""
-        flat = self.rays[:, self.across] if rows is None else self.rays[rows][:, self.across]
+        rays = self.rays if rows is None else self.rays[rows]
+        flat = rays[:, self.across] if self.axes is None else rays @ self.axes[:, self.across]
         if self.divisor is None:
             return flat
         divisor = self.divisor if rows is None else self.divisor[rows]
