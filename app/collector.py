@@ -238,6 +238,7 @@ class JobCollector:
                 input_points=descriptor.input_points,
                 input_grid=None if descriptor.input_grid is None else list(descriptor.input_grid),
                 input_support=descriptor.input_support,
+                input_hidden=descriptor.input_hidden,
                 facing_share=descriptor.facing_share,
                 smoothed=descriptor.surface_smoothed,
             ),

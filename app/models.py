@@ -157,6 +157,9 @@ class Descriptor(Base):
     # Of an organized cloud: the points of a floor, table or wall left out (None: not an
     # organized cloud, or made before they were left out).
     input_support: Mapped[int | None]
+    # Of a cloud that was not one view (a whole object's): its points hidden from where it
+    # was seen, left out (None: a mesh, one view, or made before they were left out).
+    input_hidden: Mapped[int | None]
     # The largest share of the surface facing one way (None: made before it was kept).
     facing_share: Mapped[float | None]
     # Whether it was smoothed of a scanner's noise (None: made before it was kept).

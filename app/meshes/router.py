@@ -131,6 +131,7 @@ def mesh_out(mesh: Mesh, descriptor: Descriptor | None, collection: str) -> Mesh
             input_points=descriptor.input_points,
             input_grid=descriptor.input_grid,
             input_support=descriptor.input_support,
+            input_hidden=descriptor.input_hidden,
             facing_share=descriptor.facing_share,
             smoothed=descriptor.smoothed,
         ),

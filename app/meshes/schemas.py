@@ -50,6 +50,13 @@ class DescriptorInfo(BaseModel):
         "front of it), left out before it was triangulated; null for a mesh, a cloud "
         "without a grid, or descriptors made before it was recorded",
     )
+    input_hidden: int | None = Field(
+        None,
+        description="when the cloud was not one view (a whole object's points, or several "
+        "views merged): read as the view that sees most of it, the points hidden from "
+        "there, left out; null for a mesh, one view, or descriptors made before it was "
+        "recorded",
+    )
     facing_share: float | None = Field(
         None,
         description="the largest share of the described surface's area facing one way: "

@@ -153,7 +153,9 @@ class QueryOut(BaseModel):
         "for a point cloud also input_points (its points that saw the surface), and for "
         "an organized one (a PCD with a grid or a structured E57 scan) input_grid "
         "([width, height]) and input_support (its points on a floor, table or wall its "
-        "object stood on or against, left out); smoothed (true) when its surface looked "
+        "object stood on or against, left out); for a cloud that is not one view (a whole "
+        "object's points) input_hidden, its points hidden from the view that sees most of "
+        "it, left out; smoothed (true) when its surface looked "
         "noisy and was smoothed before it was described (a single view: before it was "
         "fitted)",
     )

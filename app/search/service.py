@@ -178,6 +178,13 @@ def query_notes(
             f"The query is a scanner's point cloud: {points:,} points on a {width} x {height} "
             "grid, triangulated by it."
         )
+    elif isinstance(hidden := facts.get("input_hidden"), int):
+        notes.append(
+            f"The query is a point cloud that is not one view (a whole object's points, or "
+            f"several views'): it was read as the view that sees most of it, {points:,} "
+            f"points triangulated as seen from there; the {hidden:,} hidden behind them "
+            "were left out."
+        )
     elif points is not None:
         notes.append(
             f"The query is a scanner's point cloud: {points:,} points, triangulated as one view."
@@ -340,6 +347,8 @@ def query_facts(descriptor: ShapeDescriptor) -> dict[str, bool | int | float | l
         facts["input_grid"] = list(descriptor.input_grid)
     if descriptor.input_support is not None:
         facts["input_support"] = descriptor.input_support
+    if descriptor.input_hidden is not None:
+        facts["input_hidden"] = descriptor.input_hidden
     if descriptor.surface_smoothed:
         facts["smoothed"] = True
     return facts

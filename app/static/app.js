@@ -223,6 +223,10 @@ function pointCloud(facts) {
   if (!facts || facts.input_points == null) return null;
   const points = `a scanner's point cloud: ${facts.input_points.toLocaleString("en")} points`;
   let read = `${points}, triangulated as one view`;
+  if (facts.input_hidden != null) {
+    const hidden = facts.input_hidden.toLocaleString("en");
+    read = `${points} seen from where most of it shows, triangulated as that view (${hidden} hidden behind them left out)`;
+  }
   if (facts.input_grid) {
     const [width, height] = facts.input_grid;
     read = `${points} on a ${width} x ${height} grid, triangulated by it`;

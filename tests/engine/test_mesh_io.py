@@ -204,12 +204,18 @@ def test_gzip_bomb_is_refused_without_expanding():
         load_mesh(bomb, "bomb.obj.gz", max_decompressed_bytes=1024 * 1024)
 
 
-def test_point_cloud_has_no_faces():
+def test_a_point_cloud_that_is_no_view_is_read_as_the_view_that_sees_most_of_it():
     """Points filling a cube are no view from the origin, nor from afar (most of them
-    hide behind others as seen from either)."""
-    cloud = trimesh.PointCloud(np.random.default_rng(0).random((500, 3))).export(file_type="ply")
-    with pytest.raises(errors.PointCloudError):
-        load_mesh(cloud, "cloud.ply")
+    hide behind others as seen from either): a PLY of them is read as the view that sees
+    most of them, its triangles among the points seen, the rest counted as hidden."""
+    points = np.random.default_rng(0).random((500, 3))
+    read = mesh_io.read_mesh(trimesh.PointCloud(points).export(file_type="ply"), "cloud.ply")
+    cloud = read.cloud
+    assert cloud is not None and cloud.hidden is not None and cloud.hidden > 0
+    assert cloud.points + cloud.hidden == len(points)
+    assert read.mesh.n_vertices <= cloud.points
+    nearest = np.linalg.norm(read.mesh.vertices[:, None] - points[None], axis=2).min(axis=1)
+    assert nearest.max() < 1e-6  # the PLY's float32 coordinates
 
 
 def test_non_finite_coordinates():

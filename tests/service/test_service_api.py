@@ -229,7 +229,8 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_or_as_seen_from_its_camer
     whose left side is the scanned pose's, then quadruped-0, whose legs moved). The answer,
     and an enrolled scan's descriptor, say it was a cloud and of how many points. Its
     points without the grid, in the camera's frame, are read as seen from the camera and
-    find the same; a whole object's points are a 422 that says what to send instead."""
+    find the same; a whole object's points are read as the view that sees most of them,
+    which finds the quadruped and says so, and enrol as such."""
     data = (EXAMPLES / DEPTH_SAMPLE).read_bytes()
     response = service.client.post(
         "/query", files={"file": (DEPTH_SAMPLE.name, data)}, data={"k": "3"}
@@ -315,10 +316,26 @@ def test_a_depth_camera_s_cloud_is_queried_by_its_grid_or_as_seen_from_its_camer
     assert as_points["partial"]["single_view"]
     assert f"{points:,} points, triangulated as one view" in format_matches(as_points)
 
-    whole = trimesh.PointCloud(load_mesh(example("quadruped-2")).vertices).export(file_type="ply")
-    refused = _error(service.client.post("/query", files={"file": ("scan.ply", whole)}), 422)
-    assert refused["error"] == "no_faces" and "not one view" in refused["detail"]
-    assert "organized cloud (.pcd, one point per pixel)" in refused["detail"]
+    # A whole object's points: read as the view that sees most of them, the rest hidden.
+    vertices = load_mesh(example("quadruped-2")).vertices
+    whole = trimesh.PointCloud(vertices).export(file_type="ply")
+    response = service.client.post("/query", files={"file": ("scan.ply", whole)}, data={"k": "3"})
+    assert response.status_code == 200, response.text
+    seen = response.json()
+    hidden = seen["query"]["input_hidden"]
+    assert hidden > 0 and seen["query"]["input_points"] + hidden == len(vertices)
+    assert seen["partial"]["single_view"] and seen["matches"][0]["label"] == "quadruped"
+    assert seen["notes"][0] == (
+        "The query is a point cloud that is not one view (a whole object's points, or "
+        "several views'): it was read as the view that sees most of it, "
+        f"{seen['query']['input_points']:,} points triangulated as seen from there; the "
+        f"{hidden:,} hidden behind them were left out."
+    )
+    assert "input_hidden" not in as_points["query"] and "input_hidden" not in body["query"]
+    enrolled = service.client.post("/collections/scans/meshes", files={"file": ("q.ply", whole)})
+    assert enrolled.status_code == 202, enrolled.text
+    stored = service.wait_mesh(enrolled.json()["id"], collection="scans")["descriptor"]
+    assert stored["input_hidden"] == hidden and mesh["descriptor"]["input_hidden"] is None
 
 
 def test_a_laser_scanner_s_structured_e57_scan_is_queried_by_its_grid(service: Service, gallery):

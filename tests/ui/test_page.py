@@ -645,4 +645,15 @@ def test_an_enrolled_scan_says_it_was_a_point_cloud(page, site):
         f"({cloud.support:,} points of a floor, table or wall it stood on or against left out)"
         in facts
     ), facts
+    # A whole object's points: read as the view that sees most of them, the rest hidden.
+    whole = trimesh.PointCloud(load_mesh(example("quadruped-2")).vertices)
+    facts = enrolled_facts(page, site, "whole.ply", whole.export(file_type="ply"))
+    shown = re.search(
+        r"a scanner's point cloud: ([0-9,]+) points seen from where most of it shows, "
+        r"triangulated as that view \(([0-9,]+) hidden behind them left out\)",
+        facts,
+    )
+    assert shown is not None, facts
+    seen, hidden = (int(number.replace(",", "")) for number in shown.groups())
+    assert seen + hidden == len(whole.vertices) and hidden > 0
     page.select_option("#collection", "default")  # as the page was before this test

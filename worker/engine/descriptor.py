@@ -67,6 +67,9 @@ class ShapeDescriptor:
     input_support : of an organized cloud, the points of the floor, table or wall its
         object stood on or against, left out (:func:`~worker.engine.scans.without_support`);
         None for a mesh or a cloud without a grid.
+    input_hidden : of a cloud that was not one view (a whole object's), the points hidden
+        from where it was seen, left out (:func:`~worker.engine.scans.whole_view`); None
+        for a mesh or one view.
     facing_share : the largest share of the described surface's area whose faces face
         one direction (:func:`~worker.engine.holes.facing_share`): about a half for a
         whole, a cut or a holed copy, near 1 for one view of a scanner. None for a
@@ -99,6 +102,7 @@ class ShapeDescriptor:
     input_points: int | None = None
     input_grid: tuple[int, int] | None = None
     input_support: int | None = None
+    input_hidden: int | None = None
     facing_share: float | None = None
     surface: np.ndarray = field(default_factory=lambda: np.zeros((0, 6), dtype=np.float16))
     surface_unit: float | None = None
@@ -159,6 +163,7 @@ class ShapeDescriptor:
             "input_points": self.input_points,
             "input_grid": None if self.input_grid is None else list(self.input_grid),
             "input_support": self.input_support,
+            "input_hidden": self.input_hidden,
             "facing_share": self.facing_share,
             "surface_unit": self.surface_unit,
             "surface_voxel": self.surface_voxel,
@@ -200,6 +205,7 @@ class ShapeDescriptor:
             input_points=meta.get("input_points"),
             input_grid=None if (grid := meta.get("input_grid")) is None else (grid[0], grid[1]),
             input_support=meta.get("input_support"),
+            input_hidden=meta.get("input_hidden"),
             facing_share=meta.get("facing_share"),
             # Descriptors stored before the surface was kept have none.
             surface=np.asarray(arrays.get("surface", np.zeros((0, 6))), dtype=np.float16).reshape(

@@ -335,6 +335,7 @@ def load_and_describe(
         descriptor.input_points = cleaned.cloud.points
         descriptor.input_grid = cleaned.cloud.grid
         descriptor.input_support = cleaned.cloud.support
+        descriptor.input_hidden = cleaned.cloud.hidden
     descriptor.timings = {"load": load_seconds, **descriptor.timings}
     descriptor.timings["total"] = sum(descriptor.timings.values())
     return cleaned.mesh, descriptor

@@ -88,11 +88,14 @@ class Cloud:
     surface, its sensor ``grid``, (width, height) pixels (None: a cloud without one,
     triangulated as seen from its sensor, :func:`viewed_surface`), and the points of the
     floor, table or wall its object stood on or against, left out
-    (:func:`without_support`; None: not looked for, :func:`viewed_surface` says when)."""
+    (:func:`without_support`; None: not looked for, :func:`viewed_surface` says when), and
+    of points that are not one view, those hidden from where they were seen, left out
+    (:func:`whole_view`; None: one view)."""
 
     points: int
     grid: tuple[int, int] | None = None
     support: int | None = None
+    hidden: int | None = None
 
 
 def grid_faces(valid: np.ndarray) -> np.ndarray:
@@ -412,6 +415,7 @@ def viewed_surface(
     find_frame: bool = True,
     start: Callable[[], np.ndarray] | None = None,
     sensor_known: bool = True,
+    least_seen: float = VIEW_SHARE,
 ) -> tuple[np.ndarray, np.ndarray, Cloud]:
     """A cloud without a grid read as one view: (n, 3) its finite points and (m, 3) the
     triangles of the surface its sensor saw, facing the sensor, and the cloud it was.
@@ -448,7 +452,7 @@ def viewed_surface(
     PointCloudError
         Fewer than three points not on one line as seen from ``viewpoint``; a point
         beside or behind it (no image plane holds every ray); or fewer than
-        ``VIEW_SHARE`` of the points on the surface (points hidden behind others, as a
+        ``least_seen`` of the points on the surface (points hidden behind others, as a
         whole object's or several views' are, are joined to them only along the rays).
     """
     finite = points[np.isfinite(points).all(axis=1)]
@@ -501,7 +505,7 @@ def viewed_surface(
         remaining = _delaunay(image[rest], where)
         faces = _seen_triangles(finite[rest], image[rest], viewpoint, remaining, image[left_out])
         seen = float(np.unique(faces).size / np.count_nonzero(rest))
-        if seen < VIEW_SHARE:  # one view with its support, if not without it
+        if seen < least_seen:  # one view with its support, if not without it
             every = whole if whole is not None else _delaunay(image, where)
             seen_with = _seen_triangles(finite, image, viewpoint, every, edges=edges)
             seen = max(seen, float(np.unique(seen_with).size / len(finite)))
@@ -510,7 +514,7 @@ def viewed_surface(
         every = whole if whole is not None else _delaunay(image, where)
         faces = _seen_triangles(finite, image, viewpoint, every, edges=edges)
         seen = float(np.unique(faces).size / len(finite))
-    if seen < VIEW_SHARE:
+    if seen < least_seen:
         raise PointCloudError(
             f"The file holds points but no triangles, and they are not one view from the "
             f"sensor at ({where}): {100 * (1 - seen):.0f}% of them hide behind others, as "
@@ -773,7 +777,9 @@ def one_view(
     all would stand, and when the triangles so made are an orthographic grid's, once more
     along its own line of sight (:func:`grid_sight`: exact, where the unfolded sight can
     be degrees off), on the side the view's silhouette says its sensor stood
-    (:func:`sensor_side`). When that fails too, the first refusal stands: it names the
+    (:func:`sensor_side`). Points that are not one view from there either (a whole
+    object's, several views merged) are read as the view that sees most of them
+    (:func:`whole_view`). When that fails too, the first refusal stands: it names the
     sensor the file gave. A point written more than once (frames merged, an export's
     repeats) is read once: its copies would hide behind one another, and share a pixel;
     one written at the sensor itself is a pixel that saw nothing (:func:`at_the_sensor`)."""
@@ -800,11 +806,85 @@ def one_view(
                     finite, guess, find_frame=False, sensor_known=False
                 )
         except PointCloudError:
-            raise refusal from None
+            try:
+                return whole_view(finite)
+            except PointCloudError:
+                raise refusal from None
         direction = guess - vertices.mean(axis=0)
         if sensor_side(vertices, faces, direction) < 0.0:
             faces = faces[:, ::-1]  # its sensor stands the other way: each triangle faces it
         return vertices, faces, cloud
+
+
+#: :func:`whole_view`: the directions a cloud is looked at from (a Fibonacci lattice over
+#: the sphere), each on a seeded sample of this many of its points; how far the camera
+#: stands from their centroid, in their extents; and the radius points are flipped about
+#: (:func:`visible_points`), the farthest one's distance times ten to this power (Katz, Tal
+#: and Basri 2007's gamma).
+WHOLE_DIRECTIONS = 32
+WHOLE_SAMPLE = 2000
+WHOLE_DISTANCE = 3.0
+FLIP_POWER = 2.0
+#: :func:`whole_view`: the share of the points seen that must lie on the view's surface.
+#: Lower than one view's ``VIEW_SHARE``: the view of a whole object's points loses its
+#: rim, seen at a grazing angle (the shadow rule's), which a camera there would have seen
+#: as few pixels (a sphere's: the 21% of the points seen whose normals lie 68-82 degrees
+#: off the camera).
+WHOLE_SEEN = 0.5
+
+
+def whole_view(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, Cloud]:
+    """Points (n, 3) that are not one view from anywhere (a whole object's, several views
+    merged) read as the view that sees most of them: a camera ``WHOLE_DISTANCE`` extents
+    from their centroid along each of ``WHOLE_DIRECTIONS`` directions counts the points it
+    sees (:func:`visible_points`, on a sample); from the one that sees most, the points it
+    sees are read as its view (:func:`viewed_surface`) and the rest, hidden behind them,
+    left out (the cloud's ``hidden``). A cloud of a whole object has no triangles to
+    tell its touching sheets apart (docs/decisions.md, "Point clouds stay refused"); one
+    side of it, seen, does: a view's surface is its image's.
+
+    Raises
+    ------
+    PointCloudError
+        The view so seen is not one (:func:`viewed_surface`), or the points lie in a plane.
+    """
+    from scipy.spatial import QhullError
+
+    from .holes import fibonacci_directions  # holes reads meshes through this module
+
+    centre = points.mean(axis=0)
+    extent = float(np.ptp(points, axis=0).max())
+    cameras = centre + WHOLE_DISTANCE * extent * fibonacci_directions(WHOLE_DIRECTIONS)
+    sample = points[np.random.default_rng(0).permutation(len(points))[:WHOLE_SAMPLE]]
+    try:
+        seen = [visible_points(sample, camera).size for camera in cameras]
+        camera = cameras[int(np.argmax(seen))]
+        visible = visible_points(points, camera)
+    except QhullError as exc:
+        raise PointCloudError(
+            f"The file's points lie in a plane: no surface joins them. {UPLOAD_A_VIEW}"
+        ) from exc
+    vertices, faces, cloud = viewed_surface(
+        points[visible], camera, find_frame=False, sensor_known=False, least_seen=WHOLE_SEEN
+    )
+    return vertices, faces, Cloud(cloud.points, hidden=len(points) - len(visible))
+
+
+def visible_points(points: np.ndarray, viewpoint: np.ndarray) -> np.ndarray:
+    """The indices, in order, of ``points`` (n, 3) seen from ``viewpoint`` (3,), none at
+    it: Katz, Tal and Basri's hidden point removal ("Direct visibility of point sets",
+    SIGGRAPH 2007). About the viewpoint each point is flipped across the sphere of radius
+    R (``FLIP_POWER``), p + 2 (R - |p|) p / |p|; a point is seen when its flip is a vertex
+    of the convex hull of the flips and the viewpoint."""
+    from scipy.spatial import ConvexHull
+
+    rays = points - viewpoint
+    length = np.linalg.norm(rays, axis=1)
+    radius = float(length.max()) * 10.0**FLIP_POWER
+    flipped = rays * ((2.0 * radius - length) / length)[:, None]
+    corners = ConvexHull(np.vstack([flipped, np.zeros((1, 3))])).vertices
+    seen: np.ndarray = np.sort(corners[corners < len(points)])
+    return seen
 
 
 def written_once(points: np.ndarray) -> np.ndarray:

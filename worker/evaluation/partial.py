@@ -32,6 +32,9 @@ here keeps a part of the surface, its largest connected piece:
 * ``floor-voxels``: ``range-floor``'s very frames without their grid, thinned by
   ``view-voxels``' filter, read as ``view-voxels`` (the floor left out of their binned
   image);
+* ``points``: the whole surface as a point cloud, its vertices in a random similarity and
+  order without their faces, read as the service reads points that are not one view (the
+  view that sees most of them, :func:`worker.engine.scans.one_view`);
 * ``shrec-holes``: SHREC'17's holes: geodesic discs of random radius (up to 20% of the
   diameter) eroded around some of 70 farthest samples, the rest decimated to a random
   resolution (300 vertices .. as many as the mesh has), in a random similarity transform;
@@ -444,6 +447,15 @@ def view_points(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     return similarity(clean_mesh(vertices, faces), rng)
 
 
+def whole_points(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+    """The whole's vertices in a random :func:`similarity` and a random order, without
+    their faces, read as the service reads such a file (the sensor at the origin,
+    :func:`worker.engine.scans.one_view`)."""
+    moved = similarity(mesh, rng).vertices
+    vertices, faces, _ = one_view(moved[rng.permutation(len(moved))], np.zeros(3))
+    return clean_mesh(vertices, faces)
+
+
 #: ``view-voxels``: the voxel's edge, in pixels of the scan.
 VOXEL_PIXELS = 2.0
 
@@ -572,6 +584,7 @@ PARTIAL_VARIANTS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
     "view-voxels": view_voxels,
     "range-floor": range_floor,
     "floor-voxels": floor_voxels,
+    "points": whole_points,
     "shrec-holes": shrec_holes,
     "noise-0.25": lambda mesh, rng: noisy_surface(mesh, 0.25, rng),
     "noise-0.5": lambda mesh, rng: noisy_surface(mesh, 0.5, rng),
