@@ -860,7 +860,8 @@ def whole_view(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, Cloud]:
     extent = float(np.ptp(points, axis=0).max())
     sample = points[np.random.default_rng(0).permutation(len(points))[:WHOLE_SAMPLE]]
     # Points written twice (whole_view is also called without written_once) space none.
-    spacing = float(np.median(_tree(sample).query(sample, k=2)[0][:, 1])) or extent / len(sample)
+    nearest = np.asarray(_tree(sample).query(sample, k=2)[0])[:, 1]
+    spacing = float(np.median(nearest)) or extent / len(sample)
     covered = [
         len(np.unique(np.floor(sample @ frame[:2].T / spacing), axis=0))
         for frame in view_frame(directions)
