@@ -844,7 +844,8 @@ def whole_view(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, Cloud]:
     apart (docs/decisions.md, "Point clouds stay refused"); one side of it, seen, does: a
     view's surface is its image's. On TOSCA's wholes as points the largest silhouette
     finds the own class more often than the most points seen or a random direction
-    (docs/decisions.md, "A whole object's points read as the view that sees most").
+    (docs/decisions.md, "A whole object's points read as the view that sees most of
+    them").
 
     Raises
     ------
