@@ -247,7 +247,9 @@ def build_corpus(max_faces: int, seed: int = 5) -> list[Case]:
     add("single-triangle", "triangle.off", off(tri, [[0, 1, 2]]), 422, "too_few_vertices")
     add("single-triangle-stl", "triangle.stl", stl_binary(tri, [[0, 1, 2]]), 422,
         "too_few_vertices")  # fmt: skip
-    points = np.random.default_rng(seed).normal(size=(500, 3))
+    # Points without faces that make no surface from anywhere: on one line (a blob of them
+    # is read as the view along its largest silhouette, as a whole object's points are).
+    points = np.outer(np.random.default_rng(seed).normal(size=500), [1.0, 2.0, 3.0])
     ply_points = (
         "ply\nformat ascii 1.0\nelement vertex 500\nproperty float x\nproperty float y\n"
         "property float z\nend_header\n" + "".join(f"{x} {y} {z}\n" for x, y, z in points)
@@ -258,7 +260,7 @@ def build_corpus(max_faces: int, seed: int = 5) -> list[Case]:
     add("point-cloud-obj", "cloud.obj",
         "".join(f"v {x} {y} {z}\n" for x, y, z in points).encode(), 422,
         ("no_faces", "empty_mesh"))  # fmt: skip
-    # Points as text: around the sensor (not one view), not numbers, not text at all.
+    # Points as text: on one line (no surface), not numbers, not text at all.
     add("point-cloud-xyz", "cloud.xyz", "".join(f"{x} {y} {z}\n" for x, y, z in points).encode(),
         422, "no_faces")  # fmt: skip
     add("points-not-numbers-csv", "cloud.csv", b"x,y,z\n1,2,3\n4,five,6\n", 422, UNREADABLE)

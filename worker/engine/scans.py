@@ -780,11 +780,17 @@ def one_view(
     (:func:`sensor_side`). Points that are not one view from there either (a whole
     object's, several views merged) are read as the view that sees most of them
     (:func:`whole_view`). When that fails too, the first refusal stands: it names the
-    sensor the file gave. A point written more than once (frames merged, an export's
-    repeats) is read once: its copies would hide behind one another, and share a pixel;
-    one written at the sensor itself is a pixel that saw nothing (:func:`at_the_sensor`)."""
+    sensor the file gave. Points on one line (:func:`on_a_line`, rounded off it) are
+    refused first: from afar they would pass for a view of slivers. A point written more
+    than once (frames merged, an export's repeats) is read once: its copies would hide
+    behind one another, and share a pixel; one written at the sensor itself is a pixel
+    that saw nothing (:func:`at_the_sensor`)."""
     seen = np.isfinite(points).all(axis=1) & ~at_the_sensor(points, viewpoint)
     finite = written_once(points[seen])
+    if len(finite) >= 3 and on_a_line(finite):
+        raise PointCloudError(
+            f"The file's points lie on one line: no surface joins them. {UPLOAD_A_VIEW}"
+        )
     # Computed once, when the frame search's rounds or the second try first need it.
     start = cache(lambda: unfolded_sight(finite))
     try:
@@ -850,7 +856,8 @@ def whole_view(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, Cloud]:
     Raises
     ------
     PointCloudError
-        The view so seen is not one (:func:`viewed_surface`), or the points lie in a plane.
+        The view so seen is not one (:func:`viewed_surface`) or has no triangle, or the
+        points lie in a plane.
     """
     from scipy.spatial import QhullError
 
@@ -877,6 +884,11 @@ def whole_view(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, Cloud]:
     vertices, faces, cloud = viewed_surface(
         points[visible], camera, find_frame=False, sensor_known=False, least_seen=WHOLE_SEEN
     )
+    if not len(faces):  # a few points seen past a far outlier may lie on a lattice of none
+        raise PointCloudError(
+            f"The file's points make no surface as seen from where most of them show. "
+            f"{UPLOAD_A_VIEW}"
+        )
     return vertices, faces, Cloud(cloud.points, hidden=len(points) - len(visible))
 
 
@@ -895,6 +907,18 @@ def visible_points(points: np.ndarray, viewpoint: np.ndarray) -> np.ndarray:
     corners = ConvexHull(np.vstack([flipped, np.zeros((1, 3))])).vertices
     seen: np.ndarray = np.sort(corners[corners < len(points)])
     return seen
+
+
+#: :func:`on_a_line`: points whose spread across their line is under this share of their
+#: spread along it (float32's rounding moves a line's points some 1e-7 of it off it).
+LINE_SPREAD = 1e-4
+
+
+def on_a_line(points: np.ndarray) -> bool:
+    """Whether ``points`` (n, 3) lie on one line: their second principal spread (the root
+    of their covariance's second eigenvalue) under ``LINE_SPREAD`` times their first."""
+    variances = np.linalg.eigvalsh(np.cov(points.T))  # ascending
+    return bool(variances[1] <= LINE_SPREAD**2 * variances[2])
 
 
 def written_once(points: np.ndarray) -> np.ndarray:
