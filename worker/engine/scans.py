@@ -866,10 +866,9 @@ def whole_view(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, Cloud]:
     directions = fibonacci_directions(WHOLE_DIRECTIONS)
     centre = points.mean(axis=0)
     extent = float(np.ptp(points, axis=0).max())
-    sample = points[np.random.default_rng(0).permutation(len(points))[:WHOLE_SAMPLE]]
+    sample, spacing = _spaced_sample(points, WHOLE_SAMPLE)
     # Points written twice (whole_view is also called without written_once) space none.
-    nearest = np.asarray(_tree(sample).query(sample, k=2)[0])[:, 1]
-    spacing = float(np.median(nearest)) or extent / len(sample)
+    spacing = spacing or extent / len(sample)
     covered = [
         len(np.unique(np.floor(sample @ frame[:2].T / spacing), axis=0))
         for frame in view_frame(directions)
@@ -965,11 +964,7 @@ def unfolded_sight(points: np.ndarray) -> np.ndarray:
     median 5.6 degrees off the scanner's line of sight (90% within 16.4, the farthest
     45.7), the least principal axis a median 38.5 (87.6); :func:`sensor_axes`' rounds
     then find the exact line."""
-    from scipy.spatial import cKDTree
-
-    sample = points[np.random.default_rng(0).permutation(len(points))[:SIGHT_SAMPLE]]
-    nearest = np.asarray(cKDTree(sample).query(sample, k=2)[0])[:, 1]
-    spacing = float(np.median(nearest))
+    sample, spacing = _spaced_sample(points, SIGHT_SAMPLE)
     turn = np.pi * (1.0 + np.sqrt(5.0)) * (np.arange(SIGHT_DIRECTIONS) + 0.5)
     height = (np.arange(SIGHT_DIRECTIONS) + 0.5) / SIGHT_DIRECTIONS
     radius = np.sqrt(1.0 - height**2)
@@ -990,6 +985,14 @@ def unfolded_sight(points: np.ndarray) -> np.ndarray:
             best = tried[shares == shares.min()].mean(axis=0)
             best = best / np.linalg.norm(best)
     return best
+
+
+def _spaced_sample(points: np.ndarray, size: int) -> tuple[np.ndarray, float]:
+    """A seeded sample of ``size`` of ``points`` (n, 3) (all of them when fewer) and the
+    median distance from each of its points to the nearest other."""
+    sample = points[np.random.default_rng(0).permutation(len(points))[:size]]
+    nearest = np.asarray(_tree(sample).query(sample, k=2)[0])[:, 1]
+    return sample, float(np.median(nearest))
 
 
 def least_spread(points: np.ndarray) -> np.ndarray:
