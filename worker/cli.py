@@ -419,7 +419,8 @@ def add_subcommands(sub: Any) -> None:
         help="comma-separated subset of the partial copies: cut-5, cut-15, cut-30, holes-10, "
         "holes-25, view, range, range-cloud, view-points, view-voxels, range-floor, floor-voxels, "
         "points, shrec-holes, "
-        "noise-0.25, noise-0.5, noise-1, view-noise-0.25, view-noise-0.5 (default: all)",
+        "noise-0.25, noise-0.5, noise-1, view-noise-0.25, view-noise-0.5, points-noise-0.25, "
+        "points-noise-0.5 (default: all)",
     )
     partial.add_argument(
         "--copies",

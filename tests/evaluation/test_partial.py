@@ -192,6 +192,31 @@ def test_a_noisy_view_is_the_view_moved_along_its_rays(sphere):
         assert abs(np.mean(np.sign(normals @ ray))) > 0.95
 
 
+def test_a_noisy_whole_s_points_are_the_whole_s_points_moved(sphere, monkeypatch):
+    """``points-noise-s`` draws ``points``' very clouds (its seed: the same similarity and
+    order) and moves each point by isotropic Gaussian noise of s% of their diagonal; both
+    are read as the service reads points (what reaches the reader is compared)."""
+    read: list[np.ndarray] = []
+    reader = partial.one_view
+
+    def recorded(
+        points: np.ndarray, viewpoint: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, scans.Cloud]:
+        read.append(points)
+        return reader(points, viewpoint)
+
+    monkeypatch.setattr(partial, "one_view", recorded)
+    for name in ("sphere.off", "other.off"):
+        read.clear()
+        make_variant(sphere, "points", name)
+        make_variant(sphere, "points-noise-0.5", name)
+        clean, noisy = read
+        moved = noisy - clean
+        diagonal = np.linalg.norm(np.ptp(clean, axis=0))
+        assert moved.std(axis=0) == pytest.approx(np.full(3, 0.005 * diagonal), rel=0.1)
+        assert np.abs(moved.mean(axis=0)).max() < 0.001 * diagonal
+
+
 @pytest.mark.parametrize(
     "variant, alone, within",
     [("range-floor", "range-cloud", 0.02), ("floor-voxels", "view-voxels", 0.05)],

@@ -42,7 +42,10 @@ here keeps a part of the surface, its largest connected piece:
   by Gaussian noise of that percentage of the bounding box's diagonal;
 * ``view-noise-0.25``, ``view-noise-0.5``: ``view``'s very views (drawn from its seed),
   every vertex moved along the viewing ray by Gaussian noise of that percentage of the
-  whole's diagonal, as a depth camera errs in depth.
+  whole's diagonal, as a depth camera errs in depth;
+* ``points-noise-0.25``, ``points-noise-0.5``: ``points``' very clouds (drawn from its
+  seed), every point displaced by Gaussian noise of that percentage of their diagonal,
+  as a scanner's merged cloud is.
 
 Seeded like the tessellation variants (:func:`.variants.variant_seed`), so a rerun cuts
 the same way.
@@ -447,12 +450,17 @@ def view_points(mesh: Mesh, rng: np.random.Generator, up: str = "z") -> Mesh:
     return similarity(clean_mesh(vertices, faces), rng)
 
 
-def whole_points(mesh: Mesh, rng: np.random.Generator) -> Mesh:
+def whole_points(mesh: Mesh, rng: np.random.Generator, percent: float = 0.0) -> Mesh:
     """The whole's vertices in a random :func:`similarity` and a random order, without
-    their faces, read as the service reads such a file (the sensor at the origin,
-    :func:`worker.engine.scans.one_view`)."""
+    their faces, each displaced by isotropic Gaussian noise of sigma ``percent``% of
+    their bounding box's diagonal, read as the service reads such a file (the sensor at
+    the origin, :func:`worker.engine.scans.one_view`)."""
     moved = similarity(mesh, rng).vertices
-    vertices, faces, _ = one_view(moved[rng.permutation(len(moved))], np.zeros(3))
+    points = moved[rng.permutation(len(moved))]
+    if percent:  # drawn last: the same similarity and order as without noise
+        sigma = _noise_sigma(Mesh(points, mesh.faces), percent)
+        points = points + rng.normal(scale=sigma, size=points.shape)
+    vertices, faces, _ = one_view(points, np.zeros(3))
     return clean_mesh(vertices, faces)
 
 
@@ -557,6 +565,8 @@ DRAWN_AS = {
     "floor-voxels": "range-cloud",
     "view-noise-0.25": "view",
     "view-noise-0.5": "view",
+    "points-noise-0.25": "points",
+    "points-noise-0.5": "points",
 }
 
 #: The variants shot by the range camera: made with the axis their whole stands on
@@ -591,4 +601,6 @@ PARTIAL_VARIANTS: dict[str, Callable[[Mesh, np.random.Generator], Mesh]] = {
     "noise-1": lambda mesh, rng: noisy_surface(mesh, 1.0, rng),
     "view-noise-0.25": lambda mesh, rng: noisy_view(mesh, 0.25, rng),
     "view-noise-0.5": lambda mesh, rng: noisy_view(mesh, 0.5, rng),
+    "points-noise-0.25": lambda mesh, rng: whole_points(mesh, rng, 0.25),
+    "points-noise-0.5": lambda mesh, rng: whole_points(mesh, rng, 0.5),
 }
