@@ -455,11 +455,10 @@ def whole_points(mesh: Mesh, rng: np.random.Generator, percent: float = 0.0) -> 
     their faces, each displaced by isotropic Gaussian noise of sigma ``percent``% of
     their bounding box's diagonal, read as the service reads such a file (the sensor at
     the origin, :func:`worker.engine.scans.one_view`)."""
-    moved = similarity(mesh, rng).vertices
-    points = moved[rng.permutation(len(moved))]
+    moved = similarity(mesh, rng)
+    points = moved.vertices[rng.permutation(moved.n_vertices)]
     if percent:  # drawn last: the same similarity and order as without noise
-        sigma = _noise_sigma(Mesh(points, mesh.faces), percent)
-        points = points + rng.normal(scale=sigma, size=points.shape)
+        points = points + rng.normal(scale=_noise_sigma(moved, percent), size=points.shape)
     vertices, faces, _ = one_view(points, np.zeros(3))
     return clean_mesh(vertices, faces)
 
