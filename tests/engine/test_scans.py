@@ -39,6 +39,7 @@ from worker.evaluation.samples import (
     sample_mesh,
     seen_from_left,
 )
+from worker.evaluation.variants import subdivided
 
 HEIGHT, WIDTH = 30, 40
 
@@ -1185,6 +1186,59 @@ def test_a_dense_cloud_is_thinned_by_a_voxel_filter():
     few, own = scans.thinned(sphere[:100], 4000)
     assert few is not None and np.array_equal(few, sphere[:100])
     assert np.array_equal(own, np.arange(100))
+
+
+def _read_both_ways(monkeypatch, points):
+    """:func:`one_view` of ``points`` from the origin, and what :func:`plainly_whole`
+    said, then the same read with it saying no (every try made on all the points)."""
+    said = []
+    test = scans.plainly_whole
+
+    def spied(*args):
+        said.append(test(*args))
+        return said[-1]
+
+    monkeypatch.setattr(scans, "plainly_whole", spied)
+    fast = scans.one_view(points, np.zeros(3))
+    monkeypatch.setattr(scans, "plainly_whole", lambda *args: False)
+    return fast, scans.one_view(points, np.zeros(3)), said
+
+
+def test_a_dense_whole_is_read_as_one_without_every_point_tried_from_afar(monkeypatch):
+    """A whole object's 39,970 points (the quadruped's mesh Loop-subdivided twice, moved off
+    the origin) are plainly no view (:func:`plainly_whole`): read as a whole
+    (:func:`whole_view`) without the try from afar on all of them, exactly as that try's
+    failure would have them read; a dense view written away from its sensor, moved off
+    its pixel lattice, is still tried from afar on all its points, and read as before."""
+    rng = np.random.default_rng(3)
+    mesh = sample_mesh(*PARTIAL_SOURCE)
+    vertices = subdivided(subdivided(mesh)).vertices
+    whole = vertices[rng.permutation(len(vertices))] @ random_rotation(rng) + 2.0
+    tried = []
+    full = scans.viewed_surface
+
+    def counted(points, *args, **kwargs):
+        tried.append(len(points))
+        return full(points, *args, **kwargs)
+
+    monkeypatch.setattr(scans, "viewed_surface", counted)
+    fast, slow, said = _read_both_ways(monkeypatch, whole)
+    assert said == [True] and len(whole) > 9 * scans.WHOLE_POINTS
+    assert tried.count(len(whole)) == 1 + 2  # the first try; then the first try, from afar
+    for a, b in zip(fast, slow, strict=True):
+        assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b
+    assert fast[2].hidden > 0
+
+    grid, viewpoint = depth_scan(mesh, np.array(DEPTH_DIRECTION), 20000)
+    seen = grid.reshape(-1, 3)[np.isfinite(grid).all(axis=2).ravel()] - viewpoint
+    pitch = float(np.nanmedian(np.linalg.norm(np.diff(grid, axis=1), axis=2)))
+    moved = seen + rng.normal(scale=0.5 * pitch, size=seen.shape)
+    view = moved[rng.permutation(len(moved))] @ random_rotation(rng) + 3.0 * np.ptp(seen)
+    fast, slow, said = _read_both_ways(monkeypatch, view)
+    assert said == [False] and len(view) > scans.WHOLE_POINTS
+    for a, b in zip(fast, slow, strict=True):
+        assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b
+    assert fast[2].hidden is None
 
 
 def test_a_noisy_plane_s_points_are_moved_onto_it():

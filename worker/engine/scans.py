@@ -798,10 +798,16 @@ def one_view(
     except PointCloudError as refusal:
         if len(finite) < 3:
             raise  # too few points from anywhere
+        guess = guessed_viewpoint(finite, start())
+        thin = thinned(finite, WHOLE_POINTS)
+        if plainly_whole(thin[0], len(finite), guess):
+            try:
+                return whole_view(finite, thin)
+            except PointCloudError:
+                raise refusal from None
         try:
             # The first try searched the points' frames already (sensor_axes: where no
             # lattice was found from there, none is from afar).
-            guess = guessed_viewpoint(finite, start())
             vertices, faces, cloud = viewed_surface(
                 finite, guess, find_frame=False, sensor_known=False
             )
@@ -813,7 +819,7 @@ def one_view(
                 )
         except PointCloudError:
             try:
-                return whole_view(finite)
+                return whole_view(finite, thin)
             except PointCloudError:
                 raise refusal from None
         direction = guess - vertices.mean(axis=0)
@@ -849,12 +855,42 @@ WHOLE_POINTS = 4000
 WHOLE_NEIGHBOURS = 16
 
 
-def whole_view(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, Cloud]:
+#: :func:`plainly_whole`: the share of a thinned cloud's points on the surface seen from
+#: afar under which it is plainly no view. Thinned to ``WHOLE_POINTS``, TOSCA's 83 wholes
+#: as their vertices show at most 53% of them from their sensor or from afar, with noise
+#: of 0.5% of their diagonal too; their views and floor frames, written in their sensor's
+#: frame or in another, 75% or more (docs/decisions.md).
+WHOLE_TEST_SHARE = 0.65
+
+
+def plainly_whole(thin: np.ndarray, count: int, viewpoint: np.ndarray) -> bool:
+    """Whether a cloud of ``count`` points, ``thin`` (k, 3) of them as :func:`thinned`
+    thins it, is plainly no view from ``viewpoint`` (3,): fewer than ``WHOLE_TEST_SHARE``
+    of the thinned points lie on the surface seen from there (:func:`viewed_surface`).
+    So :func:`one_view` reads a whole object's points (:func:`whole_view`) without
+    triangulating every one of them from afar first (the thinned points' triangulation
+    takes a fraction of that time); never when none were thinned away (``k`` is
+    ``count``: that try is the full one)."""
+    if len(thin) >= count:
+        return False
+    try:
+        viewed_surface(
+            thin, viewpoint, find_frame=False, sensor_known=False, least_seen=WHOLE_TEST_SHARE
+        )
+    except PointCloudError:
+        return True
+    return False
+
+
+def whole_view(
+    points: np.ndarray, thinning: tuple[np.ndarray, np.ndarray] | None = None
+) -> tuple[np.ndarray, np.ndarray, Cloud]:
     """Points (n, 3) that are not one view from anywhere (a whole object's, several views
     merged) read as the view that sees most of them: thinned to about ``WHOLE_POINTS``
-    (:func:`thinned`), seen from :func:`whole_camera` (the largest silhouette), the points
-    it sees (:func:`visible_points`, each on the plane of its ``WHOLE_NEIGHBOURS``
-    nearest, :func:`plane_projected`) are read as its view (:func:`viewed_surface`) and
+    (:func:`thinned`; ``thinning``, its result when already made), seen from
+    :func:`whole_camera` (the largest silhouette), the points it sees
+    (:func:`visible_points`, each on the plane of its ``WHOLE_NEIGHBOURS`` nearest,
+    :func:`plane_projected`) are read as its view (:func:`viewed_surface`) and
     the rest, hidden behind them, left out: the cloud's ``points`` and ``hidden`` count
     the file's points in each (those in a cell of :func:`thinned` go with its mean). A
     cloud of a whole object has no triangles to tell its touching sheets apart
@@ -870,7 +906,7 @@ def whole_view(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, Cloud]:
     """
     from scipy.spatial import QhullError
 
-    thin, cell = thinned(points, WHOLE_POINTS)
+    thin, cell = thinned(points, WHOLE_POINTS) if thinning is None else thinning
     camera = whole_camera(thin)
     try:
         visible = visible_points(plane_projected(thin, WHOLE_NEIGHBOURS), camera)
