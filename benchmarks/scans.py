@@ -1,8 +1,8 @@
 """A scan as a scanner's file against the same surface as a mesh: describe seconds, or
 query seconds through the service.
 
-    OPENBLAS_NUM_THREADS=1 python -m benchmarks.scans [--pixels 1500 30000] [--repeats 5]
-        [--service]
+    OPENBLAS_NUM_THREADS=1 python -m benchmarks.scans [--pixels 1500 30000]
+        [--subdivisions 0 2] [--repeats 5] [--service]
 
 For each size, the walk-through's quadruped-3 seen from its left side by an orthographic
 depth grid of about ``--pixels`` pixels on it (as ``examples/partial/quadruped-3-depth``
@@ -29,7 +29,11 @@ file is instead the query of ``POST /query`` (``k`` 1) of the service as a user 
 enrolled with their labels; no recent query's descriptor kept, so that every query is
 described afresh), one request at a time: the median seconds of the round trip (upload,
 read, describe, search, a view's verification, the answer), each over the mesh's, and
-the class the first answer is.
+the class the first answer is. After the scans, the quadruped-3 whole as a scanner's
+merged cloud (its vertices in another order and frame, an XYZ text file, read as the view
+that sees most of them, :func:`~worker.engine.scans.whole_view`) against its mesh, at its
+own 2,500 vertices and with each triangle split in four ``--subdivisions`` times (Loop),
+and against the mesh of the surface it is read as (``mesh.off of`` the cloud).
 """
 
 from __future__ import annotations
@@ -64,6 +68,7 @@ from worker.evaluation.samples import (
     sample_mesh,
     seen_from_left,
 )
+from worker.evaluation.variants import subdivided
 
 
 def points_ply(points: np.ndarray) -> bytes:
@@ -78,6 +83,8 @@ def points_ply(points: np.ndarray) -> bytes:
 
 #: The floor scan's files: their names end so, and they are timed against its mesh.
 ON_A_FLOOR = "(on a floor)"
+#: The whole's files: their names end so, and they are timed against its mesh.
+WHOLE = "(whole)"
 #: A cloud moved off its lattice reads to a surface of its own, rougher than the mesh's:
 #: that surface as an OFF mesh is named so before the cloud's name, and the cloud is
 #: timed against it too (its reading's cost alone).
@@ -122,7 +129,7 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], str, str]:
         "scan.pcd (ascii)": pcd_bytes(points, viewpoint),
         "scan.pcd (binary)": binary,
         "scan.e57": e57_bytes(points, viewpoint),
-        "scan.xyz (no grid)": "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in seen.tolist()).encode(),
+        "scan.xyz (no grid)": xyz_bytes(seen),
         "scan.ply (no grid)": points_ply(seen),
         "scan.ply (no grid, turned)": points_ply(seen @ turn.T),
         "scan.ply (no grid, mesh's frame)": points_ply((seen + viewpoint) @ turn.T),
@@ -146,6 +153,32 @@ def scan_files(pixels: int) -> tuple[dict[str, bytes], str, str]:
         f"{floor.grid[0]} x {floor.grid[1]}"
     )
     return with_surfaces, scan, floor_label
+
+
+def xyz_bytes(points: np.ndarray) -> bytes:
+    """``points`` (n, 3) as an XYZ text file, each coordinate as Python writes it."""
+    return "".join(f"{x!r} {y!r} {z!r}\n" for x, y, z in points.tolist()).encode()
+
+
+def whole_files(subdivisions: int) -> tuple[dict[str, bytes], str]:
+    """The quadruped-3 whole's mesh, each triangle split in four ``subdivisions`` times
+    (Loop), its vertices in another order and frame as an XYZ file, and the surface that
+    file is read as (the view that sees most of it) as a mesh, by name; and the whole as
+    the table names it."""
+    whole = sample_mesh(*PARTIAL_SOURCE)
+    for _ in range(subdivisions):
+        whole = subdivided(whole)
+    vertices, faces = whole.vertices, whole.faces
+    rng = np.random.default_rng(0)
+    moved = vertices[rng.permutation(len(vertices))] @ random_rotation(rng).T
+    points = xyz_bytes(moved + np.ptp(vertices))
+    surface = load_mesh(points, "points.xyz")  # one side of it, as the service reads it
+    files = {
+        f"mesh.off {WHOLE}": off_bytes(vertices, faces),
+        f"points.xyz {WHOLE}": points,
+        f"{OF_ITS_SURFACE} points.xyz {WHOLE}": off_bytes(surface.vertices, surface.faces),
+    }
+    return files, f"a whole, {len(vertices):,} points"
 
 
 def described(files: dict[str, bytes], repeats: int) -> dict[str, tuple[list[float], str]]:
@@ -188,17 +221,18 @@ def queried(
     return {name: (seconds[name], first[name]) for name in files}
 
 
-def print_table(timed: dict[str, tuple[list[float], str]], scan: str, floor_label: str) -> None:
-    """One row a file: its label's column, its median seconds, those over its mesh's,
-    and a moved cloud's over the mesh of its own surface."""
+def print_table(timed: dict[str, tuple[list[float], str]], labels: dict[str, str]) -> None:
+    """One row a file: the label of its group (``labels``: the suffix its name ends with,
+    the scan's ``""``, -> the label), its column, its median seconds, those over its
+    group's mesh's, and a moved cloud's over the mesh of its own surface."""
     for name, (seconds, column) in timed.items():
-        floor = name.endswith(ON_A_FLOOR)
-        mesh = f"mesh.off {ON_A_FLOOR}" if floor else "mesh.off"
+        group = next(end for end in sorted(labels, key=len, reverse=True) if name.endswith(end))
+        mesh = f"mesh.off {group}".rstrip()
         median = statistics.median(seconds)
         own = timed.get(f"{OF_ITS_SURFACE} {name}")
         over_own = "" if own is None else f"{median / statistics.median(own[0]):.2f}"
         print(
-            f"| {floor_label if floor else scan} | {name.removesuffix(f' {ON_A_FLOOR}')} | "
+            f"| {labels[group]} | {name.removesuffix(f' {group}')} | "
             f"{column} | {median:.3f} | {median / statistics.median(timed[mesh][0]):.2f} | "
             f"{over_own} |"
         )
@@ -206,7 +240,8 @@ def print_table(timed: dict[str, tuple[list[float], str]], scan: str, floor_labe
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--pixels", type=int, nargs="+", default=[1500, 30000])
+    parser.add_argument("--pixels", type=int, nargs="*", default=[1500, 30000])
+    parser.add_argument("--subdivisions", type=int, nargs="*", default=[0, 2])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument(
         "--service", action="store_true", help="time POST /query through a fresh service"
@@ -230,14 +265,20 @@ def main() -> None:
             print(f"{DEFAULT_PRESET}; medians of {args.repeats} describes, files alternated")
             print(f"\n| scan | file | load ms | total s | total / mesh's | {OWN} |")
         print(f"|---|---|{'---' if client else '---:'}|---:|---:|---:|")
+        groups = []
         for pixels in args.pixels:
             files, scan, floor_label = scan_files(pixels)
+            groups.append((files, {"": scan, ON_A_FLOOR: floor_label}))
+        for subdivisions in args.subdivisions:
+            files, label = whole_files(subdivisions)
+            groups.append((files, {WHOLE: label}))
+        for files, labels in groups:
             timed = (
                 described(files, args.repeats)
                 if client is None
                 else queried(client, files, args.repeats)
             )
-            print_table(timed, scan, floor_label)
+            print_table(timed, labels)
 
 
 if __name__ == "__main__":
