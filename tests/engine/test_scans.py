@@ -1224,7 +1224,8 @@ def test_a_dense_whole_is_read_as_one_without_every_point_tried_from_afar(monkey
     monkeypatch.setattr(scans, "viewed_surface", counted)
     fast, slow, said = _read_both_ways(monkeypatch, whole)
     assert said == [True] and len(whole) > 9 * scans.WHOLE_POINTS
-    assert tried.count(len(whole)) == 1 + 2  # the first try; then the first try, from afar
+    # read plainly whole: the first try alone; told no: the first try, then from afar
+    assert tried.count(len(whole)) == 1 + 2
     for a, b in zip(fast, slow, strict=True):
         assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b
     assert fast[2].hidden > 0

@@ -777,14 +777,15 @@ def one_view(
     all would stand, and when the triangles so made are an orthographic grid's, once more
     along its own line of sight (:func:`grid_sight`: exact, where the unfolded sight can
     be degrees off), on the side the view's silhouette says its sensor stood
-    (:func:`sensor_side`). Points that are not one view from there either (a whole
-    object's, several views merged) are read as the view that sees most of them
-    (:func:`whole_view`). When that fails too, the first refusal stands: it names the
-    sensor the file gave. Points on one line (:func:`on_a_line`, rounded off it) are
-    refused first: from afar they would pass for a view of slivers. A point written more
-    than once (frames merged, an export's repeats) is read once: its copies would hide
-    behind one another, and share a pixel; one written at the sensor itself is a pixel
-    that saw nothing (:func:`at_the_sensor`)."""
+    (:func:`sensor_side`). Points that are not one view from there either (a whole object's,
+    several views merged) are read as the view that sees most of them (:func:`whole_view`);
+    those plainly none from afar (:func:`plainly_whole`, on their thinned cloud) without
+    that try on all of them. When that fails too, the first refusal stands: it names the
+    sensor the file gave. Points on one line (:func:`on_a_line`, rounded off it) are refused
+    first: from afar they would pass for a view of slivers. A point written more than once
+    (frames merged, an export's repeats) is read once: its copies would hide behind one
+    another, and share a pixel; one written at the sensor itself is a pixel that saw nothing
+    (:func:`at_the_sensor`)."""
     seen = np.isfinite(points).all(axis=1) & ~at_the_sensor(points, viewpoint)
     finite = written_once(points[seen])
     if len(finite) >= 3 and on_a_line(finite):
@@ -799,10 +800,10 @@ def one_view(
         if len(finite) < 3:
             raise  # too few points from anywhere
         guess = guessed_viewpoint(finite, start())
-        thin = thinned(finite, WHOLE_POINTS)
-        if plainly_whole(thin[0], len(finite), guess):
+        thinning = thinned(finite, WHOLE_POINTS)
+        if plainly_whole(thinning[0], len(finite), guess):
             try:
-                return whole_view(finite, thin)
+                return whole_view(finite, thinning)
             except PointCloudError:
                 raise refusal from None
         try:
@@ -819,7 +820,7 @@ def one_view(
                 )
         except PointCloudError:
             try:
-                return whole_view(finite, thin)
+                return whole_view(finite, thinning)
             except PointCloudError:
                 raise refusal from None
         direction = guess - vertices.mean(axis=0)
