@@ -801,7 +801,7 @@ def one_view(
             raise  # too few points from anywhere
         guess = guessed_viewpoint(finite, start())
         thinning = thinned(finite, WHOLE_POINTS)
-        if plainly_whole(thinning[0], len(finite), guess):
+        if plainly_whole(thinning, guess):
             try:
                 return whole_view(finite, thinning)
             except PointCloudError:
@@ -865,15 +865,16 @@ WHOLE_NEIGHBOURS = 16
 WHOLE_TEST_SHARE = 0.65
 
 
-def plainly_whole(thin: np.ndarray, count: int, viewpoint: np.ndarray) -> bool:
-    """Whether a cloud of ``count`` points, ``thin`` (k, 3) of them as :func:`thinned`
-    thins it, is plainly no view from ``viewpoint`` (3,): fewer than ``WHOLE_TEST_SHARE``
-    of the thinned points lie on the surface seen from there (:func:`viewed_surface`).
-    So :func:`one_view` reads a whole object's points (:func:`whole_view`) without
-    triangulating every one of them from afar first (the thinned points' triangulation
-    takes a fraction of that time); never when none were thinned away (``k`` is
-    ``count``: that try is the full one)."""
-    if len(thin) >= count:
+def plainly_whole(thinning: tuple[np.ndarray, np.ndarray], viewpoint: np.ndarray) -> bool:
+    """Whether a cloud, as :func:`thinned` thins it (``thinning``: k means and each of its
+    n points' cell), is plainly no view from ``viewpoint`` (3,): fewer than
+    ``WHOLE_TEST_SHARE`` of the thinned points lie on the surface seen from there
+    (:func:`viewed_surface`). So :func:`one_view` reads a whole object's points
+    (:func:`whole_view`) without triangulating every one of them from afar first (the
+    thinned points' triangulation takes a fraction of that time); never when none were
+    thinned away (k is n: that try is the full one)."""
+    thin, cell = thinning
+    if len(thin) == len(cell):
         return False
     try:
         viewed_surface(
